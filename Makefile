@@ -1,0 +1,130 @@
+# ARMSTG build.  `make` builds build/armstg and build/plugins/<name>.so, one per
+# folder in plugins/.  `make test`, `make demo`, `make asan-test`, `make fuzz`.
+#
+# Plugin convention (nothing here changes when a plugin is added):
+#   plugins/<name>/*.c         -> build/plugins/<name>.so
+#   plugins/<name>/*.cu        -> compiled with nvcc when present (else the
+#                                 plugin is skipped with a note)
+#   plugins/<name>/tests/*.c   -> build/tests/<name>_<file> (cmocka), linked
+#                                 with the plugin's objects and the runtime
+#   plugins/<name>/plugin.mk   -> optional: <name>_LDLIBS, <name>_CFLAGS,
+#                                 <name>_EXTRA_SRC (sources of other folders)
+#   tests/*.c                  -> build/tests/<file>
+#   tests/plugins/<name>/*.c   -> build/test-plugins/<name>.so (test only)
+
+BUILD    ?= build
+CC       ?= cc
+NVCC     ?= nvcc
+SAN      ?=
+OPT      ?= -O2
+HDF5_CFLAGS := $(shell pkg-config --cflags hdf5 2>/dev/null)
+HDF5_LIBS   := $(shell pkg-config --libs hdf5 2>/dev/null)
+CFLAGS   ?= $(OPT) -g
+CFLAGS   += -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -Wno-unused-parameter \
+            -fPIC -fopenmp -Iruntime/include -Iruntime -I/usr/include/nifti \
+            $(HDF5_CFLAGS)
+ifeq ($(SAN),1)
+CFLAGS   += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+LDSAN    := -fsanitize=address,undefined
+endif
+RT_LIBS  := -lniftiio -lznz -lz $(HDF5_LIBS) -lmsgpackc -linih -lpng -ldl -lpthread -lm
+LDFLAGS  += -fopenmp $(LDSAN)
+
+RT_SRC   := $(filter-out runtime/main.c,$(wildcard runtime/*.c))
+RT_OBJ   := $(RT_SRC:%.c=$(BUILD)/obj/%.o)
+RT_LIB   := $(BUILD)/libarmstg_rt.a
+ARMSTG   := $(BUILD)/armstg
+
+HAVE_NVCC := $(shell command -v $(NVCC) >/dev/null 2>&1 && echo 1)
+ALL_PLUGINS := $(notdir $(patsubst %/,%,$(dir $(wildcard plugins/*/*.c plugins/*/*.cu))))
+ALL_PLUGINS := $(sort $(ALL_PLUGINS))
+CUDA_PLUGINS := $(sort $(notdir $(patsubst %/,%,$(dir $(wildcard plugins/*/*.cu)))))
+ifeq ($(HAVE_NVCC),1)
+PLUGINS  := $(ALL_PLUGINS)
+else
+PLUGINS  := $(filter-out $(CUDA_PLUGINS),$(ALL_PLUGINS))
+endif
+PLUGIN_SO := $(PLUGINS:%=$(BUILD)/plugins/%.so)
+
+TEST_SRC := $(wildcard tests/*.c)
+TEST_BIN := $(TEST_SRC:tests/%.c=$(BUILD)/tests/%)
+TPLUG    := $(notdir $(patsubst %/,%,$(dir $(wildcard tests/plugins/*/*.c))))
+TPLUG_SO := $(sort $(TPLUG:%=$(BUILD)/test-plugins/%.so))
+
+.PHONY: all test demo asan-test fuzz clean deps interop bench check-cuda
+all: $(ARMSTG) $(PLUGIN_SO) check-cuda
+
+deps:
+	@sh scripts/deps.sh
+
+check-cuda:
+ifneq ($(HAVE_NVCC),1)
+	@$(if $(CUDA_PLUGINS),echo "note: nvcc not found: skipping CUDA plugins: $(CUDA_PLUGINS)",true)
+endif
+
+$(BUILD)/obj/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) $(EXTRA_CFLAGS) -MMD -MP -c $< -o $@
+
+$(RT_LIB): $(RT_OBJ)
+	@mkdir -p $(dir $@)
+	rm -f $@ && ar rcs $@ $^
+
+$(ARMSTG): $(BUILD)/obj/runtime/main.o $(RT_LIB)
+	$(CC) $(LDFLAGS) -o $@ $^ $(RT_LIBS)
+
+# ---- plugins ----
+define PLUGIN_template
+-include plugins/$(1)/plugin.mk
+$(1)_SRC := $$(wildcard plugins/$(1)/*.c) $$($(1)_EXTRA_SRC)
+$(1)_CU  := $$(wildcard plugins/$(1)/*.cu)
+$(1)_OBJ := $$($(1)_SRC:%.c=$(BUILD)/obj/%.o) $$($(1)_CU:%.cu=$(BUILD)/obj/%.cu.o)
+$(BUILD)/obj/plugins/$(1)/%.o: EXTRA_CFLAGS = $$($(1)_CFLAGS)
+$(BUILD)/plugins/$(1).so: $$($(1)_OBJ)
+	@mkdir -p $$(dir $$@)
+	$$(CC) -shared -Wl,-z,defs $$(LDFLAGS) -o $$@ $$^ $$($(1)_LDLIBS) $$(if $$($(1)_CU),-L/usr/local/cuda/lib64 -lcudart) -lm
+$(1)_TESTS := $$(patsubst plugins/$(1)/tests/%.c,$(BUILD)/tests/$(1)_%,$$(wildcard plugins/$(1)/tests/*.c))
+$(BUILD)/tests/$(1)_%: $(BUILD)/obj/plugins/$(1)/tests/%.o $$($(1)_OBJ) $(RT_LIB)
+	@mkdir -p $$(dir $$@)
+	$$(CC) $$(LDFLAGS) -o $$@ $$^ $$($(1)_LDLIBS) $(RT_LIBS) -lcmocka
+PLUGIN_TESTS += $$($(1)_TESTS)
+endef
+$(foreach p,$(PLUGINS),$(eval $(call PLUGIN_template,$(p))))
+
+$(BUILD)/obj/%.cu.o: %.cu
+	@mkdir -p $(dir $@)
+	$(NVCC) -arch=sm_90 -O3 -Xcompiler -fPIC -Iruntime/include -Iruntime -c $< -o $@
+
+$(BUILD)/test-plugins/%.so: $(wildcard tests/plugins/*/*.c)
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) -shared $(LDFLAGS) -o $@ $(wildcard tests/plugins/$*/*.c) -lm
+
+$(BUILD)/tests/%: $(BUILD)/obj/tests/%.o $(RT_LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $^ $(RT_LIBS) -lcmocka
+
+TESTS := $(TEST_BIN) $(PLUGIN_TESTS)
+tests: $(TESTS) $(TPLUG_SO)
+
+# ---- the two commands of the README ----
+test: deps
+	@$(MAKE) --no-print-directory all tests
+	@BUILD=$(BUILD) sh scripts/run-tests.sh $(TESTS)
+
+demo: deps
+	@$(MAKE) --no-print-directory all
+	@sh scripts/demo.sh $(BUILD)
+
+asan-test: deps
+	@$(MAKE) --no-print-directory BUILD=build-asan SAN=1 OPT=-O1 test
+
+fuzz: deps
+	@sh scripts/fuzz.sh
+
+interop: deps all
+	@sh scripts/interop.sh $(BUILD)
+
+clean:
+	rm -rf build build-asan build-fuzz
+
+-include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)

@@ -1,0 +1,123 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Runtime-internal API (not for plugins: they use the host table).
+ * Linked into build/armstg and every test program via build/libarmstg_rt.a.
+ */
+#ifndef ARMSTG_RT_H
+#define ARMSTG_RT_H
+
+#include <stdio.h>
+
+#include "armstg/plugin.h"
+#include "armstg/volmath.h"
+
+#define ARMSTG_VERSION "0.1.0"
+
+/* ---- msg.c: messages ---- */
+size_t vol_dtype_size(int dtype);
+vol_t *vol_new(int nx, int ny, int nz, int nc, int dtype,
+	       const double affine[16]);
+vol_t *vol_clone(const vol_t *v);
+vol_t *vol_convert(const vol_t *v, int dtype);
+ps_t *ps_new(int64_t n);
+ps_t *ps_clone(const ps_t *p);
+double *ps_add_attr(ps_t *p, const char *name, int ncomp);
+const ps_attr_t *ps_attr(const ps_t *p, const char *name);
+tab_t *tab_new(void);
+int64_t tab_add_row(tab_t *t);
+int tab_set_num(tab_t *t, int64_t row, const char *col, double v);
+int tab_set_str(tab_t *t, int64_t row, const char *col, const char *s);
+const tab_col_t *tab_col(const tab_t *t, const char *name);
+msg_t *msg_ref(const msg_t *m);
+void msg_unref(msg_t *m);
+void msg_freeze(msg_t *m);
+/* 1 when m is a live message of the given type (0 = any) */
+int msg_valid(const msg_t *m, int type);
+/* deep equality (bitwise data, affine, attrs, cells); 1 if equal */
+int msg_equal(const msg_t *a, const msg_t *b);
+/* FNV-1a hash of a message's full content (to check inputs untouched) */
+uint64_t msg_hash(const msg_t *m);
+/* bytes currently allocated by live messages, and the high-water mark */
+uint64_t msg_bytes_live(void);
+const char *armstg_strerror(int code);
+
+/* ---- msgpack.c: wire format (see docs in msgpack.c) ---- */
+/* Encode into a malloc'ed buffer. 0 or negative code. */
+int msg_pack(const msg_t *m, char **buf, size_t *len);
+/* Strict decode: any truncation, wrong type or oversize is an error with a
+ * message in err (never a crash or over-read).  max_bytes caps allocation
+ * (0 = default 4 GiB). */
+int msg_unpack(const char *buf, size_t len, uint64_t max_bytes, msg_t **out,
+	       char *err, size_t errsize);
+
+/* ---- nifti.c / h5.c: file forms; err gets a message on failure ---- */
+int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize);
+/* writes exactly path (callers wanting atomicity write a temp name) */
+int vol_write_nifti(const char *path, const vol_t *v, char *err,
+		    size_t errsize);
+int ps_read_h5(const char *path, ps_t **out, char *err, size_t errsize);
+int ps_write_h5(const char *path, const ps_t *p, char *err, size_t errsize);
+int tab_read_file(const char *path, tab_t **out, char *err, size_t errsize);
+/* .h5 -> HDF5, anything else -> TSV */
+int tab_write_file(const char *path, const tab_t *t, char *err,
+		   size_t errsize);
+
+/* ---- host.c / stage.c: stages outside or inside a graph ---- */
+const armstg_host_t *rt_host(void);
+
+typedef struct rt_plugin {
+	char path[1024];
+	void *dl;                      /* dlopen handle (NULL if static) */
+	const armstg_plugin_t *desc;
+} rt_plugin_t;
+
+/* loader.c: load build/plugins/<name>.so (search ARMSTG_PLUGIN_PATH, then
+ * the default folder).  err names the file on refusal. */
+int plugin_load_file(const char *path, rt_plugin_t *out, char *err,
+		     size_t errsize);
+int plugin_load(const char *name, rt_plugin_t *out, char *err,
+		size_t errsize);
+void plugin_unload(rt_plugin_t *p);
+/* folders searched, ':'-separated; static storage */
+const char *plugin_search_path(void);
+/* list names of all plugins found (callback per .so file path) */
+int plugin_foreach(void (*cb)(const char *path, void *user), void *user);
+/* descriptor sanity (names, ports, params, defaults in range...);
+ * 0 or EINVAL with err */
+int plugin_check_desc(const armstg_plugin_t *d, char *err, size_t errsize);
+
+typedef struct rt_stage rt_stage_t;
+rt_stage_t *stage_new(const armstg_plugin_t *desc, const char *name);
+/* parse+check one parameter value; err like "parameter 'x': 3.5 is above
+ * the maximum 2 (mm)" */
+int stage_set_param(rt_stage_t *s, const char *key, const char *value,
+		    char *err, size_t errsize);
+/* apply defaults for unset params; error if a required one is missing */
+int stage_finish_params(rt_stage_t *s, char *err, size_t errsize);
+int stage_init(rt_stage_t *s);
+/* inputs: n_inputs messages (NULL for unconnected optional ones).  On
+ * success the outputs are frozen and held by the stage. */
+int stage_process(rt_stage_t *s, const msg_t *const *inputs);
+void stage_fini(rt_stage_t *s);
+void stage_free(rt_stage_t *s);
+armstg_stage_t *stage_pub(rt_stage_t *s);
+msg_t *stage_output(rt_stage_t *s, int port);
+/* take the outputs (caller owns the references) */
+msg_t *stage_take_output(rt_stage_t *s, int port);
+const char *stage_error(rt_stage_t *s);  /* last message, "" if none */
+void stage_set_outdir(rt_stage_t *s, const char *dir);
+void stage_set_threads(rt_stage_t *s, int n);
+/* commit (rename) or discard the stage's pending temporary files */
+int stage_commit_files(rt_stage_t *s, char *err, size_t errsize);
+void stage_discard_files(rt_stage_t *s);
+
+/* ---- log.c ---- */
+void rt_log_set_level(int level);     /* default LOG_INFO; env ARMSTG_LOG */
+int rt_log_level_for(const char *stage);
+void rt_log(const char *stage, int level, const char *fmt, ...)
+	ARMSTG_PRINTF(3, 4);
+void rt_vlog(const char *stage, int level, const char *fmt, va_list ap);
+/* set by SIGINT/SIGTERM handler */
+extern volatile int rt_interrupted;
+
+#endif
