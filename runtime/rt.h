@@ -110,6 +110,7 @@ void stage_set_threads(rt_stage_t *s, int n);
 /* commit (rename) or discard the stage's pending temporary files */
 int stage_commit_files(rt_stage_t *s, char *err, size_t errsize);
 void stage_discard_files(rt_stage_t *s);
+int stage_pending_files(rt_stage_t *s, const char ***paths);
 
 /* ---- log.c ---- */
 void rt_log_set_level(int level);     /* default LOG_INFO; env ARMSTG_LOG */

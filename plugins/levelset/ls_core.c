@@ -1,0 +1,1008 @@
+/* SPDX-License-Identifier: MIT */
+#include "ls_core.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "armstg/plugin.h"
+#include "armstg/volmath.h"
+#include "ls_kdtree.h"
+#include "ls_weno.h"
+
+/* ---------------------------------------------------------------- lists */
+
+static int pts_reserve(ls_pts_t *p, int64_t add)
+{
+	if (p->n + add <= p->cap)
+		return 0;
+	int64_t cap = p->cap ? p->cap : 1024;
+	while (cap < p->n + add)
+		cap *= 2;
+	double *xyz = realloc(p->xyz, (size_t)cap * 3 * sizeof(double));
+	if (xyz)
+		p->xyz = xyz;
+	int32_t *lab = realloc(p->label, (size_t)cap * sizeof(int32_t));
+	if (lab)
+		p->label = lab;
+	double *lay = realloc(p->layer, (size_t)cap * sizeof(double));
+	if (lay)
+		p->layer = lay;
+	double *par = realloc(p->parent, (size_t)cap * 3 * sizeof(double));
+	if (par)
+		p->parent = par;
+	double *nor = realloc(p->normal, (size_t)cap * 3 * sizeof(double));
+	if (nor)
+		p->normal = nor;
+	double *lev = realloc(p->level, (size_t)cap * sizeof(double));
+	if (lev)
+		p->level = lev;
+	if (!xyz || !lab || !lay || !par || !nor || !lev)
+		return -1;
+	p->cap = cap;
+	return 0;
+}
+
+static void pts_free(ls_pts_t *p)
+{
+	free(p->xyz);
+	free(p->label);
+	free(p->layer);
+	free(p->parent);
+	free(p->normal);
+	free(p->level);
+	memset(p, 0, sizeof *p);
+}
+
+void ls_result_free(ls_result_t *r)
+{
+	pts_free(&r->contours);
+	pts_free(&r->seeds);
+	free(r->comp_spacing);
+	free(r->comp_depth);
+	r->comp_spacing = r->comp_depth = NULL;
+}
+
+static int fail(ls_result_t *r, int code, const char *msg)
+{
+	snprintf(r->err, sizeof r->err, "%s", msg);
+	return code;
+}
+
+/* ---------------------------------------------------------- components */
+
+typedef struct comp {
+	int64_t size;
+	int lo[3], hi[3];
+	double cw[3];        /* world centroid, for a world-defined order */
+	int32_t raw;         /* raw label */
+} comp_t;
+
+static int cmp_comp(const void *a, const void *b)
+{
+	const comp_t *x = a, *y = b;
+	if (x->size != y->size)
+		return x->size > y->size ? -1 : 1;
+	for (int c = 0; c < 3; c++)
+		if (x->cw[c] != y->cw[c])
+			return x->cw[c] < y->cw[c] ? -1 : 1;
+	return 0;
+}
+
+/* 26-connected components of m; lab[v] = 1..nc, 0 background. */
+static int label_components(const ls_mask_t *mk, int32_t *lab, comp_t **out,
+			    int *ncomp)
+{
+	int nx = mk->nx, ny = mk->ny, nz = mk->nz;
+	int64_t nv = (int64_t)nx * ny * nz;
+	int64_t *q = malloc((size_t)nv * sizeof *q);
+	int cap = 16, nc = 0;
+	comp_t *cs = malloc((size_t)cap * sizeof *cs);
+	if (!q || !cs) {
+		free(q);
+		free(cs);
+		return -1;
+	}
+	memset(lab, 0, (size_t)nv * sizeof *lab);
+	for (int64_t s = 0; s < nv; s++) {
+		if (!mk->m[s] || lab[s])
+			continue;
+		if (nc == cap) {
+			cap *= 2;
+			comp_t *t = realloc(cs, (size_t)cap * sizeof *cs);
+			if (!t) {
+				free(q);
+				free(cs);
+				return -1;
+			}
+			cs = t;
+		}
+		comp_t *c = &cs[nc++];
+		memset(c, 0, sizeof *c);
+		c->raw = nc;
+		for (int a = 0; a < 3; a++) {
+			c->lo[a] = 1 << 30;
+			c->hi[a] = -1;
+		}
+		double si = 0, sj = 0, sk = 0;
+		int64_t qh = 0, qt = 0;
+		q[qt++] = s;
+		lab[s] = nc;
+		while (qh < qt) {
+			int64_t v = q[qh++];
+			int i = (int)(v % nx), j = (int)((v / nx) % ny),
+			    k = (int)(v / ((int64_t)nx * ny));
+			int ijk[3] = { i, j, k };
+			for (int a = 0; a < 3; a++) {
+				if (ijk[a] < c->lo[a])
+					c->lo[a] = ijk[a];
+				if (ijk[a] > c->hi[a])
+					c->hi[a] = ijk[a];
+			}
+			si += i;
+			sj += j;
+			sk += k;
+			for (int dk = -1; dk <= 1; dk++) {
+				int kk = k + dk;
+				if (kk < 0 || kk >= nz)
+					continue;
+				for (int dj = -1; dj <= 1; dj++) {
+					int jj = j + dj;
+					if (jj < 0 || jj >= ny)
+						continue;
+					for (int di = -1; di <= 1; di++) {
+						int ii = i + di;
+						if (ii < 0 || ii >= nx)
+							continue;
+						int64_t w = ((int64_t)kk * ny +
+							     jj) * nx + ii;
+						if (mk->m[w] && !lab[w]) {
+							lab[w] = nc;
+							q[qt++] = w;
+						}
+					}
+				}
+			}
+		}
+		c->size = qt;
+		vol_to_world_A(mk->A, si / qt, sj / qt, sk / qt, c->cw);
+	}
+	free(q);
+	*out = cs;
+	*ncomp = nc;
+	return 0;
+}
+
+/* ------------------------------------------------------------ the box */
+
+typedef struct box {
+	int lo[3], n[3];
+	int64_t nv;
+	double A[16];        /* voxel -> world of the full grid */
+	double G[9];         /* (A3^-1)^T: index gradient -> world gradient */
+	double h[3];         /* axis spacings, mm */
+	uint8_t *in;         /* inside this component */
+	double *d;           /* signed exact distance, + inside (mm) */
+	double *surf;        /* surface points (world), ns*3 */
+	int64_t *surf_vox;   /* inside box voxel of each surface point */
+	int64_t ns;
+	kdtree_t kd;
+} box_t;
+
+static void box_free(box_t *b)
+{
+	free(b->in);
+	free(b->d);
+	free(b->surf);
+	free(b->surf_vox);
+	kd_free(&b->kd);
+	memset(b, 0, sizeof *b);
+}
+
+static inline int64_t bidx(const box_t *b, int a, int c, int e)
+{
+	return ((int64_t)e * b->n[1] + c) * b->n[0] + a;
+}
+
+static inline void box_world(const box_t *b, double a, double c, double e,
+			     double w[3])
+{
+	vol_to_world_A(b->A, b->lo[0] + a, b->lo[1] + c, b->lo[2] + e, w);
+}
+
+static inline void box_ijk(const box_t *b, int64_t v, int ijk[3])
+{
+	ijk[0] = (int)(v % b->n[0]);
+	ijk[1] = (int)((v / b->n[0]) % b->n[1]);
+	ijk[2] = (int)(v / ((int64_t)b->n[0] * b->n[1]));
+}
+
+static const int NB6[6][3] = { { 1, 0, 0 }, { -1, 0, 0 }, { 0, 1, 0 },
+			       { 0, -1, 0 }, { 0, 0, 1 }, { 0, 0, -1 } };
+
+/* exact unsigned distance (mm) from world point p to the boundary points;
+ * *foot receives the nearest point's index.  hint: a known point index
+ * (or -1) whose distance bounds the search. */
+static double surf_dist(const box_t *b, const double p[3], int64_t hint,
+			int64_t *foot)
+{
+	double best = INFINITY;
+	if (hint >= 0) {
+		const double *s = b->surf + 3 * hint;
+		double dx = s[0] - p[0], dy = s[1] - p[1], dz = s[2] - p[2];
+		best = (dx * dx + dy * dy + dz * dz) * (1 + 1e-12) + 1e-18;
+	}
+	int64_t f = kd_nearest(&b->kd, p, &best);
+	if (f < 0) {
+		f = hint;
+		const double *s = b->surf + 3 * hint;
+		double dx = s[0] - p[0], dy = s[1] - p[1], dz = s[2] - p[2];
+		best = dx * dx + dy * dy + dz * dz;
+	}
+	if (foot)
+		*foot = f;
+	return sqrt(best);
+}
+
+static int box_setup(box_t *b, const ls_mask_t *mk, const int32_t *lab,
+		     int32_t raw, const comp_t *c, int margin, int threads)
+{
+	memcpy(b->A, mk->A, sizeof b->A);
+	for (int a = 0; a < 3; a++) {
+		b->lo[a] = c->lo[a] - margin;
+		b->n[a] = c->hi[a] - c->lo[a] + 1 + 2 * margin;
+		b->h[a] = sqrt(mk->A[a] * mk->A[a] + mk->A[4 + a] * mk->A[4 + a] +
+			       mk->A[8 + a] * mk->A[8 + a]);
+	}
+	double inv[16];
+	aff_invert(mk->A, inv);
+	/* world gradient g_w[r] = sum_c inv[c][r] g_idx[c] */
+	for (int r = 0; r < 3; r++)
+		for (int cc = 0; cc < 3; cc++)
+			b->G[r * 3 + cc] = inv[cc * 4 + r];
+	b->nv = (int64_t)b->n[0] * b->n[1] * b->n[2];
+	b->in = calloc((size_t)b->nv, 1);
+	b->d = malloc((size_t)b->nv * sizeof *b->d);
+	if (!b->in || !b->d)
+		return -1;
+	for (int e = 0; e < b->n[2]; e++)
+		for (int cc = 0; cc < b->n[1]; cc++)
+			for (int a = 0; a < b->n[0]; a++) {
+				int gi = b->lo[0] + a, gj = b->lo[1] + cc,
+				    gk = b->lo[2] + e;
+				if (gi < 0 || gj < 0 || gk < 0 || gi >= mk->nx ||
+				    gj >= mk->ny || gk >= mk->nz)
+					continue;
+				int64_t g = ((int64_t)gk * mk->ny + gj) *
+						    mk->nx + gi;
+				if (lab[g] == raw)
+					b->in[bidx(b, a, cc, e)] = 1;
+			}
+	/* boundary points: centres of faces between inside and outside
+	 * voxels (outside the volume counts as outside) */
+	int64_t ns = 0;
+	for (int64_t v = 0; v < b->nv; v++) {
+		if (!b->in[v])
+			continue;
+		int ijk[3];
+		box_ijk(b, v, ijk);
+		for (int f = 0; f < 6; f++) {
+			int64_t w = bidx(b, ijk[0] + NB6[f][0],
+					 ijk[1] + NB6[f][1], ijk[2] + NB6[f][2]);
+			if (!b->in[w])
+				ns++;
+		}
+	}
+	b->ns = ns;
+	b->surf = malloc((size_t)(ns ? ns : 1) * 3 * sizeof(double));
+	b->surf_vox = malloc((size_t)(ns ? ns : 1) * sizeof(int64_t));
+	if (!b->surf || !b->surf_vox)
+		return -1;
+	ns = 0;
+	for (int64_t v = 0; v < b->nv; v++) {
+		if (!b->in[v])
+			continue;
+		int ijk[3];
+		box_ijk(b, v, ijk);
+		for (int f = 0; f < 6; f++) {
+			int64_t w = bidx(b, ijk[0] + NB6[f][0],
+					 ijk[1] + NB6[f][1], ijk[2] + NB6[f][2]);
+			if (b->in[w])
+				continue;
+			box_world(b, ijk[0] + 0.5 * NB6[f][0],
+				  ijk[1] + 0.5 * NB6[f][1],
+				  ijk[2] + 0.5 * NB6[f][2], b->surf + 3 * ns);
+			b->surf_vox[ns++] = v;
+		}
+	}
+	if (kd_build(&b->kd, b->surf, ns))
+		return -1;
+	/* exact signed distance at every box voxel; raster order with the
+	 * previous voxel's nearest point as the search bound */
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
+	for (int e = 0; e < b->n[2]; e++) {
+		int64_t hint = -1;
+		for (int cc = 0; cc < b->n[1]; cc++)
+			for (int a = 0; a < b->n[0]; a++) {
+				double p[3];
+				box_world(b, a, cc, e, p);
+				int64_t v = bidx(b, a, cc, e), f;
+				double dd = surf_dist(b, p, hint, &f);
+				hint = f;
+				b->d[v] = b->in[v] ? dd : -dd;
+			}
+	}
+	return 0;
+}
+
+/* central-difference gradient of f at box voxel (one-sided at the box
+ * edges), in world coordinates */
+static void box_grad(const box_t *b, const double *f, const int ijk[3],
+		     double gw[3])
+{
+	double gi[3];
+	int64_t v = bidx(b, ijk[0], ijk[1], ijk[2]);
+	for (int a = 0; a < 3; a++) {
+		int p[3] = { ijk[0], ijk[1], ijk[2] }, m[3] = { ijk[0], ijk[1],
+								 ijk[2] };
+		p[a]++;
+		m[a]--;
+		double fp, fm, den = 2;
+		if (p[a] >= b->n[a]) {
+			fp = f[v];
+			den = 1;
+		} else {
+			fp = f[bidx(b, p[0], p[1], p[2])];
+		}
+		if (m[a] < 0) {
+			fm = f[v];
+			den = den == 1 ? 1e300 : 1;
+		} else {
+			fm = f[bidx(b, m[0], m[1], m[2])];
+		}
+		gi[a] = (fp - fm) / den;
+	}
+	for (int r = 0; r < 3; r++)
+		gw[r] = b->G[r * 3] * gi[0] + b->G[r * 3 + 1] * gi[1] +
+			b->G[r * 3 + 2] * gi[2];
+}
+
+static int normalise(double v[3])
+{
+	double n = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+	if (!(n > 1e-12))
+		return -1;
+	v[0] /= n;
+	v[1] /= n;
+	v[2] /= n;
+	return 0;
+}
+
+/* ------------------------------------------------------------- layers */
+
+typedef struct xing {
+	int64_t v, w;        /* box voxels of the edge, f(v) >= 0 > f(w) */
+	double t;            /* linear crossing parameter from v */
+} xing_t;
+
+/* crossings of f = 0 along grid edges: (f(v) >= 0) != (f(w) >= 0) */
+static int find_crossings(const box_t *b, const double *f, xing_t **out,
+			  int64_t *nout)
+{
+	int64_t cap = 1024, n = 0;
+	xing_t *x = malloc((size_t)cap * sizeof *x);
+	if (!x)
+		return -1;
+	for (int e = 0; e < b->n[2]; e++)
+		for (int c = 0; c < b->n[1]; c++)
+			for (int a = 0; a < b->n[0]; a++) {
+				int64_t v = bidx(b, a, c, e);
+				for (int ax = 0; ax < 3; ax++) {
+					int q[3] = { a, c, e };
+					q[ax]++;
+					if (q[ax] >= b->n[ax])
+						continue;
+					int64_t w = bidx(b, q[0], q[1], q[2]);
+					int sv = f[v] >= 0, sw = f[w] >= 0;
+					if (sv == sw)
+						continue;
+					if (n == cap) {
+						cap *= 2;
+						xing_t *t = realloc(
+							x, (size_t)cap *
+								   sizeof *x);
+						if (!t) {
+							free(x);
+							return -1;
+						}
+						x = t;
+					}
+					int64_t vi = sv ? v : w,
+						wi = sv ? w : v;
+					double fv = f[vi], fw = f[wi];
+					x[n].v = vi;
+					x[n].w = wi;
+					x[n].t = fv / (fv - fw);
+					n++;
+				}
+			}
+	*out = x;
+	*nout = n;
+	return 0;
+}
+
+/* ---------------------------------------------------------------- seeds */
+
+typedef struct sv {
+	double g;
+	double w[3];
+} sv_t;
+
+static int cmp_sv(const void *a, const void *b)
+{
+	const sv_t *x = a, *y = b;
+	if (x->g != y->g)
+		return x->g > y->g ? -1 : 1;
+	for (int c = 0; c < 3; c++)
+		if (x->w[c] != y->w[c])
+			return x->w[c] < y->w[c] ? -1 : 1;
+	return 0;
+}
+
+/*
+ * Collapse points.  The pieces (26-connected) of {g >= 0} inside the
+ * component that hold no voxel with gnext >= 0 vanish before the next
+ * layer: the front collapses there.  A vanishing piece's collapse set is
+ * its voxels within tol of the piece's maximum of g (a point, a curve or
+ * a sheet); it is thinned greedily to points seed_spacing apart, each
+ * replaced by the centroid of the collapse voxels nearest to it.
+ */
+static int find_seeds(const box_t *b, const double *g, const double *gnext,
+		      double Lk, int layer, int32_t label, double seed_spacing,
+		      ls_pts_t *seeds)
+{
+	int64_t *lab = malloc((size_t)b->nv * sizeof *lab);
+	int64_t *q = malloc((size_t)b->nv * sizeof *q);
+	int rc = -1;
+	sv_t *m = NULL;
+	double *keep = NULL, *acc = NULL;
+	if (!lab || !q)
+		goto out;
+	for (int64_t v = 0; v < b->nv; v++)
+		lab[v] = -1;
+	double hmin = fmin(b->h[0], fmin(b->h[1], b->h[2]));
+	double tol = 0.5 * hmin;
+	for (int64_t s = 0; s < b->nv; s++) {
+		if (!b->in[s] || !(g[s] >= 0) || lab[s] >= 0)
+			continue;
+		int64_t qh = 0, qt = 0;
+		q[qt++] = s;
+		lab[s] = s;
+		double gmax = -INFINITY;
+		int alive = 0;
+		while (qh < qt) {
+			int64_t v = q[qh++];
+			if (g[v] > gmax)
+				gmax = g[v];
+			if (gnext && gnext[v] >= 0)
+				alive = 1;
+			int ijk[3];
+			box_ijk(b, v, ijk);
+			for (int dk = -1; dk <= 1; dk++)
+				for (int dj = -1; dj <= 1; dj++)
+					for (int di = -1; di <= 1; di++) {
+						int a = ijk[0] + di,
+						    c = ijk[1] + dj,
+						    e = ijk[2] + dk;
+						if (a < 0 || c < 0 || e < 0 ||
+						    a >= b->n[0] ||
+						    c >= b->n[1] ||
+						    e >= b->n[2])
+							continue;
+						int64_t w = bidx(b, a, c, e);
+						if (b->in[w] && g[w] >= 0 &&
+						    lab[w] < 0) {
+							lab[w] = s;
+							q[qt++] = w;
+						}
+					}
+		}
+		if (alive)
+			continue;
+		/* collapse set */
+		int64_t nm = 0;
+		for (int64_t i = 0; i < qt; i++)
+			if (g[q[i]] >= gmax - tol)
+				nm++;
+		free(m);
+		m = malloc((size_t)nm * sizeof *m);
+		if (!m)
+			goto out;
+		nm = 0;
+		for (int64_t i = 0; i < qt; i++) {
+			int64_t v = q[i];
+			if (g[v] < gmax - tol)
+				continue;
+			int ijk[3];
+			box_ijk(b, v, ijk);
+			m[nm].g = g[v];
+			box_world(b, ijk[0], ijk[1], ijk[2], m[nm].w);
+			nm++;
+		}
+		qsort(m, (size_t)nm, sizeof *m, cmp_sv);
+		free(keep);
+		free(acc);
+		keep = malloc((size_t)nm * 3 * sizeof *keep);
+		acc = calloc((size_t)nm * 5, sizeof *acc);
+		if (!keep || !acc)
+			goto out;
+		int64_t nk = 0;
+		double s2 = seed_spacing * seed_spacing;
+		for (int64_t i = 0; i < nm; i++) {
+			int ok = 1;
+			for (int64_t j = 0; j < nk && ok; j++) {
+				double dx = keep[3 * j] - m[i].w[0],
+				       dy = keep[3 * j + 1] - m[i].w[1],
+				       dz = keep[3 * j + 2] - m[i].w[2];
+				if (dx * dx + dy * dy + dz * dz < s2)
+					ok = 0;
+			}
+			if (ok) {
+				memcpy(keep + 3 * nk, m[i].w, sizeof m[i].w);
+				nk++;
+			}
+		}
+		for (int64_t i = 0; i < nm; i++) {
+			int64_t bj = 0;
+			double bd = INFINITY;
+			for (int64_t j = 0; j < nk; j++) {
+				double dx = keep[3 * j] - m[i].w[0],
+				       dy = keep[3 * j + 1] - m[i].w[1],
+				       dz = keep[3 * j + 2] - m[i].w[2];
+				double dd = dx * dx + dy * dy + dz * dz;
+				if (dd < bd) {
+					bd = dd;
+					bj = j;
+				}
+			}
+			for (int c = 0; c < 3; c++)
+				acc[5 * bj + c] += m[i].w[c];
+			acc[5 * bj + 3] += m[i].g;
+			acc[5 * bj + 4] += 1;
+		}
+		if (pts_reserve(seeds, nk))
+			goto out;
+		for (int64_t j = 0; j < nk; j++) {
+			int64_t o = seeds->n++;
+			double cnt = acc[5 * j + 4];
+			for (int c = 0; c < 3; c++) {
+				seeds->xyz[3 * o + c] = acc[5 * j + c] / cnt;
+				seeds->parent[3 * o + c] = 0;
+				seeds->normal[3 * o + c] = 0;
+			}
+			seeds->label[o] = label;
+			seeds->layer[o] = layer;
+			seeds->level[o] = Lk + acc[5 * j + 3] / cnt;
+		}
+	}
+	rc = 0;
+out:
+	free(lab);
+	free(q);
+	free(m);
+	free(keep);
+	free(acc);
+	return rc;
+}
+
+/* -------------------------------------------------- per-component work */
+
+typedef struct comp_ctx {
+	box_t *b;
+	const ls_params_t *p;
+	ls_result_t *r;
+	int32_t label;
+	double spacing;
+	double *prev;        /* WENO: phi at the previous layer */
+	int prev_k;
+	int nlayers;
+	int err;
+} comp_ctx_t;
+
+/* layer 0: the boundary points themselves, parent = itself */
+static int emit_layer0(comp_ctx_t *cx)
+{
+	box_t *b = cx->b;
+	ls_pts_t *o = &cx->r->contours;
+	if (pts_reserve(o, b->ns))
+		return -1;
+	for (int64_t s = 0; s < b->ns; s++) {
+		int64_t i = o->n++;
+		const double *x = b->surf + 3 * s;
+		memcpy(o->xyz + 3 * i, x, 3 * sizeof(double));
+		memcpy(o->parent + 3 * i, x, 3 * sizeof(double));
+		/* outward normal: -grad d averaged over the face's voxels */
+		int ijk[3];
+		box_ijk(b, b->surf_vox[s], ijk);
+		double g[3], n[3], iw[3];
+		box_grad(b, b->d, ijk, g);
+		box_world(b, ijk[0], ijk[1], ijk[2], iw);
+		int jk[3] = { ijk[0], ijk[1], ijk[2] };
+		/* the outside voxel lies at 2 x - iw */
+		double q[3];
+		for (int c = 0; c < 3; c++)
+			q[c] = 2 * x[c] - iw[c];
+		double inv[16], qi[3];
+		aff_invert(b->A, inv);
+		aff_apply(inv, q, qi);
+		for (int c = 0; c < 3; c++)
+			jk[c] = (int)lround(qi[c]) - b->lo[c];
+		double g2[3];
+		box_grad(b, b->d, jk, g2);
+		for (int c = 0; c < 3; c++)
+			n[c] = -(g[c] + g2[c]);
+		if (normalise(n))
+			for (int c = 0; c < 3; c++)
+				n[c] = x[c] - iw[c];
+		normalise(n);
+		memcpy(o->normal + 3 * i, n, sizeof n);
+		o->label[i] = cx->label;
+		o->layer[i] = 0;
+		o->level[i] = 0;
+	}
+	return 0;
+}
+
+/* exact scheme: layer k at L = k spacing */
+static int exact_layer(comp_ctx_t *cx, int k, double *f)
+{
+	box_t *b = cx->b;
+	double L = k * cx->spacing, Lp = (k - 1) * cx->spacing;
+	for (int64_t v = 0; v < b->nv; v++)
+		f[v] = b->d[v] - L;
+	xing_t *x;
+	int64_t nx;
+	if (find_crossings(b, f, &x, &nx))
+		return -1;
+	ls_pts_t *o = &cx->r->contours;
+	if (pts_reserve(o, nx)) {
+		free(x);
+		return -1;
+	}
+	int64_t base = o->n;
+#pragma omp parallel for num_threads(cx->p->threads) schedule(static)
+	for (int64_t i = 0; i < nx; i++) {
+		int vi[3], wi[3];
+		box_ijk(b, x[i].v, vi);
+		box_ijk(b, x[i].w, wi);
+		double pv[3], pw[3], p[3];
+		box_world(b, vi[0], vi[1], vi[2], pv);
+		box_world(b, wi[0], wi[1], wi[2], pw);
+		/* regula falsi (Illinois) on F(t) = d(v + t (w - v)) - L,
+		 * F(0) >= 0 > F(1); the distance is signed by which half of
+		 * the edge t lies in when the edge leaves the tumour */
+		double t0 = 0, t1 = 1, F0 = f[x[i].v], F1 = f[x[i].w];
+		double t = x[i].t;
+		int side = 0;
+		int64_t foot = -1;
+		for (int it = 0; it < 6; it++) {
+			for (int c = 0; c < 3; c++)
+				p[c] = pv[c] + t * (pw[c] - pv[c]);
+			double dd = surf_dist(b, p, foot, &foot);
+			if (!b->in[x[i].w] && t > 0.5)
+				dd = -dd;
+			double F = dd - L;
+			if (fabs(F) < 1e-6 * cx->spacing)
+				break;
+			if (F >= 0) {
+				t0 = t;
+				F0 = F;
+				if (side == 1)
+					F1 *= 0.5;
+				side = 1;
+			} else {
+				t1 = t;
+				F1 = F;
+				if (side == -1)
+					F0 *= 0.5;
+				side = -1;
+			}
+			t = t0 + (t1 - t0) * F0 / (F0 - F1);
+		}
+		for (int c = 0; c < 3; c++)
+			p[c] = pv[c] + t * (pw[c] - pv[c]);
+		double dd = surf_dist(b, p, foot, &foot);
+		const double *s = b->surf + 3 * foot;
+		double u[3] = { s[0] - p[0], s[1] - p[1], s[2] - p[2] };
+		if (normalise(u))
+			u[0] = u[1] = u[2] = 0;
+		int64_t oi = base + i;
+		double step = dd - Lp;
+		for (int c = 0; c < 3; c++) {
+			o->xyz[3 * oi + c] = p[c];
+			o->parent[3 * oi + c] = p[c] + step * u[c];
+			o->normal[3 * oi + c] = u[c];
+		}
+		o->label[oi] = cx->label;
+		o->layer[oi] = k;
+		o->level[oi] = L;
+	}
+	o->n += nx;
+	free(x);
+	return 0;
+}
+
+/* trilinear interpolation of the world gradient of f at box position */
+static void grad_at(const box_t *b, const double *f, const double pi[3],
+		    double gw[3])
+{
+	int i0[3];
+	double fr[3];
+	for (int c = 0; c < 3; c++) {
+		double x = pi[c];
+		if (x < 0)
+			x = 0;
+		if (x > b->n[c] - 1)
+			x = b->n[c] - 1;
+		i0[c] = (int)floor(x);
+		if (i0[c] >= b->n[c] - 1)
+			i0[c] = b->n[c] > 1 ? b->n[c] - 2 : 0;
+		fr[c] = x - i0[c];
+	}
+	gw[0] = gw[1] = gw[2] = 0;
+	for (int corner = 0; corner < 8; corner++) {
+		int q[3];
+		double wgt = 1;
+		for (int c = 0; c < 3; c++) {
+			int bit = (corner >> c) & 1;
+			q[c] = i0[c] + bit;
+			if (q[c] >= b->n[c])
+				q[c] = b->n[c] - 1;
+			wgt *= bit ? fr[c] : 1 - fr[c];
+		}
+		double g[3];
+		box_grad(b, f, q, g);
+		for (int c = 0; c < 3; c++)
+			gw[c] += wgt * g[c];
+	}
+}
+
+/* WENO scheme: called by the evolution at t_k */
+static int weno_layer(void *ctxp, int k, const double *phi)
+{
+	comp_ctx_t *cx = ctxp;
+	box_t *b = cx->b;
+	if (cx->p->cancelled && cx->p->cancelled(cx->p->user)) {
+		cx->err = ARMSTG_ECANCELLED;
+		return -1;
+	}
+	/* seeds: pieces of the previous layer that vanished by now */
+	if (find_seeds(b, cx->prev, phi, (k - 1) * cx->spacing, k - 1,
+		       cx->label, cx->p->seed_spacing, &cx->r->seeds))
+		return -2;
+	int any = 0;
+	for (int64_t v = 0; v < b->nv && !any; v++)
+		if (b->in[v] && phi[v] >= 0)
+			any = 1;
+	if (!any || k >= cx->p->max_layers)
+		return 1;
+	/* restrict crossings to the tumour: outside voxels are negative */
+	double *f = malloc((size_t)b->nv * sizeof *f);
+	if (!f)
+		return -2;
+	for (int64_t v = 0; v < b->nv; v++)
+		f[v] = b->in[v] ? phi[v] : fmin(phi[v], -1e-9);
+	xing_t *x;
+	int64_t nx;
+	if (find_crossings(b, f, &x, &nx)) {
+		free(f);
+		return -2;
+	}
+	ls_pts_t *o = &cx->r->contours;
+	if (pts_reserve(o, nx)) {
+		free(x);
+		free(f);
+		return -2;
+	}
+	double inv[16];
+	aff_invert(b->A, inv);
+	for (int64_t i = 0; i < nx; i++) {
+		int vi[3], wi[3];
+		box_ijk(b, x[i].v, vi);
+		box_ijk(b, x[i].w, wi);
+		double pi[3], p[3], g[3];
+		for (int c = 0; c < 3; c++)
+			pi[c] = vi[c] + x[i].t * (wi[c] - vi[c]);
+		box_world(b, pi[0], pi[1], pi[2], p);
+		grad_at(b, f, pi, g);
+		double n[3] = { -g[0], -g[1], -g[2] };
+		if (normalise(n))
+			n[0] = n[1] = n[2] = 0;
+		int64_t oi = o->n++;
+		for (int c = 0; c < 3; c++) {
+			o->xyz[3 * oi + c] = p[c];
+			o->parent[3 * oi + c] = p[c] + cx->spacing * n[c];
+			o->normal[3 * oi + c] = n[c];
+		}
+		o->label[oi] = cx->label;
+		o->layer[oi] = k;
+		o->level[oi] = k * cx->spacing;
+	}
+	free(x);
+	memcpy(cx->prev, f, (size_t)b->nv * sizeof *f);
+	free(f);
+	cx->nlayers = k + 1;
+	if (cx->p->progress)
+		cx->p->progress(cx->p->user, -1, "weno layer");
+	return 0;
+}
+
+static int run_component(const ls_mask_t *mk, const int32_t *lab,
+			 const comp_t *c, int32_t label, const ls_params_t *p,
+			 ls_result_t *r, int ci)
+{
+	box_t b;
+	memset(&b, 0, sizeof b);
+	int margin = p->scheme == LS_WENO ? 5 : 2;
+	double *f = NULL;
+	int rc = ARMSTG_ENOMEM;
+	if (box_setup(&b, mk, lab, c->raw, c, margin, p->threads))
+		goto out;
+	double dmax = 0;
+	for (int64_t v = 0; v < b.nv; v++)
+		if (b.in[v] && b.d[v] > dmax)
+			dmax = b.d[v];
+	double spacing = p->spacing;
+	if (p->max_layers >= 2 && ceil(dmax / spacing) > p->max_layers - 1)
+		spacing = dmax / (p->max_layers - 1) * (1 + 1e-9);
+	r->comp_spacing[ci] = spacing;
+	r->comp_depth[ci] = dmax;
+	comp_ctx_t cx = { .b = &b, .p = p, .r = r, .label = label,
+			  .spacing = spacing };
+	if (emit_layer0(&cx))
+		goto out;
+	f = malloc((size_t)b.nv * sizeof *f);
+	if (!f)
+		goto out;
+	if (p->scheme == LS_EXACT) {
+		double *g = malloc((size_t)b.nv * sizeof *g);
+		if (!g)
+			goto out;
+		int k = 1;
+		for (;; k++) {
+			double L = k * spacing;
+			if (!(L < dmax) || k >= p->max_layers)
+				break;
+			if (p->cancelled && p->cancelled(p->user)) {
+				free(g);
+				rc = fail(r, ARMSTG_ECANCELLED, "cancelled");
+				goto out;
+			}
+			if (exact_layer(&cx, k, f)) {
+				free(g);
+				goto out;
+			}
+			if (p->progress)
+				p->progress(p->user, fmin(1, L / dmax),
+					    "exact layer");
+		}
+		cx.nlayers = k;
+		/* seeds: level j pieces that vanish by level j+1 */
+		for (int j = 0; j < k; j++) {
+			double L = j * spacing, Ln = (j + 1) * spacing;
+			for (int64_t v = 0; v < b.nv; v++) {
+				f[v] = b.d[v] - L;
+				g[v] = j + 1 < k ? b.d[v] - Ln : -1;
+			}
+			if (find_seeds(&b, f, g, L, j, label, p->seed_spacing,
+				       &r->seeds)) {
+				free(g);
+				goto out;
+			}
+		}
+		free(g);
+	} else {
+		/* narrow band initial phi: the signed distance clamped to
+		 * +-band, so the evolution (not the exact distance) carries
+		 * the front inward */
+		double hmax = fmax(b.h[0], fmax(b.h[1], b.h[2]));
+		double band = 3 * hmax;
+		cx.prev = malloc((size_t)b.nv * sizeof *cx.prev);
+		if (!cx.prev)
+			goto out;
+		for (int64_t v = 0; v < b.nv; v++) {
+			f[v] = fmax(-band, fmin(band, b.d[v]));
+			cx.prev[v] = b.in[v] ? b.d[v] : -1;
+		}
+		ls_weno_cfg_t wc = { .n = { b.n[0], b.n[1], b.n[2] },
+				     .h = { b.h[0], b.h[1], b.h[2] },
+				     .speed = p->speed,
+				     .spacing = spacing,
+				     .band = band,
+				     .cfl = p->cfl,
+				     .max_layers = p->max_layers + 1,
+				     .threads = p->threads,
+				     .on_layer = weno_layer,
+				     .ctx = &cx };
+		int wr = ls_weno_run(&wc, f);
+		free(cx.prev);
+		if (wr < 0) {
+			if (cx.err) {
+				rc = fail(r, cx.err, "cancelled");
+				goto out;
+			}
+			goto out;
+		}
+	}
+	if (cx.nlayers > r->nlayers_max)
+		r->nlayers_max = cx.nlayers;
+	rc = 0;
+out:
+	free(f);
+	box_free(&b);
+	if (rc == ARMSTG_ENOMEM)
+		fail(r, rc, "out of memory in the level-set computation");
+	return rc;
+}
+
+int ls_run(const ls_mask_t *mk, const ls_params_t *p, ls_result_t *r)
+{
+	if (mk->nx < 1 || mk->ny < 1 || mk->nz < 1)
+		return fail(r, ARMSTG_EINVAL, "tumour mask has an empty grid");
+	double inv[16];
+	if (aff_invert(mk->A, inv))
+		return fail(r, ARMSTG_EINVAL,
+			    "tumour mask affine is singular");
+	if (!(p->speed > 0) || !(p->spacing > 0))
+		return fail(r, ARMSTG_EINVAL,
+			    "speed and layer spacing must be positive");
+	int64_t nv = (int64_t)mk->nx * mk->ny * mk->nz, cnt = 0;
+	for (int64_t v = 0; v < nv; v++)
+		cnt += mk->m[v] != 0;
+	if (!cnt)
+		return fail(r, ARMSTG_EINVAL,
+			    "tumour mask is empty (no voxel > 0)");
+	int32_t *lab = malloc((size_t)nv * sizeof *lab);
+	comp_t *cs = NULL;
+	int nc = 0, rc;
+	if (!lab || label_components(mk, lab, &cs, &nc)) {
+		free(lab);
+		return fail(r, ARMSTG_ENOMEM, "out of memory labelling the "
+					      "tumour components");
+	}
+	int kept = 0;
+	for (int i = 0; i < nc; i++) {
+		if (cs[i].size >= p->min_voxels)
+			cs[kept++] = cs[i];
+		else
+			r->dropped++;
+	}
+	if (!kept) {
+		snprintf(r->err, sizeof r->err,
+			 "all %d tumour components are smaller than "
+			 "min_voxels = %lld voxels",
+			 nc, (long long)p->min_voxels);
+		free(lab);
+		free(cs);
+		return ARMSTG_EINVAL;
+	}
+	qsort(cs, (size_t)kept, sizeof *cs, cmp_comp);
+	r->ncomp = kept;
+	r->comp_spacing = calloc((size_t)kept, sizeof(double));
+	r->comp_depth = calloc((size_t)kept, sizeof(double));
+	if (!r->comp_spacing || !r->comp_depth) {
+		rc = fail(r, ARMSTG_ENOMEM, "out of memory");
+		goto out;
+	}
+	for (int i = 0; i < kept; i++) {
+		rc = run_component(mk, lab, &cs[i], i + 1, p, r, i);
+		if (rc)
+			goto out;
+	}
+	rc = 0;
+out:
+	free(lab);
+	free(cs);
+	return rc;
+}

@@ -1,0 +1,37 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * A static 3-D k-d tree over points in world mm (Bentley 1975; Friedman,
+ * Bentley and Finkel 1977 for the nearest-neighbour search).  Used by the
+ * levelset stage for exact Euclidean distances to the sub-voxel tumour
+ * boundary and by the sampler for nearest-node queries.
+ */
+#ifndef LS_KDTREE_H
+#define LS_KDTREE_H
+
+#include <stdint.h>
+
+typedef struct kdtree {
+	int64_t n;
+	const double *xyz;   /* n*3, borrowed: must outlive the tree */
+	int64_t *idx;        /* permutation: implicit balanced tree */
+	int8_t *axis;        /* split axis per node (position in idx) */
+} kdtree_t;
+
+/* Build over n points (n may be 0).  0 or -1 on out-of-memory. */
+int kd_build(kdtree_t *t, const double *xyz, int64_t n);
+void kd_free(kdtree_t *t);
+
+/*
+ * Nearest point to q.  *best_d2 is an upper bound on the squared distance
+ * on entry (use INFINITY when none is known) and the squared distance found
+ * on return.  Returns the point's index, or -1 when no point lies strictly
+ * within the bound.
+ */
+int64_t kd_nearest(const kdtree_t *t, const double q[3], double *best_d2);
+
+/* Number of points within distance r of q (inclusive); stops counting at
+ * max (>0) when reached. */
+int64_t kd_count_within(const kdtree_t *t, const double q[3], double r,
+			int64_t max);
+
+#endif

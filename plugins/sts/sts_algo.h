@@ -1,0 +1,197 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * sts: Simple Tumour Segmenter, pure algorithm part (no host calls, so the
+ * tests and bench/sts call it directly and the plugin wraps it).
+ *
+ * Method (Diaz, "Atlas to Patient Registration with Brain Tumor Based on a
+ * New Mesh-free Method", U. Alberta, section 3.1; DESIGN.md section 6):
+ *
+ *   1. per modality, the background value and th_alpha (brain vs background)
+ *   2. per modality, a histogram of the brain, smoothed with a Savitzky-Golay
+ *      filter; its modes, valleys (slope sign changes) and the width of the
+ *      main tissue mode give th_1 (tissue vs CSF), th_2 (hyperintense) and
+ *      th_omega (the strict "surely abnormal" level)
+ *   3. double thresholding across modalities: markers above th_omega in the
+ *      primary hyperintense modality (FLAIR, else T2), grown by geodesic
+ *      reconstruction inside the voxels above th_2 in every hyperintense
+ *      modality present
+ *   4. morphology (opening by reconstruction, closing, hole filling) and the
+ *      largest plausible components
+ *   5. enhancement from T1c - T1 (both z-scored on their tissue mode) or T1c
+ *      alone; core = enhancing region with the holes it encloses
+ *
+ * Units: intensities are whatever the file holds (every threshold is derived
+ * from the image's own histogram, so raw int16 and z-scored floats behave
+ * the same); lengths are mm through the voxel spacing; volumes mm^3.
+ */
+#ifndef STS_ALGO_H
+#define STS_ALGO_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+enum sts_mod { STS_T1 = 0, STS_T1C = 1, STS_T2 = 2, STS_FLAIR = 3, STS_NMOD = 4 };
+
+/* Output tumour label codes (BraTS 2017-2021 convention). */
+enum sts_label {
+	STS_LAB_CORE = 1,      /* necrosis / non-enhancing tumour core */
+	STS_LAB_EDEMA = 2,     /* peritumoural edema (hyperintense rest) */
+	STS_LAB_ENHANCING = 4, /* enhancing tumour */
+};
+
+/* ---- Savitzky-Golay (Savitzky & Golay, Anal. Chem. 36(8), 1964) ---- */
+
+/*
+ * Coefficients c[0..2*half] of the least-squares polynomial of degree
+ * `order` fitted to 2*half+1 equally spaced samples (offsets -half..half),
+ * evaluated (derivative `deriv`, per sample spacing) at offset `pos`:
+ *     y^(deriv)(pos) = sum_j c[j] * y[j - half].
+ * pos = 0 gives the classic centred filter: half=2, order=2, deriv=0 is
+ * (-3, 12, 17, 12, -3)/35.  Returns 0, or -1 for bad arguments.
+ */
+int sts_sg_coeffs(int half, int order, int deriv, double pos, double *c);
+
+/*
+ * Filter n samples.  Interior points use the centred coefficients; the
+ * first/last `half` points use the polynomial fitted to the first/last
+ * window evaluated at their own offset (no padding assumptions).
+ * Needs n >= 2*half+1 and order < 2*half+1.  Returns 0 or -1.
+ */
+int sts_sg_filter(const double *in, int n, int half, int order, int deriv,
+		  double *out);
+
+/* ---- histogram analysis ---- */
+
+typedef struct sts_hist {
+	int nbins;
+	double lo;        /* centre of bin 0 */
+	double width;     /* bin width (intensity units) */
+	double *count;    /* raw counts */
+	double *smooth;   /* Savitzky-Golay smoothed counts */
+	double *slope;    /* Savitzky-Golay first derivative (counts/bin) */
+	double quantum;   /* detected intensity quantum (0 = continuous) */
+} sts_hist_t;
+
+typedef struct sts_thr {
+	double bg;        /* background value (constant background), or NAN */
+	double th_alpha;  /* brain: v != bg (constant bg) or v > th_alpha */
+	double mode;      /* main tissue mode of the brain histogram */
+	double sigma;     /* its width: narrower half width at half max/1.1774 */
+	double th_1;      /* tissue vs CSF (CSF below for T1/T1c/FLAIR,
+	                     above for T2) */
+	double th_2;      /* hyperintense (tumour candidate) level */
+	double th_omega;  /* strict hyperintense level: markers */
+	double p_lo, p_hi;/* 0.1 and 99.9 percentiles of the brain */
+	int n_modes;      /* modes found in the smoothed brain histogram */
+	int th1_from_valley; /* 1: th_1 is a valley (CSF mode found) */
+	int th2_from_valley; /* 1: th_2 is a valley before a hyperintense mode */
+} sts_thr_t;
+
+typedef struct sts_params {
+	int mode_labels;      /* 0 auto, 1 labels */
+	int labels_scheme;    /* 0 brats2013, 1 brats2023, 2 binary */
+	int bins;             /* histogram bins over [p0.1, p99.9] */
+	int sg_half;          /* Savitzky-Golay half window (bins) */
+	int sg_order;         /* Savitzky-Golay polynomial degree */
+	double k_csf;         /* th_1 = mode - k_csf*sigma without a CSF mode */
+	double k_hyper;       /* th_2 = mode + k_hyper*sigma */
+	double k_marker;      /* th_omega = mode + k_marker*sigma */
+	double k_enh;         /* enhancing: > mode + k_enh*sigma of T1c(-T1) */
+	double open_mm;       /* opening-by-reconstruction radius, mm */
+	double close_mm;      /* closing radius, mm */
+	double min_volume_mm3;/* smallest tumour component kept */
+	double keep_ratio;    /* other components kept if >= ratio*largest */
+	int threads;
+} sts_params_t;
+
+void sts_params_default(sts_params_t *p);
+
+/* Build the histogram of v[i] for mask[i] != 0 (mask NULL = all) over
+ * [lo, hi] with about `bins` bins (fewer when the data are quantised: the
+ * width is then a whole number of quanta so no bin aliases).  Smooths with
+ * the Savitzky-Golay filter.  Returns 0, -1 (bad args / empty), -2 (nomem). */
+int sts_hist_build(const float *v, const uint8_t *mask, int64_t n,
+		   double lo, double hi, double quantum, int bins, int sg_half,
+		   int sg_order, sts_hist_t *h);
+void sts_hist_free(sts_hist_t *h);
+
+/* Bin centre of bin b. */
+static inline double sts_hist_x(const sts_hist_t *h, double b)
+{
+	return h->lo + b * h->width;
+}
+
+/*
+ * Thresholds from a smoothed brain histogram (fills mode, sigma, th_1,
+ * th_2, th_omega, n_modes; leaves bg/th_alpha/p_lo/p_hi alone).
+ * bright_csf: 1 for T2 (CSF above the tissue mode).  Returns 0, or -1 when
+ * the histogram has no usable mode (e.g. all counts in one bin).
+ */
+int sts_hist_thresholds(const sts_hist_t *h, const sts_params_t *p,
+			int bright_csf, sts_thr_t *t);
+
+/* ---- binary morphology on a grid with voxel spacing sp (mm) ---- */
+
+typedef struct sts_grid {
+	int nx, ny, nz;
+	double sp[3];    /* voxel spacing, mm */
+	int threads;     /* OpenMP threads (<= 0: 1) */
+} sts_grid_t;
+
+/* Squared Euclidean distance (mm^2) from every voxel to the nearest voxel
+ * with f[i] != 0 (Felzenszwalb & Huttenlocher 2012, separable lower
+ * envelope of parabolas); INFINITY where f has no such voxel. */
+int sts_edt2(const sts_grid_t *g, const uint8_t *f, float *d2);
+/* out = m dilated / eroded by a ball of radius r mm.  out may be m. */
+int sts_dilate(const sts_grid_t *g, const uint8_t *m, double r_mm,
+	       uint8_t *out);
+int sts_erode(const sts_grid_t *g, const uint8_t *m, double r_mm,
+	      uint8_t *out);
+/* Binary geodesic reconstruction by dilation of `marker` under `mask`
+ * (6-connected; Vincent, IEEE TIP 2(2), 1993): the connected components
+ * of mask that contain a marker voxel.  out may alias marker. */
+int sts_reconstruct(const sts_grid_t *g, const uint8_t *marker,
+		    const uint8_t *mask, uint8_t *out);
+/* Fill the background components (6-connected) not reaching the border. */
+int sts_fill_holes(const sts_grid_t *g, const uint8_t *m, uint8_t *out);
+/* 6-connected labelling: lab[i] in 1..n (0 background), sizes[l] voxels
+ * (caller frees *sizes).  Returns the number of components or < 0. */
+int sts_label_cc(const sts_grid_t *g, const uint8_t *m, int32_t *lab,
+		 int64_t **sizes);
+/* Keep the largest component and any other of at least
+ * max(ratio*largest, min_vox) voxels; returns the kept voxel count. */
+int64_t sts_keep_components(const sts_grid_t *g, uint8_t *m, double ratio,
+			    int64_t min_vox);
+
+/* ---- the whole segmentation ---- */
+
+typedef struct sts_input {
+	sts_grid_t grid;
+	const float *mod[STS_NMOD];  /* NULL where absent */
+	const int32_t *labels;       /* labels mode input, or NULL */
+} sts_input_t;
+
+typedef struct sts_output {
+	uint8_t *brain;      /* nvox, 0/1 */
+	uint8_t *tissue;     /* nvox, 0/1: brain without CSF (tumour counts
+	                        as tissue) */
+	uint8_t *tumour;     /* nvox, 0/1 or NULL when not computed */
+	uint8_t *labels;     /* nvox, 0/1/2/4 or NULL when not computed */
+	sts_thr_t thr[STS_NMOD];
+	int have[STS_NMOD];
+	double enh_mode, enh_sigma, th_enh; /* enhancement image thresholds */
+	int enh_source;      /* 0 none, 1 T1c alone, 2 T1c - T1 */
+	int64_t n_brain, n_tumour, n_markers;
+	char note[256];      /* warning for the log ("" if none) */
+} sts_output_t;
+
+extern const char *const sts_mod_name[STS_NMOD];
+
+/* Runs the segmentation; allocates out's arrays (free with
+ * sts_output_free).  Returns 0 or a negative ARMSTG_E* code with err set
+ * (the message names the problem and the modality). */
+int sts_segment(const sts_input_t *in, const sts_params_t *p,
+		sts_output_t *out, char *err, size_t errsize);
+void sts_output_free(sts_output_t *out);
+
+#endif

@@ -1,0 +1,407 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * sts: binary morphology in mm (exact Euclidean distance transform),
+ * geodesic reconstruction, hole filling, connected components.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "sts_algo.h"
+
+static inline int64_t gidx(const sts_grid_t *g, int i, int j, int k)
+{
+	return ((int64_t)k * g->ny + j) * g->nx + i;
+}
+
+static inline int64_t gnvox(const sts_grid_t *g)
+{
+	return (int64_t)g->nx * g->ny * g->nz;
+}
+
+/*
+ * 1-D squared distance transform of f (n samples, spacing^2 w) into d:
+ * d(q) = min_p w (q-p)^2 + f(p)  (Felzenszwalb & Huttenlocher, Theory of
+ * Computing 8, 2012, algorithm DT(f)).  Samples with f = INF are skipped;
+ * v, z are scratch (n and n+1).
+ */
+static void edt1(const float *f, int n, double w, float *d, int *v, double *z)
+{
+	int k = -1;
+	for (int q = 0; q < n; q++) {
+		if (!isfinite(f[q]))
+			continue;
+		double fq = f[q] + w * (double)q * q;
+		while (k >= 0) {
+			int p = v[k];
+			double s = (fq - (f[p] + w * (double)p * p)) /
+				   (2 * w * (q - p));
+			if (s <= z[k]) {
+				k--;
+				continue;
+			}
+			k++;
+			v[k] = q;
+			z[k] = s;
+			z[k + 1] = INFINITY;
+			break;
+		}
+		if (k < 0) {
+			k = 0;
+			v[0] = q;
+			z[0] = -INFINITY;
+			z[1] = INFINITY;
+		}
+	}
+	if (k < 0) {
+		for (int q = 0; q < n; q++)
+			d[q] = INFINITY;
+		return;
+	}
+	int j = 0;
+	for (int q = 0; q < n; q++) {
+		while (z[j + 1] < q)
+			j++;
+		double dq = q - v[j];
+		d[q] = (float)(w * dq * dq + f[v[j]]);
+	}
+}
+
+int sts_edt2(const sts_grid_t *g, const uint8_t *f, float *d2)
+{
+	int64_t n = gnvox(g);
+	int nx = g->nx, ny = g->ny, nz = g->nz;
+	int nmax = nx > ny ? nx : ny;
+	nmax = nmax > nz ? nmax : nz;
+	for (int64_t i = 0; i < n; i++)
+		d2[i] = f[i] ? 0.0f : INFINITY;
+	int err = 0;
+	double w[3] = { g->sp[0] * g->sp[0], g->sp[1] * g->sp[1],
+			g->sp[2] * g->sp[2] };
+#pragma omp parallel num_threads(g->threads > 0 ? g->threads : 1)
+	{
+		float *in = malloc(sizeof(float) * nmax);
+		float *out = malloc(sizeof(float) * nmax);
+		int *v = malloc(sizeof(int) * nmax);
+		double *z = malloc(sizeof(double) * (nmax + 1));
+		int ok = in && out && v && z;
+		if (!ok) {
+#pragma omp atomic write
+			err = 1;
+		}
+		/* x lines */
+#pragma omp for collapse(2) schedule(static)
+		for (int k = 0; k < nz; k++)
+			for (int j = 0; j < ny; j++) {
+				if (!ok)
+					continue;
+				float *row = d2 + gidx(g, 0, j, k);
+				memcpy(in, row, sizeof(float) * nx);
+				edt1(in, nx, w[0], row, v, z);
+			}
+		/* y lines */
+#pragma omp for collapse(2) schedule(static)
+		for (int k = 0; k < nz; k++)
+			for (int i = 0; i < nx; i++) {
+				if (!ok)
+					continue;
+				for (int j = 0; j < ny; j++)
+					in[j] = d2[gidx(g, i, j, k)];
+				edt1(in, ny, w[1], out, v, z);
+				for (int j = 0; j < ny; j++)
+					d2[gidx(g, i, j, k)] = out[j];
+			}
+		/* z lines */
+#pragma omp for collapse(2) schedule(static)
+		for (int j = 0; j < ny; j++)
+			for (int i = 0; i < nx; i++) {
+				if (!ok)
+					continue;
+				for (int k = 0; k < nz; k++)
+					in[k] = d2[gidx(g, i, j, k)];
+				edt1(in, nz, w[2], out, v, z);
+				for (int k = 0; k < nz; k++)
+					d2[gidx(g, i, j, k)] = out[k];
+			}
+		free(in);
+		free(out);
+		free(v);
+		free(z);
+	}
+	return err ? -2 : 0;
+}
+
+/* Bounding box of m grown by `margin` voxels per axis (clipped). Returns 0
+ * when m is empty. */
+static int bbox(const sts_grid_t *g, const uint8_t *m, const int margin[3],
+		int lo[3], int hi[3])
+{
+	lo[0] = g->nx, lo[1] = g->ny, lo[2] = g->nz;
+	hi[0] = hi[1] = hi[2] = -1;
+	for (int k = 0; k < g->nz; k++)
+		for (int j = 0; j < g->ny; j++) {
+			const uint8_t *row = m + gidx(g, 0, j, k);
+			for (int i = 0; i < g->nx; i++)
+				if (row[i]) {
+					if (i < lo[0]) lo[0] = i;
+					if (i > hi[0]) hi[0] = i;
+					if (j < lo[1]) lo[1] = j;
+					if (j > hi[1]) hi[1] = j;
+					if (k < lo[2]) lo[2] = k;
+					if (k > hi[2]) hi[2] = k;
+				}
+		}
+	if (hi[0] < 0)
+		return 0;
+	int dim[3] = { g->nx, g->ny, g->nz };
+	for (int a = 0; a < 3; a++) {
+		lo[a] = lo[a] - margin[a] < 0 ? 0 : lo[a] - margin[a];
+		hi[a] = hi[a] + margin[a] >= dim[a] ? dim[a] - 1
+						    : hi[a] + margin[a];
+	}
+	return 1;
+}
+
+/* dilate (erode = 0) or erode (erode = 1) by a ball of r mm, computed on
+ * the bounding box of m plus the radius (and one voxel) only. */
+static int morph(const sts_grid_t *g, const uint8_t *m, double r_mm,
+		 int erode, uint8_t *out)
+{
+	int64_t n = gnvox(g);
+	if (!(r_mm > 0)) {
+		if (out != m)
+			memcpy(out, m, (size_t)n);
+		return 0;
+	}
+	int margin[3], lo[3], hi[3];
+	for (int a = 0; a < 3; a++)
+		margin[a] = erode ? 1 : (int)ceil(r_mm / g->sp[a]) + 1;
+	if (!bbox(g, m, margin, lo, hi)) {
+		memset(out, 0, (size_t)n);
+		return 0;
+	}
+	sts_grid_t sg = { hi[0] - lo[0] + 1, hi[1] - lo[1] + 1,
+			  hi[2] - lo[2] + 1, { g->sp[0], g->sp[1], g->sp[2] },
+			  g->threads };
+	int64_t sn = gnvox(&sg);
+	uint8_t *sub = malloc((size_t)sn);
+	float *d2 = malloc(sizeof(float) * sn);
+	if (!sub || !d2) {
+		free(sub);
+		free(d2);
+		return -2;
+	}
+	for (int k = 0; k < sg.nz; k++)
+		for (int j = 0; j < sg.ny; j++)
+			for (int i = 0; i < sg.nx; i++) {
+				uint8_t b = m[gidx(g, i + lo[0], j + lo[1],
+						   k + lo[2])] != 0;
+				sub[gidx(&sg, i, j, k)] = erode ? !b : b;
+			}
+	int rc = sts_edt2(&sg, sub, d2);
+	if (!rc) {
+		float r2 = (float)(r_mm * r_mm);
+		memset(out, 0, (size_t)n);
+		for (int k = 0; k < sg.nz; k++)
+			for (int j = 0; j < sg.ny; j++)
+				for (int i = 0; i < sg.nx; i++) {
+					int64_t s = gidx(&sg, i, j, k);
+					uint8_t b = erode ? (!sub[s] && d2[s] > r2)
+							  : d2[s] <= r2;
+					out[gidx(g, i + lo[0], j + lo[1],
+						 k + lo[2])] = b;
+				}
+	}
+	free(sub);
+	free(d2);
+	return rc;
+}
+
+int sts_dilate(const sts_grid_t *g, const uint8_t *m, double r_mm,
+	       uint8_t *out)
+{
+	return morph(g, m, r_mm, 0, out);
+}
+
+int sts_erode(const sts_grid_t *g, const uint8_t *m, double r_mm,
+	      uint8_t *out)
+{
+	return morph(g, m, r_mm, 1, out);
+}
+
+/* Breadth-first flood of `in` (values 1) through voxels where allow != 0;
+ * queue holds seeds on entry (nq of them). */
+static void flood(const sts_grid_t *g, uint8_t *in, const uint8_t *allow,
+		  int64_t *queue, int64_t nq)
+{
+	int64_t head = 0, sx = 1, sy = g->nx, sz = (int64_t)g->nx * g->ny;
+	while (head < nq) {
+		int64_t p = queue[head++];
+		int i = (int)(p % g->nx), j = (int)((p / g->nx) % g->ny),
+		    k = (int)(p / sz);
+		int64_t nb[6];
+		int c = 0;
+		if (i > 0) nb[c++] = p - sx;
+		if (i < g->nx - 1) nb[c++] = p + sx;
+		if (j > 0) nb[c++] = p - sy;
+		if (j < g->ny - 1) nb[c++] = p + sy;
+		if (k > 0) nb[c++] = p - sz;
+		if (k < g->nz - 1) nb[c++] = p + sz;
+		for (int t = 0; t < c; t++) {
+			int64_t q = nb[t];
+			if (!in[q] && allow[q]) {
+				in[q] = 1;
+				queue[nq++] = q;
+			}
+		}
+	}
+}
+
+int sts_reconstruct(const sts_grid_t *g, const uint8_t *marker,
+		    const uint8_t *mask, uint8_t *out)
+{
+	int64_t n = gnvox(g), nq = 0;
+	uint8_t *r = malloc((size_t)n);
+	int64_t *queue = malloc(sizeof(int64_t) * n);
+	if (!r || !queue) {
+		free(r);
+		free(queue);
+		return -2;
+	}
+	for (int64_t i = 0; i < n; i++) {
+		r[i] = marker[i] && mask[i];
+		if (r[i])
+			queue[nq++] = i;
+	}
+	flood(g, r, mask, queue, nq);
+	memcpy(out, r, (size_t)n);
+	free(r);
+	free(queue);
+	return 0;
+}
+
+int sts_fill_holes(const sts_grid_t *g, const uint8_t *m, uint8_t *out)
+{
+	int64_t n = gnvox(g), nq = 0;
+	uint8_t *bg = malloc((size_t)n), *outside = calloc((size_t)n, 1);
+	int64_t *queue = malloc(sizeof(int64_t) * n);
+	if (!bg || !outside || !queue) {
+		free(bg);
+		free(outside);
+		free(queue);
+		return -2;
+	}
+	for (int64_t i = 0; i < n; i++)
+		bg[i] = !m[i];
+	/* seeds: background voxels on the grid's faces */
+	for (int k = 0; k < g->nz; k++)
+		for (int j = 0; j < g->ny; j++)
+			for (int i = 0; i < g->nx; i++) {
+				if (!(i == 0 || j == 0 || k == 0 ||
+				      i == g->nx - 1 || j == g->ny - 1 ||
+				      k == g->nz - 1))
+					continue;
+				int64_t p = gidx(g, i, j, k);
+				if (bg[p] && !outside[p]) {
+					outside[p] = 1;
+					queue[nq++] = p;
+				}
+			}
+	flood(g, outside, bg, queue, nq);
+	for (int64_t i = 0; i < n; i++)
+		out[i] = !outside[i];
+	free(bg);
+	free(outside);
+	free(queue);
+	return 0;
+}
+
+int sts_label_cc(const sts_grid_t *g, const uint8_t *m, int32_t *lab,
+		 int64_t **sizes)
+{
+	int64_t n = gnvox(g);
+	int64_t *queue = malloc(sizeof(int64_t) * n);
+	int64_t cap = 64, *sz = malloc(sizeof(int64_t) * cap);
+	if (!queue || !sz) {
+		free(queue);
+		free(sz);
+		return -2;
+	}
+	memset(lab, 0, sizeof(int32_t) * n);
+	int32_t nl = 0;
+	sz[0] = 0;
+	int64_t sy = g->nx, sk = (int64_t)g->nx * g->ny;
+	for (int64_t s = 0; s < n; s++) {
+		if (!m[s] || lab[s])
+			continue;
+		if (nl + 1 >= cap) {
+			int64_t *t = realloc(sz, sizeof(int64_t) * cap * 2);
+			if (!t) {
+				free(queue);
+				free(sz);
+				return -2;
+			}
+			sz = t;
+			cap *= 2;
+		}
+		nl++;
+		int64_t head = 0, nq = 0;
+		queue[nq++] = s;
+		lab[s] = nl;
+		while (head < nq) {
+			int64_t p = queue[head++];
+			int i = (int)(p % g->nx), j = (int)((p / g->nx) % g->ny),
+			    k = (int)(p / sk);
+			int64_t nb[6];
+			int c = 0;
+			if (i > 0) nb[c++] = p - 1;
+			if (i < g->nx - 1) nb[c++] = p + 1;
+			if (j > 0) nb[c++] = p - sy;
+			if (j < g->ny - 1) nb[c++] = p + sy;
+			if (k > 0) nb[c++] = p - sk;
+			if (k < g->nz - 1) nb[c++] = p + sk;
+			for (int t = 0; t < c; t++)
+				if (m[nb[t]] && !lab[nb[t]]) {
+					lab[nb[t]] = nl;
+					queue[nq++] = nb[t];
+				}
+		}
+		sz[nl] = nq;
+	}
+	free(queue);
+	*sizes = sz;
+	return nl;
+}
+
+int64_t sts_keep_components(const sts_grid_t *g, uint8_t *m, double ratio,
+			    int64_t min_vox)
+{
+	int64_t n = gnvox(g), *sz = NULL;
+	int32_t *lab = malloc(sizeof(int32_t) * n);
+	if (!lab)
+		return -2;
+	int nl = sts_label_cc(g, m, lab, &sz);
+	if (nl < 0) {
+		free(lab);
+		return nl;
+	}
+	int64_t largest = 0;
+	for (int l = 1; l <= nl; l++)
+		if (sz[l] > largest)
+			largest = sz[l];
+	double lim = ratio * (double)largest;
+	if (lim < (double)min_vox)
+		lim = (double)min_vox;
+	if (lim > (double)largest)
+		lim = (double)largest; /* the largest is always kept... */
+	if (largest < min_vox)
+		lim = INFINITY;        /* ...unless it is too small */
+	int64_t kept = 0;
+	for (int64_t i = 0; i < n; i++) {
+		m[i] = lab[i] && (double)sz[lab[i]] >= lim;
+		kept += m[i];
+	}
+	free(lab);
+	free(sz);
+	return kept;
+}

@@ -1,0 +1,188 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Mesh-free Total Lagrangian Explicit Dynamics (MTLED): model setup shared by
+ * every backend (tled_cpu here; a tled_cuda backend links the same sources via
+ * its plugin.mk `tled_cuda_EXTRA_SRC = plugins/tled_cpu/tled_model.c ...` and
+ * replaces only the hot loops of tled_step.h).
+ *
+ * Method (Horton, Wittek, Joldes, Miller 2010, "A meshless Total Lagrangian
+ * explicit dynamics algorithm for surgical simulation", IJNMBE 26:977):
+ *   - nodes carry the unknowns; integration points (ips) sit at the centres of
+ *     a regular background grid of cells and are kept where they fall inside
+ *     the domain; each ip has its own support domain: its K nearest nodes;
+ *   - moving least squares (MLS) shape functions with a linear basis and a
+ *     cubic-spline weight (Belytschko et al. 1994), so linear fields are
+ *     reproduced exactly;
+ *   - the shape-function derivatives at the ips are corrected once so that the
+ *     discrete integration constraint  sum_ip V_ip dN_a(x_ip) = 0  holds for
+ *     every node whose force is used (the linear patch test then passes to
+ *     round-off; cf. variationally consistent integration, Chen, Hillman &
+ *     Rueter 2013, IJNME 95:387).  The correction is the least-norm one that
+ *     keeps linear reproduction at every ip, and the SAME derivatives give F
+ *     and the forces, so forces stay the exact gradient of a discrete strain
+ *     energy (symmetric stiffness, energy-conserving explicit dynamics);
+ *   - lumped masses from the weights (a partition of each ip's mass);
+ *   - neo-Hookean TLED stress (tled_step.h).
+ *
+ * Units: the model is in SI (m, kg, s, Pa, N, J).  The plugin's ports are in
+ * mm; conversion happens only at the plugin boundary (TLED_MM = 1e-3 m).
+ */
+#ifndef TLED_MODEL_H
+#define TLED_MODEL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define TLED_MM 1e-3 /* metres per millimetre */
+
+/* node kinds: what the solver does with a node */
+enum tled_kind {
+	TLED_FREE = 0,   /* unknown: moves under internal forces */
+	TLED_FIXED = 1,  /* brain boundary: u = 0 forever */
+	TLED_DRIVEN = 2, /* tumour: displacement prescribed by the growth */
+};
+
+/* node labels at the ports (sampler convention) */
+enum tled_label {
+	TL_TISSUE = 0,
+	TL_BOUNDARY = 1,
+	TL_CSF = 2,       /* ventricles / sulci */
+	TL_TUMOUR = 3,
+	TL_TUMOUR_BND = 4,
+	TL_SEED = 5,
+};
+
+enum tled_mat_id { MAT_BRAIN = 0, MAT_CSF = 1, MAT_TUMOUR = 2, MAT_N = 3 };
+
+typedef struct tled_material {
+	double E;      /* Young's modulus, Pa */
+	double nu;     /* Poisson's ratio */
+	double rho;    /* density, kg/m^3 */
+	/* derived (tled_material_set) */
+	double mu;     /* shear modulus E/(2(1+nu)), Pa */
+	double kappa;  /* bulk modulus E/(3(1-2nu)), Pa */
+	double lambda; /* Lame lambda kappa - 2mu/3, Pa */
+	double c;      /* dilatational wave speed sqrt((lambda+2mu)/rho), m/s */
+} tled_material_t;
+
+int tled_material_set(tled_material_t *m, double E, double nu, double rho);
+
+typedef struct tled_model_opts {
+	int support_k;          /* nodes per ip support domain (K nearest) */
+	double support_dilation;/* weight radius = dilation * distance to K-th */
+	double ip_factor;       /* ip grid spacing / mean node spacing */
+	double merge_tol;       /* m: nodes closer than this are merged */
+	tled_material_t mat[MAT_N];
+	int nthreads;           /* OpenMP threads (<=0: runtime default) */
+	/* Domain test for ip candidates (reference coordinates, m).  NULL: the
+	 * default test (near the node cloud and on the inner side of the brain
+	 * boundary nodes).  Returns 1 inside, 0 outside. */
+	int (*inside)(const double x[3], void *ctx);
+	void *inside_ctx;
+	/* Optional material per ip (reference coordinates, m): returns a
+	 * tled_mat_id, or -1 to use the default (label of the nearest node). */
+	int (*material)(const double x[3], void *ctx);
+	void *material_ctx;
+} tled_model_opts_t;
+
+void tled_model_opts_default(tled_model_opts_t *o);
+
+/* Uniform grid hash for nearest-neighbour queries (3-D points). */
+typedef struct tled_grid {
+	double lo[3], cell;      /* origin and cell size, m */
+	int nc[3];
+	int64_t *start;          /* ncells+1 */
+	int64_t *idx;            /* point ids sorted by cell */
+	const double *p;         /* 3*n points (not owned) */
+	int64_t n;
+} tled_grid_t;
+
+int tled_grid_build(tled_grid_t *g, const double *p, int64_t n, double cell);
+void tled_grid_free(tled_grid_t *g);
+/* k nearest points to x (excluding id `skip`, -1 none); writes up to k ids
+ * sorted by distance and their squared distances; returns how many. */
+int tled_grid_knn(const tled_grid_t *g, const double x[3], int k, int64_t skip,
+		  int64_t *ids, double *d2);
+
+typedef struct tled_model {
+	/* ---- nodes (after merging coincident ones) ---- */
+	int64_t n;          /* model nodes */
+	double *X;          /* 3n reference positions, m */
+	int32_t *label;     /* n labels (port convention, current) */
+	uint8_t *kind;      /* n tled_kind */
+	double *mass;       /* n lumped masses, kg */
+	double *nn_dist;    /* n distance to the nearest other node, m */
+	int64_t n_in;       /* input nodes */
+	int64_t *rep;       /* n_in: input node -> model node */
+	int64_t n_merged;   /* input nodes merged into another */
+	double h_min;       /* smallest node spacing (nn distance), m */
+	double h_mean;      /* mean nn distance, m */
+
+	/* ---- integration points ---- */
+	int64_t nip;
+	double *ipX;        /* 3*nip reference positions, m */
+	double *ipV;        /* nip volumes (weights), m^3 */
+	int32_t *ipmat;     /* nip tled_mat_id */
+	int64_t *ipptr;     /* nip+1: CSR into the support arrays */
+	int64_t *ipnode;    /* support node ids */
+	double *N;          /* shape function values N_a(x_ip) */
+	double *dN;         /* 3 per entry: corrected dN_a/dX at x_ip, 1/m */
+	double ip_h;        /* background cell size, m */
+	/* transposed CSR: for node a, the support entries e with ipnode[e]==a */
+	int64_t *nptr;      /* n+1 */
+	int64_t *nent;      /* entries */
+
+	tled_material_t mat[MAT_N];
+	int nthreads;
+
+	/* brain boundary (label 1 nodes) for the domain and contact tests */
+	int64_t nb;
+	int64_t *bnode;     /* nb model node ids */
+	double *bX;         /* 3*nb positions, m */
+	double *bn;         /* 3*nb outward unit normals */
+	tled_grid_t bgrid;  /* over bX */
+
+	/* diagnostics of the setup */
+	double corr_rel;    /* |integration-constraint residual| after / before */
+	int corr_iters;     /* CG iterations of the correction */
+	double dt_wave;     /* h_min / c_max, s */
+} tled_model_t;
+
+/*
+ * Build the model from reference nodes X (3*n, m) and their labels.
+ * `kind0` may be NULL: then label 1 -> TLED_FIXED, others TLED_FREE
+ * (the caller sets TLED_DRIVEN later).  Nodes whose kind stays TLED_FIXED for
+ * the whole run do not get the integration-constraint correction; pass
+ * `constrain` (n flags, 1 = the node's force is used some time) or NULL
+ * (= every node that is not TLED_FIXED in kind0/labels).
+ * err receives a message naming the problem on failure.
+ */
+int tled_model_build(tled_model_t *m, const double *X, const int32_t *label,
+		     int64_t n, const uint8_t *kind0, const uint8_t *constrain,
+		     const tled_model_opts_t *o, char *err, size_t errsize);
+void tled_model_free(tled_model_t *m);
+
+/* MLS shape functions (linear basis, cubic-spline weight) at x from the
+ * support nodes ids[0..k-1] of X, weight radius R.  Writes N[k], dN[3k]
+ * (uncorrected), w[k].  Returns 0, or -1 if the moment matrix is singular
+ * (support nodes coplanar or coincident). */
+int tled_mls(const double *X, const int64_t *ids, int k, const double x[3],
+	     double R, double *N, double *dN, double *w);
+
+/* cubic spline weight W(r), r = d/R, and dW/dr */
+double tled_weight(double r, double *dwdr);
+
+/* Sum over ips of V * dN_a (3n): the integration-constraint residual. */
+void tled_model_gradsum(const tled_model_t *m, double *g);
+
+/* Signed distance of y (m) beyond the brain boundary, measured along the
+ * outward normal of the nearest boundary node (>0 outside).  Returns -INF
+ * when the model has no boundary nodes; *bid gets that node (or -1). */
+double tled_boundary_side(const tled_model_t *m, const double y[3],
+			  int64_t *bid);
+
+/* Displacement gradient at every ip from nodal u (3n, m): H (9 per ip,
+ * row-major dU_i/dX_j).  Used by tests and diagnostics. */
+void tled_model_grad(const tled_model_t *m, const double *u, double *H);
+
+#endif

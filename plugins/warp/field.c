@@ -1,0 +1,1304 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * field.c: displacement fields and resampling (see field.h for the
+ * conventions).  Pure C + OpenMP; no runtime calls.
+ */
+#include "field.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "armstg/plugin.h"
+#include "armstg/volmath.h"
+
+#define NT(n) ((n) > 0 ? (n) : omp_default_threads())
+
+#ifdef _OPENMP
+#include <omp.h>
+static int omp_default_threads(void)
+{
+	return omp_get_max_threads();
+}
+#else
+static int omp_default_threads(void)
+{
+	return 1;
+}
+#endif
+
+/* element size of a dtype (local: the runtime's vol_dtype_size is not
+ * reachable from a plugin) */
+static size_t dt_size(int dtype)
+{
+	switch (dtype) {
+	case DT_U8: return 1;
+	case DT_I16: return 2;
+	case DT_I32: return 4;
+	case DT_F32: return 4;
+	case DT_F64: return 8;
+	default: return 0;
+	}
+}
+
+/* ------------------------------------------------------------------ */
+/* grids                                                               */
+/* ------------------------------------------------------------------ */
+
+int fgrid_make(fgrid_t *g, int nx, int ny, int nz, const double v2w[16])
+{
+	memset(g, 0, sizeof *g);
+	if (nx <= 0 || ny <= 0 || nz <= 0)
+		return -1;
+	for (int i = 0; i < 12; i++)
+		if (!isfinite(v2w[i]))
+			return -1;
+	g->nx = nx;
+	g->ny = ny;
+	g->nz = nz;
+	memcpy(g->v2w, v2w, sizeof g->v2w);
+	g->v2w[12] = g->v2w[13] = g->v2w[14] = 0;
+	g->v2w[15] = 1;
+	if (aff_invert(g->v2w, g->w2v))
+		return -1;
+	for (int c = 0; c < 3; c++)
+		g->sp[c] = sqrt(v2w[c] * v2w[c] + v2w[4 + c] * v2w[4 + c] +
+				v2w[8 + c] * v2w[8 + c]);
+	/* a column of (near) zero length makes the affine useless even
+	 * when the determinant test passes by scale */
+	for (int c = 0; c < 3; c++)
+		if (!(g->sp[c] > 1e-6))
+			return -1;
+	return 0;
+}
+
+int fgrid_from_vol(const vol_t *v, fgrid_t *g)
+{
+	return fgrid_make(g, v->nx, v->ny, v->nz, v->affine);
+}
+
+int fgrid_same(const fgrid_t *a, const fgrid_t *b, double tol)
+{
+	if (a->nx != b->nx || a->ny != b->ny || a->nz != b->nz)
+		return 0;
+	for (int i = 0; i < 12; i++)
+		if (fabs(a->v2w[i] - b->v2w[i]) > tol)
+			return 0;
+	return 1;
+}
+
+static inline int inside_c(const fgrid_t *g, const double c[3])
+{
+	return c[0] >= -0.5 && c[0] <= g->nx - 0.5 && c[1] >= -0.5 &&
+	       c[1] <= g->ny - 0.5 && c[2] >= -0.5 && c[2] <= g->nz - 0.5;
+}
+
+double fgrid_overlap(const fgrid_t *a, const fgrid_t *b)
+{
+	/* subsample a's voxels on a lattice of at most ~32^3 points */
+	int st[3] = { a->nx / 32 + 1, a->ny / 32 + 1, a->nz / 32 + 1 };
+	int64_t n = 0, in = 0;
+	for (int k = 0; k < a->nz; k += st[2])
+		for (int j = 0; j < a->ny; j += st[1])
+			for (int i = 0; i < a->nx; i += st[0]) {
+				double p[3] = { i, j, k }, w[3], c[3];
+				aff_apply(a->v2w, p, w);
+				aff_apply(b->w2v, w, c);
+				n++;
+				in += inside_c(b, c);
+			}
+	return n ? (double)in / (double)n : 0;
+}
+
+void fgrid_shrink(const fgrid_t *in, int f, fgrid_t *out)
+{
+	if (f < 1)
+		f = 1;
+	double A[16];
+	memcpy(A, in->v2w, sizeof A);
+	/* coarse I -> fine f*I + (f-1)/2 */
+	double off = (f - 1) / 2.0;
+	for (int r = 0; r < 3; r++) {
+		A[r * 4 + 3] = in->v2w[r * 4 + 3] +
+			       off * (in->v2w[r * 4 + 0] + in->v2w[r * 4 + 1] +
+				      in->v2w[r * 4 + 2]);
+		for (int c = 0; c < 3; c++)
+			A[r * 4 + c] = in->v2w[r * 4 + c] * f;
+	}
+	int nx = (in->nx + f - 1) / f, ny = (in->ny + f - 1) / f,
+	    nz = (in->nz + f - 1) / f;
+	fgrid_make(out, nx < 1 ? 1 : nx, ny < 1 ? 1 : ny, nz < 1 ? 1 : nz, A);
+}
+
+/* ------------------------------------------------------------------ */
+/* scratch images                                                      */
+/* ------------------------------------------------------------------ */
+
+int fimg_alloc(fimg_t *f, const fgrid_t *g, int nc)
+{
+	memset(f, 0, sizeof *f);
+	if (!g || nc <= 0)
+		return ARMSTG_EINVAL;
+	f->g = *g;
+	f->nc = nc;
+	size_t n = (size_t)fgrid_nvox(g) * (size_t)nc;
+	f->d = calloc(n ? n : 1, sizeof(float));
+	return f->d ? 0 : ARMSTG_ENOMEM;
+}
+
+void fimg_free(fimg_t *f)
+{
+	if (!f)
+		return;
+	free(f->d);
+	f->d = NULL;
+}
+
+int fimg_from_vol(fimg_t *f, const vol_t *v)
+{
+	fgrid_t g;
+	memset(f, 0, sizeof *f);
+	if (!v || fgrid_from_vol(v, &g))
+		return ARMSTG_EINVAL;
+	int rc = fimg_alloc(f, &g, v->nc);
+	if (rc)
+		return rc;
+	int64_t n = fgrid_nvox(&g) * v->nc;
+	switch (v->dtype) {
+	case DT_F32:
+		memcpy(f->d, v->data, (size_t)n * sizeof(float));
+		break;
+	case DT_F64: {
+		const double *s = v->data;
+		for (int64_t e = 0; e < n; e++)
+			f->d[e] = (float)s[e];
+		break;
+	}
+	default:
+		if (!dt_size(v->dtype)) {
+			fimg_free(f);
+			return ARMSTG_EINVAL;
+		}
+		for (int64_t e = 0; e < n; e++)
+			f->d[e] = (float)vol_get(v, e);
+	}
+	return 0;
+}
+
+int fimg_to_vol(const fimg_t *f, vol_t *v)
+{
+	if (v->nx != f->g.nx || v->ny != f->g.ny || v->nz != f->g.nz ||
+	    v->nc != f->nc)
+		return ARMSTG_EINVAL;
+	int64_t n = fgrid_nvox(&f->g) * f->nc;
+	switch (v->dtype) {
+	case DT_F32:
+		memcpy(v->data, f->d, (size_t)n * sizeof(float));
+		break;
+	case DT_F64: {
+		double *o = v->data;
+		for (int64_t e = 0; e < n; e++)
+			o[e] = f->d[e];
+		break;
+	}
+	default:
+		if (!dt_size(v->dtype))
+			return ARMSTG_EINVAL;
+		for (int64_t e = 0; e < n; e++)
+			vol_set(v, e, f->d[e]);
+	}
+	return 0;
+}
+
+/* ------------------------------------------------------------------ */
+/* checks                                                              */
+/* ------------------------------------------------------------------ */
+
+int field_check_vol(const vol_t *v, const char *what, int nc_want,
+		    int min_dim, char *err, size_t errsize)
+{
+	fgrid_t g;
+	if (!v || v->base.magic != MSG_MAGIC || v->base.type != MSG_VOLUME) {
+		snprintf(err, errsize, "%s is missing or not a volume", what);
+		return ARMSTG_EINVAL;
+	}
+	if (!dt_size(v->dtype) || !v->data) {
+		snprintf(err, errsize, "%s has an unknown data type (%d)", what,
+			 v->dtype);
+		return ARMSTG_EINVAL;
+	}
+	if (nc_want && v->nc != nc_want) {
+		snprintf(err, errsize,
+			 "%s must have %d component%s per voxel (got %d)%s",
+			 what, nc_want, nc_want > 1 ? "s" : "", v->nc,
+			 nc_want == 3 ? ": not a displacement field" : "");
+		return ARMSTG_EINVAL;
+	}
+	if (v->nx < min_dim || v->ny < min_dim || v->nz < min_dim) {
+		snprintf(err, errsize,
+			 "%s is %dx%dx%d: %s (every dimension must be >= %d "
+			 "voxels)", what, v->nx, v->ny, v->nz,
+			 (v->nz == 1 || v->ny == 1 || v->nx == 1)
+				 ? "a single-slice volume, 3-D is required"
+				 : "too small",
+			 min_dim);
+		return ARMSTG_EINVAL;
+	}
+	if (fgrid_from_vol(v, &g)) {
+		snprintf(err, errsize,
+			 "%s has a singular or non-finite voxel-to-world "
+			 "affine (check its sform/qform)", what);
+		return ARMSTG_EINVAL;
+	}
+	if (v->dtype == DT_F32 || v->dtype == DT_F64) {
+		int64_t n = vol_nvox(v) * v->nc, bad = -1;
+		if (v->dtype == DT_F32) {
+			const float *d = v->data;
+			for (int64_t e = 0; e < n && bad < 0; e++)
+				if (!isfinite(d[e]))
+					bad = e;
+		} else {
+			const double *d = v->data;
+			for (int64_t e = 0; e < n && bad < 0; e++)
+				if (!isfinite(d[e]))
+					bad = e;
+		}
+		if (bad >= 0) {
+			int64_t nv = vol_nvox(v), r = bad % nv;
+			snprintf(err, errsize,
+				 "%s contains NaN or Inf (first at voxel "
+				 "%d,%d,%d component %d)", what,
+				 (int)(r % v->nx), (int)(r / v->nx % v->ny),
+				 (int)(r / ((int64_t)v->nx * v->ny)),
+				 (int)(bad / nv));
+			return ARMSTG_EINVAL;
+		}
+	}
+	return 0;
+}
+
+int field_vol_all_zero(const vol_t *v)
+{
+	int64_t n = vol_nvox(v) * v->nc;
+	for (int64_t e = 0; e < n; e++)
+		if (vol_get(v, e) != 0)
+			return 0;
+	return 1;
+}
+
+/* ------------------------------------------------------------------ */
+/* interpolation kernels                                               */
+/* ------------------------------------------------------------------ */
+
+/* Axis set-up for "inside" sampling: 0 when c is outside [-0.5, n-0.5]. */
+static inline int ax_in(double c, int n, int *a, int *b, float *t)
+{
+	if (!(c >= -0.5 && c <= n - 0.5))
+		return 0;
+	double fl = floor(c);
+	int i = (int)fl;
+	if (i < 0) {
+		*a = *b = 0;
+		*t = 0;
+	} else if (i >= n - 1) {
+		*a = *b = n - 1;
+		*t = 0;
+	} else {
+		*a = i;
+		*b = i + 1;
+		*t = (float)(c - fl);
+	}
+	return 1;
+}
+
+/* Clamped axis set-up: always succeeds. */
+static inline void ax_clamp(double c, int n, int *a, int *b, float *t)
+{
+	if (!(c > 0)) { /* also NaN */
+		*a = *b = 0;
+		*t = 0;
+		return;
+	}
+	if (c >= n - 1) {
+		*a = *b = n - 1;
+		*t = 0;
+		return;
+	}
+	double fl = floor(c);
+	*a = (int)fl;
+	*b = *a + 1;
+	*t = (float)(c - fl);
+}
+
+typedef struct stencil {
+	int64_t o[8];
+	float w[8];
+} stencil_t;
+
+static inline void stencil_make(const fgrid_t *g, int i0, int i1, float ti,
+				int j0, int j1, float tj, int k0, int k1,
+				float tk, stencil_t *s)
+{
+	int64_t nx = g->nx, nxy = (int64_t)g->nx * g->ny;
+	int64_t r00 = j0 * nx + k0 * nxy, r10 = j1 * nx + k0 * nxy,
+		r01 = j0 * nx + k1 * nxy, r11 = j1 * nx + k1 * nxy;
+	s->o[0] = r00 + i0;
+	s->o[1] = r00 + i1;
+	s->o[2] = r10 + i0;
+	s->o[3] = r10 + i1;
+	s->o[4] = r01 + i0;
+	s->o[5] = r01 + i1;
+	s->o[6] = r11 + i0;
+	s->o[7] = r11 + i1;
+	float ui = 1 - ti, uj = 1 - tj, uk = 1 - tk;
+	s->w[0] = ui * uj * uk;
+	s->w[1] = ti * uj * uk;
+	s->w[2] = ui * tj * uk;
+	s->w[3] = ti * tj * uk;
+	s->w[4] = ui * uj * tk;
+	s->w[5] = ti * uj * tk;
+	s->w[6] = ui * tj * tk;
+	s->w[7] = ti * tj * tk;
+}
+
+static inline float stencil_eval(const float *d, const stencil_t *s)
+{
+	return s->w[0] * d[s->o[0]] + s->w[1] * d[s->o[1]] +
+	       s->w[2] * d[s->o[2]] + s->w[3] * d[s->o[3]] +
+	       s->w[4] * d[s->o[4]] + s->w[5] * d[s->o[5]] +
+	       s->w[6] * d[s->o[6]] + s->w[7] * d[s->o[7]];
+}
+
+static inline void stencil_clamp(const fgrid_t *g, const double c[3],
+				 stencil_t *s)
+{
+	int i0, i1, j0, j1, k0, k1;
+	float ti, tj, tk;
+	ax_clamp(c[0], g->nx, &i0, &i1, &ti);
+	ax_clamp(c[1], g->ny, &j0, &j1, &tj);
+	ax_clamp(c[2], g->nz, &k0, &k1, &tk);
+	stencil_make(g, i0, i1, ti, j0, j1, tj, k0, k1, tk, s);
+}
+
+/* 0 when outside */
+static inline int stencil_in(const fgrid_t *g, const double c[3],
+			     stencil_t *s)
+{
+	int i0, i1, j0, j1, k0, k1;
+	float ti, tj, tk;
+	if (!ax_in(c[0], g->nx, &i0, &i1, &ti) ||
+	    !ax_in(c[1], g->ny, &j0, &j1, &tj) ||
+	    !ax_in(c[2], g->nz, &k0, &k1, &tk))
+		return 0;
+	stencil_make(g, i0, i1, ti, j0, j1, tj, k0, k1, tk, s);
+	return 1;
+}
+
+float fimg_sample_clamp(const fimg_t *f, int c, const double w[3])
+{
+	double v[3];
+	stencil_t s;
+	aff_apply(f->g.w2v, w, v);
+	stencil_clamp(&f->g, v, &s);
+	return stencil_eval(f->d + (int64_t)c * fgrid_nvox(&f->g), &s);
+}
+
+/* per-label linear: label with the largest summed weight among the 8 */
+static inline float stencil_label(const float *d, const stencil_t *s)
+{
+	float lab[8], wt[8];
+	int n = 0;
+	for (int q = 0; q < 8; q++) {
+		if (s->w[q] <= 0)
+			continue;
+		float l = d[s->o[q]];
+		int m = 0;
+		while (m < n && lab[m] != l)
+			m++;
+		if (m == n) {
+			lab[n] = l;
+			wt[n++] = 0;
+		}
+		wt[m] += s->w[q];
+	}
+	if (!n) /* all weights zero cannot happen (they sum to 1) */
+		return d[s->o[0]];
+	int best = 0;
+	for (int m = 1; m < n; m++)
+		if (wt[m] > wt[best] + 1e-6f)
+			best = m;
+	return lab[best];
+}
+
+/* M = A*B restricted to 3x4 */
+static void aff3_mul(const double A[16], const double B[16], double M[16])
+{
+	aff_mul(A, B, M);
+}
+
+/* ------------------------------------------------------------------ */
+/* resampling                                                          */
+/* ------------------------------------------------------------------ */
+
+int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
+		  float outside, fimg_t *dst, int nthreads)
+{
+	if (!src || !dst || !src->d || !dst->d || dst->nc != src->nc)
+		return ARMSTG_EINVAL;
+	if (u && (u->nc != 3 || !u->d))
+		return ARMSTG_EINVAL;
+	const fgrid_t *dg = &dst->g, *sg = &src->g;
+	const int64_t nvd = fgrid_nvox(dg), nvs = fgrid_nvox(sg);
+	const int u_same = u && fgrid_same(&u->g, dg, 1e-6);
+	const int64_t nvu = u ? fgrid_nvox(&u->g) : 0;
+	double M[16]; /* dst voxel -> src voxel */
+	aff3_mul(sg->w2v, dg->v2w, M);
+	const int nc = src->nc;
+
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static)
+	for (int k = 0; k < dg->nz; k++) {
+		for (int j = 0; j < dg->ny; j++) {
+			for (int i = 0; i < dg->nx; i++) {
+				int64_t e = ((int64_t)k * dg->ny + j) * dg->nx + i;
+				double p[3] = { i, j, k }, c[3];
+				aff_apply(M, p, c);
+				if (u) {
+					double d[3];
+					if (u_same) {
+						d[0] = u->d[e];
+						d[1] = u->d[e + nvu];
+						d[2] = u->d[e + 2 * nvu];
+					} else {
+						double w[3], cu[3];
+						stencil_t su;
+						aff_apply(dg->v2w, p, w);
+						aff_apply(u->g.w2v, w, cu);
+						stencil_clamp(&u->g, cu, &su);
+						for (int q = 0; q < 3; q++)
+							d[q] = stencil_eval(
+								u->d + q * nvu, &su);
+					}
+					double dv[3];
+					aff_apply_vec(sg->w2v, d, dv);
+					c[0] += dv[0];
+					c[1] += dv[1];
+					c[2] += dv[2];
+				}
+				if (interp == FIELD_NEAREST) {
+					if (!inside_c(sg, c)) {
+						for (int q = 0; q < nc; q++)
+							dst->d[e + q * nvd] = outside;
+						continue;
+					}
+					int a = (int)lround(c[0]), b = (int)lround(c[1]),
+					    cc = (int)lround(c[2]);
+					a = a < 0 ? 0 : a >= sg->nx ? sg->nx - 1 : a;
+					b = b < 0 ? 0 : b >= sg->ny ? sg->ny - 1 : b;
+					cc = cc < 0 ? 0 : cc >= sg->nz ? sg->nz - 1 : cc;
+					int64_t o = ((int64_t)cc * sg->ny + b) * sg->nx + a;
+					for (int q = 0; q < nc; q++)
+						dst->d[e + q * nvd] = src->d[o + q * nvs];
+					continue;
+				}
+				stencil_t s;
+				if (!stencil_in(sg, c, &s)) {
+					for (int q = 0; q < nc; q++)
+						dst->d[e + q * nvd] = outside;
+					continue;
+				}
+				for (int q = 0; q < nc; q++)
+					dst->d[e + q * nvd] =
+						interp == FIELD_LABEL
+							? stencil_label(src->d + q * nvs, &s)
+							: stencil_eval(src->d + q * nvs, &s);
+			}
+		}
+	}
+	return 0;
+}
+
+/* ------------------------------------------------------------------ */
+/* Gaussian smoothing                                                  */
+/* ------------------------------------------------------------------ */
+
+static float *gauss_kernel(double sigma_vox, int *radius)
+{
+	int r = (int)ceil(3.0 * sigma_vox);
+	if (r < 1)
+		r = 1;
+	float *k = malloc(sizeof(float) * (2 * r + 1));
+	if (!k)
+		return NULL;
+	double s = 0;
+	for (int t = -r; t <= r; t++) {
+		double v = exp(-0.5 * t * t / (sigma_vox * sigma_vox));
+		k[t + r] = (float)v;
+		s += v;
+	}
+	for (int t = 0; t < 2 * r + 1; t++)
+		k[t] = (float)(k[t] / s);
+	*radius = r;
+	return k;
+}
+
+static inline int clampi(int a, int lo, int hi)
+{
+	return a < lo ? lo : a > hi ? hi : a;
+}
+
+static int smooth_axis(float *d, const fgrid_t *g, int axis,
+		       const float *ker, int r, int nthreads)
+{
+	const int nx = g->nx, ny = g->ny, nz = g->nz;
+	int fail = 0;
+	if (axis == 0) {
+#pragma omp parallel num_threads(NT(nthreads))
+		{
+			float *buf = malloc(sizeof(float) * (nx + 2 * r));
+			if (!buf) {
+#pragma omp atomic write
+				fail = 1;
+			}
+#pragma omp for schedule(static)
+			for (int64_t line = 0; line < (int64_t)ny * nz; line++) {
+				if (!buf)
+					continue;
+				float *p = d + line * nx;
+				for (int i = -r; i < nx + r; i++)
+					buf[i + r] = p[clampi(i, 0, nx - 1)];
+				for (int i = 0; i < nx; i++) {
+					float s = 0;
+					for (int t = 0; t <= 2 * r; t++)
+						s += ker[t] * buf[i + t];
+					p[i] = s;
+				}
+			}
+			free(buf);
+		}
+	} else if (axis == 1) {
+#pragma omp parallel num_threads(NT(nthreads))
+		{
+			float *buf = malloc(sizeof(float) * (size_t)nx * ny);
+			if (!buf) {
+#pragma omp atomic write
+				fail = 1;
+			}
+#pragma omp for schedule(static)
+			for (int k = 0; k < nz; k++) {
+				if (!buf)
+					continue;
+				float *p = d + (int64_t)k * nx * ny;
+				memcpy(buf, p, sizeof(float) * (size_t)nx * ny);
+				for (int j = 0; j < ny; j++) {
+					float *o = p + (int64_t)j * nx;
+					for (int i = 0; i < nx; i++)
+						o[i] = 0;
+					for (int t = -r; t <= r; t++) {
+						const float *s =
+							buf + (int64_t)clampi(j + t, 0, ny - 1) * nx;
+						float w = ker[t + r];
+						for (int i = 0; i < nx; i++)
+							o[i] += w * s[i];
+					}
+				}
+			}
+			free(buf);
+		}
+	} else {
+		const int64_t nxy = (int64_t)nx * ny;
+#pragma omp parallel num_threads(NT(nthreads))
+		{
+			float *buf = malloc(sizeof(float) * (size_t)nx * nz);
+			if (!buf) {
+#pragma omp atomic write
+				fail = 1;
+			}
+#pragma omp for schedule(static)
+			for (int j = 0; j < ny; j++) {
+				if (!buf)
+					continue;
+				for (int k = 0; k < nz; k++)
+					memcpy(buf + (int64_t)k * nx,
+					       d + k * nxy + (int64_t)j * nx,
+					       sizeof(float) * nx);
+				for (int k = 0; k < nz; k++) {
+					float *o = d + k * nxy + (int64_t)j * nx;
+					for (int i = 0; i < nx; i++)
+						o[i] = 0;
+					for (int t = -r; t <= r; t++) {
+						const float *s =
+							buf + (int64_t)clampi(k + t, 0, nz - 1) * nx;
+						float w = ker[t + r];
+						for (int i = 0; i < nx; i++)
+							o[i] += w * s[i];
+					}
+				}
+			}
+			free(buf);
+		}
+	}
+	return fail ? ARMSTG_ENOMEM : 0;
+}
+
+int fimg_smooth(fimg_t *f, double sigma_mm, int nthreads)
+{
+	if (!f || !f->d)
+		return ARMSTG_EINVAL;
+	if (!(sigma_mm > 0))
+		return 0;
+	const int64_t nv = fgrid_nvox(&f->g);
+	const int dims[3] = { f->g.nx, f->g.ny, f->g.nz };
+	for (int a = 0; a < 3; a++) {
+		double sv = sigma_mm / f->g.sp[a];
+		if (sv < 0.05 || dims[a] < 2)
+			continue;
+		int r;
+		float *ker = gauss_kernel(sv, &r);
+		if (!ker)
+			return ARMSTG_ENOMEM;
+		for (int c = 0; c < f->nc; c++) {
+			int rc = smooth_axis(f->d + c * nv, &f->g, a, ker, r,
+					     nthreads);
+			if (rc) {
+				free(ker);
+				return rc;
+			}
+		}
+		free(ker);
+	}
+	return 0;
+}
+
+/* ------------------------------------------------------------------ */
+/* composition, exponential, inverse                                   */
+/* ------------------------------------------------------------------ */
+
+int fimg_compose(const fimg_t *outer, const fimg_t *inner, fimg_t *out,
+		 int nthreads)
+{
+	if (!outer || !inner || !out || outer->nc != 3 || inner->nc != 3 ||
+	    out->nc != 3 || !fgrid_same(&inner->g, &out->g, 1e-6) ||
+	    out->d == outer->d)
+		return ARMSTG_EINVAL;
+	const fgrid_t *ig = &inner->g, *og = &outer->g;
+	const int64_t nv = fgrid_nvox(ig), nvo = fgrid_nvox(og);
+	double M[16]; /* inner voxel -> outer voxel */
+	aff3_mul(og->w2v, ig->v2w, M);
+
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static)
+	for (int k = 0; k < ig->nz; k++)
+		for (int j = 0; j < ig->ny; j++)
+			for (int i = 0; i < ig->nx; i++) {
+				int64_t e = ((int64_t)k * ig->ny + j) * ig->nx + i;
+				double p[3] = { i, j, k }, c[3], dv[3];
+				double d[3] = { inner->d[e], inner->d[e + nv],
+						inner->d[e + 2 * nv] };
+				aff_apply(M, p, c);
+				aff_apply_vec(og->w2v, d, dv);
+				c[0] += dv[0];
+				c[1] += dv[1];
+				c[2] += dv[2];
+				stencil_t s;
+				stencil_clamp(og, c, &s);
+				for (int q = 0; q < 3; q++)
+					out->d[e + q * nv] = (float)(
+						d[q] + stencil_eval(outer->d + q * nvo, &s));
+			}
+	return 0;
+}
+
+void fimg_field_maxnorm(const fimg_t *u, double *max_mm, double *max_vox)
+{
+	const int64_t nv = fgrid_nvox(&u->g);
+	double mm = 0, mv = 0;
+	for (int64_t e = 0; e < nv; e++) {
+		double d[3] = { u->d[e], u->d[e + nv], u->d[e + 2 * nv] }, c[3];
+		double n2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+		if (n2 > mm)
+			mm = n2;
+		aff_apply_vec(u->g.w2v, d, c);
+		double v2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+		if (v2 > mv)
+			mv = v2;
+	}
+	if (max_mm)
+		*max_mm = sqrt(mm);
+	if (max_vox)
+		*max_vox = sqrt(mv);
+}
+
+int fimg_exp(const fimg_t *v, fimg_t *out, int *nsteps, int nthreads)
+{
+	if (!v || !out || v->nc != 3 || out->nc != 3 ||
+	    !fgrid_same(&v->g, &out->g, 1e-6))
+		return ARMSTG_EINVAL;
+	double mvox;
+	fimg_field_maxnorm(v, NULL, &mvox);
+	int n = 0;
+	while (mvox / ldexp(1.0, n) > 0.5 && n < 30)
+		n++;
+	if (nsteps)
+		*nsteps = n;
+	const int64_t ne = fgrid_nvox(&v->g) * 3;
+	const float scale = (float)ldexp(1.0, -n);
+	if (out->d != v->d)
+		for (int64_t e = 0; e < ne; e++)
+			out->d[e] = v->d[e] * scale;
+	else
+		for (int64_t e = 0; e < ne; e++)
+			out->d[e] *= scale;
+	if (!n)
+		return 0;
+	fimg_t tmp;
+	int rc = fimg_alloc(&tmp, &v->g, 3);
+	if (rc)
+		return rc;
+	fimg_t *a = out, *b = &tmp;
+	for (int s = 0; s < n; s++) {
+		/* b = a o a */
+		fimg_compose(a, a, b, nthreads);
+		fimg_t *t = a;
+		a = b;
+		b = t;
+	}
+	if (a != out)
+		memcpy(out->d, a->d, sizeof(float) * (size_t)ne);
+	fimg_free(&tmp);
+	return 0;
+}
+
+int fimg_invert(const fimg_t *u, fimg_t *out, int max_iter, double tol_mm,
+		field_inv_stats_t *stats, int nthreads)
+{
+	if (!u || !out || u->nc != 3 || out->nc != 3 || u->d == out->d)
+		return ARMSTG_EINVAL;
+	const fgrid_t *og = &out->g, *ug = &u->g;
+	const int64_t nv = fgrid_nvox(og), nvu = fgrid_nvox(ug);
+	double M[16];
+	aff3_mul(ug->w2v, og->v2w, M);
+	fimg_t nxt;
+	int rc = fimg_alloc(&nxt, og, 3);
+	if (rc)
+		return rc;
+	/* w0 = -u(x) (clamped sampling of u at x) */
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static)
+	for (int64_t e = 0; e < nv; e++) {
+		int i = (int)(e % og->nx), j = (int)(e / og->nx % og->ny),
+		    k = (int)(e / ((int64_t)og->nx * og->ny));
+		double p[3] = { i, j, k }, c[3];
+		stencil_t s;
+		aff_apply(M, p, c);
+		stencil_clamp(ug, c, &s);
+		for (int q = 0; q < 3; q++)
+			out->d[e + q * nv] = -stencil_eval(u->d + q * nvu, &s);
+	}
+
+
+	double rmax = 0, rsum = 0;
+	int it;
+	for (it = 0;; it++) {
+		rmax = 0;
+		rsum = 0;
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static) \
+	reduction(max : rmax) reduction(+ : rsum)
+		for (int64_t e = 0; e < nv; e++) {
+			int i = (int)(e % og->nx), j = (int)(e / og->nx % og->ny),
+			    k = (int)(e / ((int64_t)og->nx * og->ny));
+			double p[3] = { i, j, k }, c[3], dv[3];
+			double w[3] = { out->d[e], out->d[e + nv], out->d[e + 2 * nv] };
+			aff_apply(M, p, c);
+			aff_apply_vec(ug->w2v, w, dv);
+			c[0] += dv[0];
+			c[1] += dv[1];
+			c[2] += dv[2];
+			stencil_t s;
+			stencil_clamp(ug, c, &s);
+			double r2 = 0;
+			for (int q = 0; q < 3; q++) {
+				double uq = stencil_eval(u->d + q * nvu, &s);
+				double r = w[q] + uq;
+				r2 += r * r;
+				nxt.d[e + q * nv] = (float)(-uq);
+			}
+			double r = sqrt(r2);
+			rsum += r;
+			if (r > rmax)
+				rmax = r;
+		}
+		if (rmax <= tol_mm || it >= max_iter)
+			break;
+		memcpy(out->d, nxt.d, sizeof(float) * (size_t)nv * 3);
+	}
+	if (stats) {
+		stats->iterations = it;
+		stats->mean_residual_mm = nv ? rsum / (double)nv : 0;
+		stats->max_residual_mm = rmax;
+	}
+	fimg_free(&nxt);
+	return 0;
+}
+
+/* ------------------------------------------------------------------ */
+/* Jacobian determinant                                                */
+/* ------------------------------------------------------------------ */
+
+int fimg_jacobian(const fimg_t *u, fimg_t *out, field_jac_stats_t *stats,
+		  int nthreads)
+{
+	if (!u || !out || u->nc != 3 || out->nc != 1 ||
+	    !fgrid_same(&u->g, &out->g, 1e-6))
+		return ARMSTG_EINVAL;
+	const fgrid_t *g = &u->g;
+	const int nx = g->nx, ny = g->ny, nz = g->nz;
+	const int64_t nv = fgrid_nvox(g);
+	const int64_t stride[3] = { 1, nx, (int64_t)nx * ny };
+	const int dims[3] = { nx, ny, nz };
+	/* L^{-1}: row a (index axis) = d idx_a / d world */
+	double Li[3][3];
+	for (int a = 0; a < 3; a++)
+		for (int w = 0; w < 3; w++)
+			Li[a][w] = g->w2v[a * 4 + w];
+	double jmin = DBL_MAX, jmax = -DBL_MAX, jsum = 0;
+	int64_t nneg = 0;
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static) \
+	reduction(min : jmin) reduction(max : jmax) reduction(+ : jsum, nneg)
+	for (int k = 0; k < nz; k++)
+		for (int j = 0; j < ny; j++)
+			for (int i = 0; i < nx; i++) {
+				int64_t e = ((int64_t)k * ny + j) * nx + i;
+				int idx[3] = { i, j, k };
+				double D[3][3]; /* D[c][a] = du_c / d idx_a */
+				for (int a = 0; a < 3; a++) {
+					int64_t lo = e, hi = e;
+					double h = 0;
+					if (dims[a] > 1) {
+						if (idx[a] > 0) {
+							lo = e - stride[a];
+							h += 1;
+						}
+						if (idx[a] < dims[a] - 1) {
+							hi = e + stride[a];
+							h += 1;
+						}
+					}
+					for (int c = 0; c < 3; c++)
+						D[c][a] = h > 0 ? (u->d[hi + c * nv] -
+								   u->d[lo + c * nv]) / h
+								: 0;
+				}
+				double J[3][3];
+				for (int c = 0; c < 3; c++)
+					for (int w = 0; w < 3; w++) {
+						double s = c == w ? 1 : 0;
+						for (int a = 0; a < 3; a++)
+							s += D[c][a] * Li[a][w];
+						J[c][w] = s;
+					}
+				double det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) -
+					     J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
+					     J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+				out->d[e] = (float)det;
+				if (det < jmin)
+					jmin = det;
+				if (det > jmax)
+					jmax = det;
+				jsum += det;
+				if (det <= 0)
+					nneg++;
+			}
+	if (stats) {
+		stats->min = jmin;
+		stats->max = jmax;
+		stats->mean = nv ? jsum / (double)nv : 0;
+		stats->n_nonpositive = nneg;
+	}
+	return 0;
+}
+
+/* ------------------------------------------------------------------ */
+/* scattered points -> dense field                                     */
+/* ------------------------------------------------------------------ */
+
+/* bucket grid over the points' bounding box */
+typedef struct buckets {
+	double lo[3], cell;
+	int n[3];
+	int64_t *start; /* ncell+1 */
+	int64_t *idx;   /* point indices sorted by cell */
+} buckets_t;
+
+static int64_t bucket_of(const buckets_t *b, const double p[3], int cl[3])
+{
+	for (int a = 0; a < 3; a++) {
+		int c = (int)floor((p[a] - b->lo[a]) / b->cell);
+		cl[a] = c;
+	}
+	for (int a = 0; a < 3; a++)
+		if (cl[a] < 0 || cl[a] >= b->n[a])
+			return -1;
+	return ((int64_t)cl[2] * b->n[1] + cl[1]) * b->n[0] + cl[0];
+}
+
+static int buckets_build(buckets_t *b, const double *xyz, int64_t n,
+			 double cell)
+{
+	memset(b, 0, sizeof *b);
+	double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX },
+	       hi[3] = { -DBL_MAX, -DBL_MAX, -DBL_MAX };
+	for (int64_t p = 0; p < n; p++)
+		for (int a = 0; a < 3; a++) {
+			if (xyz[3 * p + a] < lo[a])
+				lo[a] = xyz[3 * p + a];
+			if (xyz[3 * p + a] > hi[a])
+				hi[a] = xyz[3 * p + a];
+		}
+	/* keep the cell count bounded (<= ~2^24) */
+	for (;;) {
+		int64_t tot = 1;
+		for (int a = 0; a < 3; a++) {
+			b->n[a] = (int)floor((hi[a] - lo[a]) / cell) + 1;
+			tot *= b->n[a];
+		}
+		if (tot <= (1 << 24))
+			break;
+		cell *= 1.5;
+	}
+	b->cell = cell;
+	memcpy(b->lo, lo, sizeof lo);
+	int64_t nc = (int64_t)b->n[0] * b->n[1] * b->n[2];
+	b->start = calloc((size_t)nc + 1, sizeof(int64_t));
+	b->idx = malloc(sizeof(int64_t) * (size_t)(n ? n : 1));
+	int64_t *cellof = malloc(sizeof(int64_t) * (size_t)(n ? n : 1));
+	if (!b->start || !b->idx || !cellof) {
+		free(cellof);
+		return ARMSTG_ENOMEM;
+	}
+	for (int64_t p = 0; p < n; p++) {
+		int cl[3];
+		cellof[p] = bucket_of(b, xyz + 3 * p, cl);
+		if (cellof[p] < 0) /* rounding at hi edge */
+			cellof[p] = nc - 1;
+		b->start[cellof[p] + 1]++;
+	}
+	for (int64_t c = 0; c < nc; c++)
+		b->start[c + 1] += b->start[c];
+	int64_t *fill = malloc(sizeof(int64_t) * (size_t)nc);
+	if (!fill) {
+		free(cellof);
+		return ARMSTG_ENOMEM;
+	}
+	memcpy(fill, b->start, sizeof(int64_t) * (size_t)nc);
+	for (int64_t p = 0; p < n; p++)
+		b->idx[fill[cellof[p]]++] = p;
+	free(fill);
+	free(cellof);
+	return 0;
+}
+
+static void buckets_free(buckets_t *b)
+{
+	free(b->start);
+	free(b->idx);
+}
+
+/* Moving least squares of order 1 at y; returns 0 when no support. */
+static int mls_at(const buckets_t *b, const double *xyz, const double *vec,
+		  const double y[3], double sigma, double out[3])
+{
+	const double R = 3 * sigma, R2 = R * R, is2 = 0.5 / (sigma * sigma);
+	int cl[3];
+	for (int a = 0; a < 3; a++)
+		cl[a] = (int)floor((y[a] - b->lo[a]) / b->cell);
+	int span = (int)ceil(R / b->cell);
+	double S0 = 0, S1[3] = { 0 }, S2[3][3] = { { 0 } }, R0[3] = { 0 },
+	       R1[3][3] = { { 0 } };
+	for (int cz = cl[2] - span; cz <= cl[2] + span; cz++) {
+		if (cz < 0 || cz >= b->n[2])
+			continue;
+		for (int cy = cl[1] - span; cy <= cl[1] + span; cy++) {
+			if (cy < 0 || cy >= b->n[1])
+				continue;
+			for (int cx = cl[0] - span; cx <= cl[0] + span; cx++) {
+				if (cx < 0 || cx >= b->n[0])
+					continue;
+				int64_t c = ((int64_t)cz * b->n[1] + cy) * b->n[0] + cx;
+				for (int64_t t = b->start[c]; t < b->start[c + 1]; t++) {
+					int64_t p = b->idx[t];
+					double q[3] = { xyz[3 * p] - y[0],
+							xyz[3 * p + 1] - y[1],
+							xyz[3 * p + 2] - y[2] };
+					double r2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2];
+					if (r2 > R2)
+						continue;
+					double w = exp(-r2 * is2);
+					const double *d = vec + 3 * p;
+					S0 += w;
+					for (int a = 0; a < 3; a++) {
+						S1[a] += w * q[a];
+						R0[a] += w * d[a];
+						for (int bb = 0; bb < 3; bb++) {
+							S2[a][bb] += w * q[a] * q[bb];
+							R1[a][bb] += w * q[a] * d[bb];
+						}
+					}
+				}
+			}
+		}
+	}
+	if (!(S0 > 1e-300))
+		return 0;
+	double m[3], md[3], C[3][3], X[3][3];
+	for (int a = 0; a < 3; a++) {
+		m[a] = S1[a] / S0;
+		md[a] = R0[a] / S0;
+	}
+	for (int a = 0; a < 3; a++)
+		for (int bb = 0; bb < 3; bb++) {
+			C[a][bb] = S2[a][bb] / S0 - m[a] * m[bb];
+			X[a][bb] = R1[a][bb] / S0 - m[a] * md[bb];
+		}
+	double tr = C[0][0] + C[1][1] + C[2][2];
+	double det = C[0][0] * (C[1][1] * C[2][2] - C[1][2] * C[2][1]) -
+		     C[0][1] * (C[1][0] * C[2][2] - C[1][2] * C[2][0]) +
+		     C[0][2] * (C[1][0] * C[2][1] - C[1][1] * C[2][0]);
+	double t3 = tr / 3;
+	if (!(tr > 1e-12) || !(det > 1e-6 * t3 * t3 * t3)) {
+		/* points do not span 3-D: weighted mean (Shepard) */
+		memcpy(out, md, sizeof md);
+		return 1;
+	}
+	double Ci[3][3];
+	Ci[0][0] = (C[1][1] * C[2][2] - C[1][2] * C[2][1]) / det;
+	Ci[0][1] = (C[0][2] * C[2][1] - C[0][1] * C[2][2]) / det;
+	Ci[0][2] = (C[0][1] * C[1][2] - C[0][2] * C[1][1]) / det;
+	Ci[1][0] = (C[1][2] * C[2][0] - C[1][0] * C[2][2]) / det;
+	Ci[1][1] = (C[0][0] * C[2][2] - C[0][2] * C[2][0]) / det;
+	Ci[1][2] = (C[0][2] * C[1][0] - C[0][0] * C[1][2]) / det;
+	Ci[2][0] = (C[1][0] * C[2][1] - C[1][1] * C[2][0]) / det;
+	Ci[2][1] = (C[0][1] * C[2][0] - C[0][0] * C[2][1]) / det;
+	Ci[2][2] = (C[0][0] * C[1][1] - C[0][1] * C[1][0]) / det;
+	/* gradient G[a][c] = d d_c / d q_a = (C^-1 X)[a][c];
+	 * value at q = 0: md - G^T m */
+	for (int c = 0; c < 3; c++) {
+		double v = md[c];
+		for (int a = 0; a < 3; a++) {
+			double G = 0;
+			for (int bb = 0; bb < 3; bb++)
+				G += Ci[a][bb] * X[bb][c];
+			v -= G * m[a];
+		}
+		out[c] = v;
+	}
+	return 1;
+}
+
+int field_from_points(const double *xyz, const double *vec, int64_t n,
+		      double sigma_mm, fimg_t *out, int64_t *n_unsupported,
+		      int nthreads)
+{
+	if (!out || out->nc != 3 || !(sigma_mm > 0) || n < 0 ||
+	    (n > 0 && (!xyz || !vec)))
+		return ARMSTG_EINVAL;
+	const fgrid_t *g = &out->g;
+	const int64_t nv = fgrid_nvox(g);
+	memset(out->d, 0, sizeof(float) * (size_t)nv * 3);
+	if (n == 0) {
+		if (n_unsupported)
+			*n_unsupported = nv;
+		return 0;
+	}
+	/* evaluation grid: nodes at fine indices f*I */
+	double maxsp = fmax(g->sp[0], fmax(g->sp[1], g->sp[2]));
+	int f = (int)floor(sigma_mm / (2 * maxsp));
+	if (f < 1)
+		f = 1;
+	double A[16];
+	memcpy(A, g->v2w, sizeof A);
+	for (int r = 0; r < 3; r++)
+		for (int c = 0; c < 3; c++)
+			A[r * 4 + c] *= f;
+	int cn[3] = { (g->nx - 1 + f - 1) / f + 1, (g->ny - 1 + f - 1) / f + 1,
+		      (g->nz - 1 + f - 1) / f + 1 };
+	fgrid_t cg;
+	if (fgrid_make(&cg, cn[0], cn[1], cn[2], A))
+		return ARMSTG_EINVAL;
+	const int64_t cnv = fgrid_nvox(&cg);
+	double *cv = malloc(sizeof(double) * (size_t)cnv * 3);
+	uint8_t *ok = malloc((size_t)cnv);
+	uint8_t *ok2 = malloc((size_t)cnv);
+	buckets_t b;
+	int rc = buckets_build(&b, xyz, n, 3 * sigma_mm);
+	if (!cv || !ok || !ok2 || rc) {
+		free(cv);
+		free(ok);
+		free(ok2);
+		buckets_free(&b);
+		return ARMSTG_ENOMEM;
+	}
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(dynamic, 64)
+	for (int64_t e = 0; e < cnv; e++) {
+		double p[3] = { (double)(e % cn[0]), (double)(e / cn[0] % cn[1]),
+				(double)(e / ((int64_t)cn[0] * cn[1])) },
+		       y[3];
+		aff_apply(cg.v2w, p, y);
+		ok[e] = (uint8_t)mls_at(&b, xyz, vec, y, sigma_mm, cv + 3 * e);
+		if (!ok[e])
+			cv[3 * e] = cv[3 * e + 1] = cv[3 * e + 2] = 0;
+	}
+	buckets_free(&b);
+	/* extension into unsupported nodes: average of filled 6-neighbours,
+	 * layer by layer */
+	memcpy(ok2, ok, (size_t)cnv);
+	const int64_t cs[3] = { 1, cn[0], (int64_t)cn[0] * cn[1] };
+	int64_t any_ok = 0;
+	for (int64_t e = 0; e < cnv; e++)
+		any_ok += ok[e];
+	for (int changed = any_ok > 0; changed;) {
+		changed = 0;
+		for (int64_t e = 0; e < cnv; e++) {
+			if (ok2[e])
+				continue;
+			int64_t idx[3] = { e % cn[0], e / cn[0] % cn[1],
+					   e / ((int64_t)cn[0] * cn[1]) };
+			double s[3] = { 0 };
+			int m = 0;
+			for (int a = 0; a < 3; a++)
+				for (int dd = -1; dd <= 1; dd += 2) {
+					int64_t q = idx[a] + dd;
+					if (q < 0 || q >= cn[a])
+						continue;
+					int64_t o = e + dd * cs[a];
+					if (ok2[o] != 1)
+						continue;
+					for (int c = 0; c < 3; c++)
+						s[c] += cv[3 * o + c];
+					m++;
+				}
+			if (m) {
+				for (int c = 0; c < 3; c++)
+					cv[3 * e + c] = s[c] / m;
+				ok2[e] = 2; /* filled in this pass */
+				changed = 1;
+			}
+		}
+		for (int64_t e = 0; e < cnv; e++)
+			if (ok2[e] == 2)
+				ok2[e] = 1;
+	}
+	free(ok2);
+	/* trilinear refinement onto the output grid (exact for linear) */
+	int64_t nuns = 0;
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static) \
+	reduction(+ : nuns)
+	for (int k = 0; k < g->nz; k++)
+		for (int j = 0; j < g->ny; j++)
+			for (int i = 0; i < g->nx; i++) {
+				int64_t e = ((int64_t)k * g->ny + j) * g->nx + i;
+				double c[3] = { (double)i / f, (double)j / f,
+						(double)k / f };
+				int a0, a1, b0, b1, c0, c1;
+				float ta, tb, tc;
+				ax_clamp(c[0], cn[0], &a0, &a1, &ta);
+				ax_clamp(c[1], cn[1], &b0, &b1, &tb);
+				ax_clamp(c[2], cn[2], &c0, &c1, &tc);
+				stencil_t s;
+				stencil_make(&cg, a0, a1, ta, b0, b1, tb, c0, c1, tc, &s);
+				for (int q = 0; q < 3; q++) {
+					double v = 0;
+					for (int t = 0; t < 8; t++)
+						v += s.w[t] * cv[3 * s.o[t] + q];
+					out->d[e + q * nv] = (float)v;
+				}
+				int64_t nn = ((int64_t)lround(c[2]) * cn[1] +
+					      lround(c[1])) * cn[0] + lround(c[0]);
+				if (!ok[nn])
+					nuns++;
+			}
+	if (n_unsupported)
+		*n_unsupported = nuns;
+	free(cv);
+	free(ok);
+	return 0;
+}
+
+/* ------------------------------------------------------------------ */
+/* vol_t wrappers                                                      */
+/* ------------------------------------------------------------------ */
+
+int field_warp_vol(const vol_t *src, const vol_t *u, int interp,
+		   double outside, vol_t *out, int nthreads)
+{
+	fimg_t s = { 0 }, fu = { 0 }, o = { 0 };
+	fgrid_t og;
+	int rc;
+	if (!src || !out || src->nc != out->nc || fgrid_from_vol(out, &og))
+		return ARMSTG_EINVAL;
+	if ((rc = fimg_from_vol(&s, src)))
+		goto done;
+	if (u && (rc = fimg_from_vol(&fu, u)))
+		goto done;
+	if ((rc = fimg_alloc(&o, &og, src->nc)))
+		goto done;
+	rc = fimg_resample(&s, u ? &fu : NULL, interp, (float)outside, &o,
+			   nthreads);
+	if (!rc)
+		rc = fimg_to_vol(&o, out);
+done:
+	fimg_free(&s);
+	fimg_free(&fu);
+	fimg_free(&o);
+	return rc;
+}
+
+int field_compose_vol(const vol_t *outer, const vol_t *inner, vol_t *out,
+		      int nthreads)
+{
+	fimg_t a = { 0 }, b = { 0 };
+	int rc;
+	if ((rc = fimg_from_vol(&a, outer)) || (rc = fimg_from_vol(&b, inner)))
+		goto done;
+	if ((rc = fimg_compose(&a, &b, &b, nthreads)))
+		goto done;
+	rc = fimg_to_vol(&b, out);
+done:
+	fimg_free(&a);
+	fimg_free(&b);
+	return rc;
+}
+
+int field_invert_vol(const vol_t *u, vol_t *out, int max_iter,
+		     double tol_mm, field_inv_stats_t *stats, int nthreads)
+{
+	fimg_t a = { 0 }, o = { 0 };
+	fgrid_t og;
+	int rc;
+	if (!out || fgrid_from_vol(out, &og))
+		return ARMSTG_EINVAL;
+	if ((rc = fimg_from_vol(&a, u)) || (rc = fimg_alloc(&o, &og, 3)))
+		goto done;
+	if ((rc = fimg_invert(&a, &o, max_iter, tol_mm, stats, nthreads)))
+		goto done;
+	rc = fimg_to_vol(&o, out);
+done:
+	fimg_free(&a);
+	fimg_free(&o);
+	return rc;
+}
+
+int field_jacobian_vol(const vol_t *u, vol_t *out, field_jac_stats_t *stats,
+		       int nthreads)
+{
+	fimg_t a = { 0 }, o = { 0 };
+	int rc;
+	if ((rc = fimg_from_vol(&a, u)) || (rc = fimg_alloc(&o, &a.g, 1)))
+		goto done;
+	if ((rc = fimg_jacobian(&a, &o, stats, nthreads)))
+		goto done;
+	rc = fimg_to_vol(&o, out);
+done:
+	fimg_free(&a);
+	fimg_free(&o);
+	return rc;
+}

@@ -1,0 +1,217 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * field.h: displacement fields and resampling, a small pure-C library shared
+ * by the warp and demons plugins (and metrics, report, pipeline).  It never
+ * calls the runtime: link it into a plugin with, in plugins/NAME/plugin.mk,
+ *
+ *     NAME_EXTRA_SRC := plugins/warp/field.c
+ *     NAME_CFLAGS    := -Iplugins/warp
+ *
+ * Conventions (msg.h):
+ *   - World coordinates are RAS+ mm; every operation goes through the
+ *     voxel->world affines, so grids of any orientation (LAS, LPS, oblique)
+ *     and spacing mix freely.
+ *   - A displacement field is nc = 3 planar components holding RAS+ world
+ *     vectors in mm.  ITK convention: the field u lives on the grid of the
+ *     image you resample INTO and points to where you sample the image you
+ *     resample FROM:   out(x) = moving(x + u(x)).
+ *   - The transform of a field is phi_u(x) = x + u(x).  Warping an image m by
+ *     u gives m o phi_u.
+ *
+ * Two layers:
+ *   1. fimg_t: a float32 scratch image on a grid (not a message: plain
+ *      malloc, free with fimg_free).  All algorithms run on it; it is what
+ *      the demons inner loops use.
+ *   2. vol_t wrappers (field_warp_vol, ...) for stages that hold messages:
+ *      they convert inputs of any dtype (u8/i16/i32/f32/f64) and write into
+ *      an output vol_t the caller allocated (with host->vol_new), so this
+ *      library never allocates a message.
+ *
+ * Sampling rules (match ITK's ResampleImageFilter, hence ANTs):
+ *   - a point is inside image g when every continuous voxel index lies in
+ *     [-0.5, n-0.5]; trilinear interpolation clamps neighbours to the edge.
+ *     Points outside get the caller's `outside` value.
+ *   - fields are sampled with edge clamping everywhere (zero-flux
+ *     extension), so compositions near the border stay smooth.
+ *
+ * Threads: nthreads <= 0 means the OpenMP default.  Functions return 0 or a
+ * negative ARMSTG_E* code; those taking err/errsize write a message naming
+ * the problem.
+ */
+#ifndef ARMSTG_FIELD_H
+#define ARMSTG_FIELD_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "armstg/msg.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---- grids ---- */
+typedef struct fgrid {
+	int nx, ny, nz;
+	double v2w[16];  /* voxel -> world, row-major (vol_t.affine) */
+	double w2v[16];  /* world -> voxel */
+	double sp[3];    /* spacing along i, j, k (mm) */
+} fgrid_t;
+
+/* Grid of a volume; -1 when the affine is singular or not finite. */
+int fgrid_from_vol(const vol_t *v, fgrid_t *g);
+/* Grid from sizes and an affine; -1 when singular. */
+int fgrid_make(fgrid_t *g, int nx, int ny, int nz, const double v2w[16]);
+static inline int64_t fgrid_nvox(const fgrid_t *g)
+{
+	return (int64_t)g->nx * g->ny * g->nz;
+}
+/* Same sizes and affines equal within tol (mm). */
+int fgrid_same(const fgrid_t *a, const fgrid_t *b, double tol);
+/* Fraction (0..1) of a's voxel centres that lie inside grid b (world). */
+double fgrid_overlap(const fgrid_t *a, const fgrid_t *b);
+/*
+ * Grid for pyramid level with integer shrink factor f >= 1 along every axis:
+ * sizes ceil(n/f) (at least 1), spacing *f, and the coarse voxel I centred
+ * on fine continuous index f*I + (f-1)/2 (ITK shrink convention).
+ */
+void fgrid_shrink(const fgrid_t *in, int f, fgrid_t *out);
+
+/* ---- float scratch images ---- */
+typedef struct fimg {
+	fgrid_t g;
+	int nc;          /* components (1 image, 3 field) */
+	float *d;        /* planar: c*nvox + (k*ny + j)*nx + i */
+} fimg_t;
+
+int fimg_alloc(fimg_t *f, const fgrid_t *g, int nc); /* zero-filled */
+void fimg_free(fimg_t *f);                           /* tolerates zeroed */
+/* Copy of v converted to float (any dtype). */
+int fimg_from_vol(fimg_t *f, const vol_t *v);
+/* Write f into v (same sizes and nc; v's dtype, rounded for integers). */
+int fimg_to_vol(const fimg_t *f, vol_t *v);
+
+/* ---- volume checks (for clear errors) ---- */
+/*
+ * Check a volume for use: `what` names it in messages ("fixed volume").
+ * nc_want: required components (0 = any).  Refuses: NULL/not a volume,
+ * wrong nc, unknown dtype, singular or non-finite affine, any dimension
+ * < min_dim (min_dim 2 refuses single-slice volumes), NaN/Inf values.
+ * Returns 0 or ARMSTG_EINVAL with err set.
+ */
+int field_check_vol(const vol_t *v, const char *what, int nc_want,
+		    int min_dim, char *err, size_t errsize);
+/* 1 when every value of component-0 (all components for fields) is 0. */
+int field_vol_all_zero(const vol_t *v);
+
+/* ---- interpolation ---- */
+enum field_interp {
+	FIELD_LINEAR = 0,   /* trilinear */
+	FIELD_NEAREST = 1,  /* nearest voxel */
+	FIELD_LABEL = 2,    /* per-label linear: linear interpolation of each
+	                       label's indicator, the label of largest weight
+	                       wins (smooth label boundaries, keeps the set) */
+};
+
+/* Sample component c of f at world point w; edge clamped (never outside). */
+float fimg_sample_clamp(const fimg_t *f, int c, const double w[3]);
+
+/*
+ * Resample src into dst (dst->g and dst->nc set, dst->nc == src->nc):
+ *     dst(x) = src(x + u(x))       for every voxel centre x of dst,
+ * u may be NULL (identity: plain world resampling between grids).  u on
+ * dst's grid is read directly, on any other grid it is sampled (clamped) at
+ * x.  Points falling outside src get `outside`.
+ */
+int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
+		  float outside, fimg_t *dst, int nthreads);
+
+/*
+ * Separable Gaussian smoothing in place, sigma in mm (per axis
+ * sigma/spacing voxels; kernel truncated at 3 sigma, replicated borders).
+ * All components.  sigma <= 0: no-op.  On an oblique grid the kernel
+ * follows the voxel axes (exact for axis-aligned grids).
+ */
+int fimg_smooth(fimg_t *f, double sigma_mm, int nthreads);
+
+/*
+ * Composition out = outer o inner as transforms:
+ *     out(x) = inner(x) + outer(x + inner(x)),
+ * so warping by out equals warping by outer, then warping the result by
+ * inner.  out must have inner's grid and nc 3 (out may not alias outer;
+ * it may alias inner).
+ */
+int fimg_compose(const fimg_t *outer, const fimg_t *inner, fimg_t *out,
+		 int nthreads);
+
+/*
+ * Exponential of a stationary velocity field v by scaling and squaring
+ * (Arsigny et al. MICCAI 2006; Vercauteren et al. 2007): u0 = v/2^N with N
+ * chosen so max |u0| <= 0.5 voxel, then N times u <- u o u.  out on v's
+ * grid; *nsteps (may be NULL) gets N.
+ */
+int fimg_exp(const fimg_t *v, fimg_t *out, int *nsteps, int nthreads);
+
+/*
+ * Inverse by fixed point iteration (Chen et al., Med Phys 35(1) 2008):
+ *     w_{k+1}(x) = -u(x + w_k(x)),  w_0 = -u,
+ * out's grid may differ from u's.  Stops when the max residual
+ * |w(x) + u(x + w(x))| (mm) is below tol_mm or after max_iter.  Reports
+ * the residual over out's voxels whose x + w(x) falls inside u's grid.
+ */
+typedef struct field_inv_stats {
+	int iterations;
+	double mean_residual_mm;
+	double max_residual_mm;
+} field_inv_stats_t;
+int fimg_invert(const fimg_t *u, fimg_t *out, int max_iter, double tol_mm,
+		field_inv_stats_t *stats, int nthreads);
+
+/*
+ * Jacobian determinant of phi(x) = x + u(x): det(I + du/dx) with world
+ * derivatives (central differences in voxels, one-sided at borders, mapped
+ * to world axes through the inverse of the affine's 3x3).  out: nc 1 on
+ * u's grid.
+ */
+typedef struct field_jac_stats {
+	double min, max, mean;
+	int64_t n_nonpositive;  /* voxels with det <= 0 (folding) */
+} field_jac_stats_t;
+int fimg_jacobian(const fimg_t *u, fimg_t *out, field_jac_stats_t *stats,
+		  int nthreads);
+
+/*
+ * Dense field from scattered displacements: at each voxel centre y of out
+ * (nc 3), a local weighted least-squares fit of an affine function
+ * d(p) = a + B (p - y) to the points within 3 sigma with Gaussian weights
+ * exp(-|p-y|^2 / 2 sigma^2) (moving least squares of order 1, so any
+ * linear field is reproduced exactly); where the points do not span 3-D it
+ * falls back to the weighted mean.  It is evaluated on a grid coarser by
+ * an integer factor (spacing <= sigma/2) and trilinearly refined, which
+ * keeps linear fields exact.  Voxels with no point within 3 sigma are
+ * filled by repeated averaging of filled neighbours (extension) and counted
+ * in *n_unsupported.  xyz, vec: n*3 interleaved world mm.
+ */
+int field_from_points(const double *xyz, const double *vec, int64_t n,
+		      double sigma_mm, fimg_t *out, int64_t *n_unsupported,
+		      int nthreads);
+
+/* max over voxels of |u| in mm, and of |u| in voxels (via the affine). */
+void fimg_field_maxnorm(const fimg_t *u, double *max_mm, double *max_vox);
+
+/* ---- vol_t convenience wrappers (caller allocates out) ---- */
+/* out(x) = src(x + u(x)); u may be NULL; out's grid is the output grid. */
+int field_warp_vol(const vol_t *src, const vol_t *u, int interp,
+		   double outside, vol_t *out, int nthreads);
+/* out = outer o inner (see fimg_compose); out on inner's grid. */
+int field_compose_vol(const vol_t *outer, const vol_t *inner, vol_t *out,
+		      int nthreads);
+int field_invert_vol(const vol_t *u, vol_t *out, int max_iter,
+		     double tol_mm, field_inv_stats_t *stats, int nthreads);
+int field_jacobian_vol(const vol_t *u, vol_t *out, field_jac_stats_t *stats,
+		       int nthreads);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

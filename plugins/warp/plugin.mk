@@ -1,0 +1,2 @@
+# warp: field.h is included by the tests as "field.h"
+warp_CFLAGS := -Iplugins/warp

@@ -1,0 +1,303 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * armstg: the command line.
+ *
+ *   armstg run GRAPH [--set stage.key=value]... [--out DIR] [--jobs N]
+ *              [--target STAGE]... [-v] [-q]
+ *   armstg check GRAPH [--set ...]...
+ *   armstg plugins
+ *   armstg describe PLUGIN
+ *   armstg --help | --version
+ *
+ * Exit codes: 0 success; 1 a stage failed while running; 2 usage error or
+ * invalid graph (nothing ran); 3 a plugin could not be loaded (plugins,
+ * describe); 130 interrupted (SIGINT/SIGTERM; temporary files removed).
+ */
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "graph.h"
+
+enum { EXIT_STAGE = 1, EXIT_USAGE = 2, EXIT_PLUGIN = 3, EXIT_INTR = 130 };
+
+static void usage(FILE *f)
+{
+	fprintf(f,
+"usage: armstg COMMAND [ARGS]\n"
+"\n"
+"ARMSTG: atlas-to-patient registration for brains with tumours.\n"
+"\n"
+"commands:\n"
+"  run GRAPH [options]   validate GRAPH (INI) and run it\n"
+"      --set STAGE.KEY=VALUE   override or add a key (repeatable)\n"
+"      --out DIR               folder for outputs and run.tsv (default .)\n"
+"      --jobs N                stages run at the same time (default 1)\n"
+"      --target STAGE          run only what STAGE needs (repeatable)\n"
+"      -v / -q                 more / less logging (ARMSTG_LOG=debug,stage=trace)\n"
+"  check GRAPH [--set ...] validate only: plugins, ports, types, parameters,\n"
+"                          cycles; prints every error with file:line\n"
+"  plugins                 list the plugins found (ARMSTG_PLUGIN_PATH, then\n"
+"                          build/plugins beside the executable)\n"
+"  describe PLUGIN         ports, parameters (default, range, unit, help)\n"
+"  --help, --version\n"
+"\n"
+"exit codes: 0 ok, 1 a stage failed, 2 usage or invalid graph,\n"
+"            3 plugin load error, 130 interrupted\n");
+}
+
+static void on_signal(int sig)
+{
+	(void)sig;
+	rt_interrupted = 1;
+}
+
+typedef struct cli {
+	const char *graph;
+	const char *sets[256];
+	int nsets;
+	const char *targets[64];
+	int ntargets;
+	const char *out;
+	int jobs;
+	int quiet;
+} cli_t;
+
+static int parse_cli(int argc, char **argv, int i, cli_t *c)
+{
+	memset(c, 0, sizeof *c);
+	c->jobs = 1;
+	for (; i < argc; i++) {
+		const char *a = argv[i];
+		const char *next = i + 1 < argc ? argv[i + 1] : NULL;
+		if (!strcmp(a, "--set") || !strcmp(a, "-s")) {
+			if (!next || c->nsets >= 256)
+				goto missing;
+			c->sets[c->nsets++] = next;
+			i++;
+		} else if (!strncmp(a, "--set=", 6)) {
+			if (c->nsets < 256)
+				c->sets[c->nsets++] = a + 6;
+		} else if (!strcmp(a, "--out") || !strcmp(a, "-o")) {
+			if (!next)
+				goto missing;
+			c->out = next;
+			i++;
+		} else if (!strcmp(a, "--jobs") || !strcmp(a, "-j")) {
+			char *end;
+			if (!next)
+				goto missing;
+			long j = strtol(next, &end, 10);
+			if (*end || j < 1 || j > 64) {
+				fprintf(stderr, "armstg: --jobs takes 1..64, "
+					"got '%s'\n", next);
+				return -1;
+			}
+			c->jobs = (int)j;
+			i++;
+		} else if (!strcmp(a, "--target") || !strcmp(a, "-t")) {
+			if (!next || c->ntargets >= 64)
+				goto missing;
+			c->targets[c->ntargets++] = next;
+			i++;
+		} else if (!strcmp(a, "-v") || !strcmp(a, "--verbose")) {
+			rt_log_set_level(LOG_DEBUG);
+		} else if (!strcmp(a, "-q") || !strcmp(a, "--quiet")) {
+			rt_log_set_level(LOG_WARN);
+			c->quiet = 1;
+		} else if (a[0] == '-' && a[1]) {
+			fprintf(stderr, "armstg: unknown option '%s' (see "
+				"armstg --help)\n", a);
+			return -1;
+		} else if (!c->graph) {
+			c->graph = a;
+		} else {
+			fprintf(stderr, "armstg: unexpected argument '%s'\n",
+				a);
+			return -1;
+		}
+	}
+	if (!c->graph) {
+		fprintf(stderr, "armstg: no graph file given (see armstg "
+			"--help)\n");
+		return -1;
+	}
+	return 0;
+missing:
+	fprintf(stderr, "armstg: option '%s' needs a value\n", argv[i]);
+	return -1;
+}
+
+static int cmd_run(int argc, char **argv, int check_only)
+{
+	cli_t c;
+	if (parse_cli(argc, argv, 2, &c))
+		return EXIT_USAGE;
+	char *err = malloc(65536);
+	if (!err)
+		return EXIT_USAGE;
+	graph_t *g = graph_load(c.graph, c.sets, c.nsets, err, 65536);
+	if (!g) {
+		fprintf(stderr, "%s\n", err);
+		free(err);
+		return EXIT_USAGE;
+	}
+	if (check_only) {
+		printf("%s: ok (%d stages)\n", c.graph, graph_nstages(g));
+		graph_free(g);
+		free(err);
+		return 0;
+	}
+	struct sigaction sa;
+	memset(&sa, 0, sizeof sa);
+	sa.sa_handler = on_signal;
+	sigaction(SIGINT, &sa, NULL);
+	sigaction(SIGTERM, &sa, NULL);
+	run_opts_t o = { .outdir = c.out ? c.out : ".", .jobs = c.jobs,
+			 .targets = c.targets, .ntargets = c.ntargets,
+			 .quiet = c.quiet };
+	int rc = graph_run(g, &o, err, 65536);
+	int code = 0;
+	if (rt_interrupted) {
+		fprintf(stderr, "armstg: interrupted; no output file was "
+			"left behind\n");
+		code = EXIT_INTR;
+	} else if (rc) {
+		fprintf(stderr, "armstg: %s\n", err);
+		code = EXIT_STAGE;
+	} else {
+		fprintf(stderr, "armstg: graph '%s' done; outputs and run.tsv "
+			"in %s\n", graph_name(g), o.outdir);
+	}
+	graph_free(g);
+	free(err);
+	return code;
+}
+
+static void list_cb(const char *path, void *user)
+{
+	int *bad = user;
+	rt_plugin_t p;
+	char err[1024];
+	if (plugin_load_file(path, &p, err, sizeof err)) {
+		fprintf(stderr, "armstg: %s\n", err);
+		(*bad)++;
+		return;
+	}
+	const armstg_plugin_t *d = p.desc;
+	printf("%-14s %-8s %s%s\n", d->name, d->version, d->description,
+	       (d->devices & DEV_CUDA) ? " [cuda]" : "");
+	plugin_unload(&p);
+}
+
+static int cmd_plugins(void)
+{
+	int bad = 0;
+	int n = plugin_foreach(list_cb, &bad);
+	if (!n)
+		fprintf(stderr, "armstg: no plugins found in %s\n",
+			plugin_search_path());
+	return bad || !n ? EXIT_PLUGIN : 0;
+}
+
+static const char *ptype(int t)
+{
+	switch (t) {
+	case PT_INT: return "int";
+	case PT_DOUBLE: return "double";
+	case PT_BOOL: return "bool";
+	case PT_STRING: return "string";
+	case PT_ENUM: return "enum";
+	default: return "?";
+	}
+}
+
+static int cmd_describe(const char *name)
+{
+	rt_plugin_t p;
+	char err[1024];
+	int rc = strchr(name, '/') ? plugin_load_file(name, &p, err, sizeof err)
+				   : plugin_load(name, &p, err, sizeof err);
+	if (rc) {
+		fprintf(stderr, "armstg: %s\n", err);
+		return EXIT_PLUGIN;
+	}
+	const armstg_plugin_t *d = p.desc;
+	printf("%s %s (%s) - %s\n", d->name, d->version, d->license,
+	       d->description);
+	printf("file: %s\ndevices:%s%s\n", p.path,
+	       (d->devices & DEV_CPU) ? " cpu" : "",
+	       (d->devices & DEV_CUDA) ? " cuda" : "");
+	printf("\ninputs:\n");
+	for (int i = 0; i < d->n_inputs; i++)
+		printf("  %-14s %-9s %-9s %s\n", d->inputs[i].name,
+		       msg_type_name(d->inputs[i].type),
+		       d->inputs[i].optional ? "optional" : "required",
+		       d->inputs[i].help);
+	if (!d->n_inputs)
+		printf("  (none)\n");
+	printf("\noutputs:\n");
+	for (int i = 0; i < d->n_outputs; i++)
+		printf("  %-14s %-9s %-9s %s\n", d->outputs[i].name,
+		       msg_type_name(d->outputs[i].type),
+		       d->outputs[i].optional ? "optional" : "always",
+		       d->outputs[i].help);
+	if (!d->n_outputs)
+		printf("  (none)\n");
+	printf("\nparameters:\n");
+	for (int i = 0; i < d->n_params; i++) {
+		const armstg_param_t *q = &d->params[i];
+		char range[128] = "";
+		if (q->type == PT_INT || q->type == PT_DOUBLE)
+			snprintf(range, sizeof range, "[%g, %g]", q->min,
+				 q->max);
+		else if (q->type == PT_ENUM)
+			snprintf(range, sizeof range, "{%s}", q->choices);
+		printf("  %-14s %-6s default %-10s %-18s %-5s %s\n", q->name,
+		       ptype(q->type),
+		       (q->flags & PARAM_REQUIRED) ? "(required)"
+		       : q->def ? q->def : "(unset)",
+		       range, q->unit, q->help);
+	}
+	if (!d->n_params)
+		printf("  (none)\n");
+	plugin_unload(&p);
+	return 0;
+}
+
+int main(int argc, char **argv)
+{
+	if (argc < 2) {
+		usage(stderr);
+		return EXIT_USAGE;
+	}
+	const char *cmd = argv[1];
+	if (!strcmp(cmd, "--help") || !strcmp(cmd, "-h") ||
+	    !strcmp(cmd, "help")) {
+		usage(stdout);
+		return 0;
+	}
+	if (!strcmp(cmd, "--version") || !strcmp(cmd, "version")) {
+		printf("armstg %s (plugin ABI %d.%d)\n", ARMSTG_VERSION,
+		       ARMSTG_ABI_MAJOR, ARMSTG_ABI_MINOR);
+		return 0;
+	}
+	if (!strcmp(cmd, "run"))
+		return cmd_run(argc, argv, 0);
+	if (!strcmp(cmd, "check"))
+		return cmd_run(argc, argv, 1);
+	if (!strcmp(cmd, "plugins"))
+		return cmd_plugins();
+	if (!strcmp(cmd, "describe")) {
+		if (argc != 3) {
+			fprintf(stderr, "usage: armstg describe PLUGIN\n");
+			return EXIT_USAGE;
+		}
+		return cmd_describe(argv[2]);
+	}
+	fprintf(stderr, "armstg: unknown command '%s' (see armstg --help)\n",
+		cmd);
+	return EXIT_USAGE;
+}

@@ -1,0 +1,742 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * NIfTI-1 file form of volumes (.nii, .nii.gz), through niftilib
+ * (nifti1_io + znzlib).
+ *
+ * Reading
+ *   - data types: u8, i16, i32, f32, f64 are kept as they are; i8 -> i16,
+ *     u16 -> i32, u32/i64/u64 -> i32 when every value fits, else f64
+ *     (exact to 2^53).  Complex, RGB, float128 and bit data are refused.
+ *   - scl_slope/scl_inter (applied when slope is finite, non-zero and the
+ *     pair is not (1,0)): the result is f32 for 8/16-bit and f32 data and
+ *     f64 for 32/64-bit integer and f64 data (f32 cannot hold every i32).
+ *   - dimensions: 1-D to 3-D, any number of trailing singletons (SRI24 is
+ *     stored (240,240,155,1)); dim[4] (time) must be 1; dim[5] is the number
+ *     of components (ITK vector images are (nx,ny,nz,1,nc)); dim[6], dim[7]
+ *     must be 1.
+ *   - affine (voxel -> world, RAS+ mm), the NIfTI-1 precedence used by
+ *     nibabel and most tools: the sform when sform_code > 0, else the qform
+ *     when qform_code > 0, else the ANALYZE "method 1" diagonal
+ *     diag(pixdim[1..3]).  The qform is evaluated in double precision from
+ *     the stored quaternion (niftilib's qto_xyz is float, which would round
+ *     it a second time).  xyz_units METER or MICRON are scaled to mm as
+ *     ITK does.
+ *   - vector images (dim[5] == 3): ITK/ANTs store intent NIFTI_INTENT_VECTOR
+ *     displacement fields with vectors in ITK's physical LPS frame; they are
+ *     negated in x and y into RAS.  NIFTI_INTENT_DISPVECT (1006) vectors are
+ *     RAS already (NIfTI standard; ITK >= 5.3 reads them so) and kept.
+ *
+ * Writing
+ *   - 3-D (nc == 1) or 5-D (nx,ny,nz,1,nc); data type kept; voxel units mm;
+ *     scl_slope 1, scl_inter 0; native byte order; .nii.gz when the path ends
+ *     in .gz.  3-component volumes (fields) get intent NIFTI_INTENT_VECTOR and
+ *     LPS vectors (x, y negated): the convention antsApplyTransforms, ITK and
+ *     Slicer read.  Other volumes keep vol_t.intent.
+ *   - sform = the affine, sform_code NIFTI_XFORM_SCANNER_ANAT (1).  The qform
+ *     holds the same matrix (qform_code 1) when its 3x3 part is a rotation
+ *     times a scaling (columns orthogonal to 1e-6); otherwise qform_code 0.
+ *   - NIfTI-1 stores the sform as float32, so a general double affine would
+ *     come back rounded to float.  To keep it EXACT the writer also stores
+ *     the 12 doubles as text in a comment extension (NIFTI_ECODE_COMMENT,
+ *     "armstg_affine_f64 ..."); the reader uses them only when the sform is
+ *     the chosen transform and every double rounds to the stored float
+ *     (so a file whose sform another tool changed falls back to the sform).
+ *     Other tools ignore the extension and see the float-rounded sform.
+ *   - the file is written at exactly the given path and removed again on any
+ *     write error (callers wanting atomicity pass a temporary name, which
+ *     must keep the .nii / .nii.gz ending).
+ */
+#include <errno.h>
+#include <float.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <nifti1_io.h>
+
+#include "rt.h"
+
+#define AFFINE_EXT_TAG "armstg_affine_f64"
+
+static pthread_once_t nifti_once = PTHREAD_ONCE_INIT;
+
+/* niftilib prints its own diagnostics to stderr unless told not to; we turn
+ * every failure into a message instead. */
+static void nifti_quiet(void)
+{
+	nifti_set_debug_level(0);
+	nifti_set_allow_upper_fext(1);
+}
+
+ARMSTG_PRINTF(4, 5)
+static int ferr(char *err, size_t errsize, int code, const char *fmt, ...)
+{
+	if (err && errsize) {
+		va_list ap;
+		va_start(ap, fmt);
+		vsnprintf(err, errsize, fmt, ap);
+		va_end(ap);
+	}
+	return code;
+}
+
+static int ends_with(const char *s, const char *suf)
+{
+	size_t n = strlen(s), m = strlen(suf);
+	return n >= m && !strcasecmp(s + n - m, suf);
+}
+
+static int nifti_name_ok(const char *path)
+{
+	return ends_with(path, ".nii") || ends_with(path, ".nii.gz") ||
+	       ends_with(path, ".hdr") || ends_with(path, ".hdr.gz");
+}
+
+/* ------------------------------------------------------------------ */
+/* reading                                                            */
+
+static uint16_t bswap16(uint16_t x)
+{
+	return (uint16_t)((x >> 8) | (x << 8));
+}
+
+static uint32_t bswap32(uint32_t x)
+{
+	return (x >> 24) | ((x >> 8) & 0xff00u) | ((x << 8) & 0xff0000u) |
+	       (x << 24);
+}
+
+/*
+ * niftilib refused the file: read the raw header ourselves to say why.
+ */
+static int nifti_diagnose(const char *path, char *err, size_t errsize)
+{
+	unsigned char raw[348];
+	int gz = ends_with(path, ".gz");
+	znzFile f = znzopen(path, "rb", gz);
+	if (znz_isnull(f))
+		return ferr(err, errsize, ARMSTG_EIO, "cannot open '%s': %s",
+			    path, strerror(errno ? errno : EIO));
+	size_t got = znzread(raw, 1, sizeof raw, f);
+	znzclose(f);
+	if (!gz && got >= 2 && raw[0] == 0x1f && raw[1] == 0x8b)
+		return ferr(err, errsize, ARMSTG_EIO,
+			    "'%s' is gzip-compressed: name it .nii.gz", path);
+	if (got < sizeof raw)
+		return ferr(err, errsize, ARMSTG_EIO,
+			    "'%s': not a NIfTI-1 file: only %zu of the 348 "
+			    "header bytes could be read%s",
+			    path, got, gz ? " (truncated or corrupt gzip?)" : "");
+	nifti_1_header h;
+	memcpy(&h, raw, sizeof h);
+	uint32_t sz = (uint32_t)h.sizeof_hdr;
+	int swap = 0;
+	if (sz != 348 && bswap32(sz) == 348)
+		swap = 1;
+	if (sz == 540 || bswap32(sz) == 540)
+		return ferr(err, errsize, ARMSTG_EUNSUPPORTED,
+			    "'%s' is a NIfTI-2 file: only NIfTI-1 is supported "
+			    "(convert it, e.g. with nibabel or c3d)", path);
+	if (sz != 348 && !swap)
+		return ferr(err, errsize, ARMSTG_EIO,
+			    "'%s': not a NIfTI-1 file (sizeof_hdr is %u, "
+			    "expected 348)", path, sz);
+	int dim[8];
+	for (int i = 0; i < 8; i++)
+		dim[i] = swap ? (int16_t)bswap16((uint16_t)h.dim[i]) : h.dim[i];
+	int dt = swap ? (int16_t)bswap16((uint16_t)h.datatype) : h.datatype;
+	if (dim[0] < 1 || dim[0] > 7)
+		return ferr(err, errsize, ARMSTG_EIO,
+			    "'%s': bad header: dim[0] = %d (number of "
+			    "dimensions must be 1..7)", path, dim[0]);
+	for (int i = 1; i <= dim[0]; i++)
+		if (dim[i] < 1)
+			return ferr(err, errsize, ARMSTG_EIO,
+				    "'%s': bad header: dimension %d has size "
+				    "%d (must be >= 1)", path, i, dim[i]);
+	if (!nifti_is_valid_datatype(dt))
+		return ferr(err, errsize, ARMSTG_EUNSUPPORTED,
+			    "'%s': unknown NIfTI datatype code %d", path, dt);
+	return ferr(err, errsize, ARMSTG_EIO,
+		    "'%s': niftilib refused the header (corrupt or "
+		    "inconsistent NIfTI-1 file)", path);
+}
+
+/* qform in double precision: the NIfTI-1 quaternion formula (nifti1.h,
+ * "METHOD 2"), a = sqrt(1 - b^2 - c^2 - d^2), R from (a,b,c,d), the third
+ * column negated when qfac = pixdim[0] < 0, columns scaled by pixdim. */
+static void qform_affine(const nifti_image *nim, double A[16])
+{
+	double b = nim->quatern_b, c = nim->quatern_c, d = nim->quatern_d;
+	double a = 1.0 - (b * b + c * c + d * d);
+	if (a < 1e-7) { /* 180 degree rotation: renormalise (b,c,d) */
+		double s = sqrt(b * b + c * c + d * d);
+		if (s > 0) {
+			b /= s;
+			c /= s;
+			d /= s;
+		}
+		a = 0;
+	} else {
+		a = sqrt(a);
+	}
+	double xd = nim->pixdim[1] > 0 ? nim->pixdim[1] : 1.0;
+	double yd = nim->pixdim[2] > 0 ? nim->pixdim[2] : 1.0;
+	double zd = nim->pixdim[3] > 0 ? nim->pixdim[3] : 1.0;
+	if (nim->qfac < 0)
+		zd = -zd;
+	memset(A, 0, 16 * sizeof(double));
+	A[0] = (a * a + b * b - c * c - d * d) * xd;
+	A[1] = 2.0 * (b * c - a * d) * yd;
+	A[2] = 2.0 * (b * d + a * c) * zd;
+	A[4] = 2.0 * (b * c + a * d) * xd;
+	A[5] = (a * a + c * c - b * b - d * d) * yd;
+	A[6] = 2.0 * (c * d - a * b) * zd;
+	A[8] = 2.0 * (b * d - a * c) * xd;
+	A[9] = 2.0 * (c * d + a * b) * yd;
+	A[10] = (a * a + d * d - c * c - b * b) * zd;
+	A[3] = nim->qoffset_x;
+	A[7] = nim->qoffset_y;
+	A[11] = nim->qoffset_z;
+	A[15] = 1;
+}
+
+/* The exact double affine of our own comment extension, if present and
+ * consistent with the float sform (every double rounds to the stored
+ * float).  Returns 1 and fills A when usable. */
+static int ext_affine(const nifti_image *nim, double A[16])
+{
+	for (int e = 0; e < nim->num_ext; e++) {
+		const nifti1_extension *x = &nim->ext_list[e];
+		size_t len = x->esize > 8 ? (size_t)x->esize - 8 : 0;
+		size_t tl = strlen(AFFINE_EXT_TAG);
+		if (x->ecode != NIFTI_ECODE_COMMENT || !x->edata || len <= tl ||
+		    memcmp(x->edata, AFFINE_EXT_TAG, tl))
+			continue;
+		char buf[640];
+		if (len >= sizeof buf)
+			len = sizeof buf - 1;
+		memcpy(buf, x->edata, len);
+		buf[len] = 0;
+		const char *p = buf + tl;
+		double v[12];
+		int ok = 1;
+		for (int i = 0; i < 12 && ok; i++) {
+			char *end;
+			errno = 0;
+			v[i] = strtod(p, &end);
+			if (end == p || errno || !isfinite(v[i]))
+				ok = 0;
+			p = end;
+		}
+		for (int r = 0; r < 3 && ok; r++)
+			for (int c = 0; c < 4 && ok; c++) {
+				float f = (float)v[r * 4 + c];
+				float s = nim->sto_xyz.m[r][c];
+				if (memcmp(&f, &s, sizeof f))
+					ok = 0;
+			}
+		if (!ok)
+			continue;
+		memcpy(A, v, 12 * sizeof(double));
+		A[12] = A[13] = A[14] = 0;
+		A[15] = 1;
+		return 1;
+	}
+	return 0;
+}
+
+static int affine_ok(const double A[16])
+{
+	for (int i = 0; i < 12; i++)
+		if (!isfinite(A[i]))
+			return 0;
+	double det = A[0] * (A[5] * A[10] - A[6] * A[9]) -
+		     A[1] * (A[4] * A[10] - A[6] * A[8]) +
+		     A[2] * (A[4] * A[9] - A[5] * A[8]);
+	return isfinite(det) && fabs(det) > 1e-12;
+}
+
+static int nifti_affine(const char *path, const nifti_image *nim,
+			double A[16], char *err, size_t errsize)
+{
+	const char *which;
+	memset(A, 0, 16 * sizeof(double));
+	A[15] = 1;
+	int units = XYZT_TO_SPACE(nim->xyz_units);
+	if (nim->sform_code > 0) {
+		which = "sform";
+		if (units != NIFTI_UNITS_METER && units != NIFTI_UNITS_MICRON &&
+		    ext_affine(nim, A))
+			return 0;
+		for (int r = 0; r < 3; r++)
+			for (int c = 0; c < 4; c++)
+				A[r * 4 + c] = nim->sto_xyz.m[r][c];
+	} else if (nim->qform_code > 0) {
+		which = "qform";
+		qform_affine(nim, A);
+	} else {
+		which = "pixdim (no qform or sform)";
+		for (int c = 0; c < 3; c++) {
+			double d = fabs((double)nim->pixdim[c + 1]);
+			A[c * 5] = isfinite(d) && d > 0 ? d : 1.0;
+		}
+	}
+	double scale = units == NIFTI_UNITS_METER ? 1000.0
+		     : units == NIFTI_UNITS_MICRON ? 0.001 : 1.0;
+	if (scale != 1.0)
+		for (int i = 0; i < 12; i++)
+			A[i] *= scale;
+	if (!affine_ok(A))
+		return ferr(err, errsize, ARMSTG_EINVAL,
+			    "'%s': the %s affine is singular or not finite",
+			    path, which);
+	return 0;
+}
+
+/* Copy n elements of NIfTI type ndt at src into the vol_t buffer dst of
+ * type vdt, as y = x * slope + inter (slope 1, inter 0 for no scaling). */
+#define CONVERT_FROM(T)                                                       \
+	do {                                                                  \
+		const T *s = (const T *)src;                                  \
+		for (size_t e = 0; e < n; e++)                                \
+			vol_set(v, (int64_t)e,                                \
+				(double)s[e] * slope + inter);                \
+	} while (0)
+
+static void convert_data(vol_t *v, const void *src, int ndt, size_t n,
+			 double slope, double inter)
+{
+	switch (ndt) {
+	case NIFTI_TYPE_UINT8: CONVERT_FROM(uint8_t); break;
+	case NIFTI_TYPE_INT8: CONVERT_FROM(int8_t); break;
+	case NIFTI_TYPE_INT16: CONVERT_FROM(int16_t); break;
+	case NIFTI_TYPE_UINT16: CONVERT_FROM(uint16_t); break;
+	case NIFTI_TYPE_INT32: CONVERT_FROM(int32_t); break;
+	case NIFTI_TYPE_UINT32: CONVERT_FROM(uint32_t); break;
+	case NIFTI_TYPE_INT64: CONVERT_FROM(int64_t); break;
+	case NIFTI_TYPE_UINT64: CONVERT_FROM(uint64_t); break;
+	case NIFTI_TYPE_FLOAT32: CONVERT_FROM(float); break;
+	case NIFTI_TYPE_FLOAT64: CONVERT_FROM(double); break;
+	default: break;
+	}
+}
+
+/* 1 when every value of a wide integer buffer fits in int32 */
+static int fits_i32(const void *src, int ndt, size_t n)
+{
+	switch (ndt) {
+	case NIFTI_TYPE_UINT32:
+		for (size_t e = 0; e < n; e++)
+			if (((const uint32_t *)src)[e] > INT32_MAX)
+				return 0;
+		return 1;
+	case NIFTI_TYPE_INT64:
+		for (size_t e = 0; e < n; e++) {
+			int64_t x = ((const int64_t *)src)[e];
+			if (x < INT32_MIN || x > INT32_MAX)
+				return 0;
+		}
+		return 1;
+	case NIFTI_TYPE_UINT64:
+		for (size_t e = 0; e < n; e++)
+			if (((const uint64_t *)src)[e] > INT32_MAX)
+				return 0;
+		return 1;
+	default:
+		return 1;
+	}
+}
+
+int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize)
+{
+	nifti_image *nim = NULL;
+	vol_t *v = NULL;
+	int rc;
+
+	if (err && errsize)
+		err[0] = 0;
+	if (!out)
+		return ferr(err, errsize, ARMSTG_EINVAL, "no output pointer");
+	*out = NULL;
+	if (!path || !*path)
+		return ferr(err, errsize, ARMSTG_EINVAL,
+			    "no NIfTI file name given");
+	pthread_once(&nifti_once, nifti_quiet);
+
+	struct stat sb;
+	if (stat(path, &sb))
+		return ferr(err, errsize, ARMSTG_EIO, "cannot open '%s': %s",
+			    path, strerror(errno));
+	if (S_ISDIR(sb.st_mode))
+		return ferr(err, errsize, ARMSTG_EIO,
+			    "'%s' is a folder, not a NIfTI file", path);
+	if (!nifti_name_ok(path))
+		return ferr(err, errsize, ARMSTG_EINVAL,
+			    "'%s': not a NIfTI file name (expected .nii or "
+			    ".nii.gz)", path);
+
+	errno = 0;
+	nim = nifti_image_read(path, 0);
+	if (!nim)
+		return nifti_diagnose(path, err, errsize);
+
+	/* dimensions beyond dim[0] count as 1 */
+	int d[8];
+	for (int i = 1; i < 8; i++)
+		d[i] = i <= nim->dim[0] ? nim->dim[i] : 1;
+	for (int i = 1; i < 8; i++)
+		if (d[i] < 1) {
+			rc = ferr(err, errsize, ARMSTG_EIO,
+				  "'%s': dimension %d has size %d", path, i,
+				  d[i]);
+			goto out;
+		}
+	if (d[6] != 1 || d[7] != 1) {
+		rc = ferr(err, errsize, ARMSTG_EUNSUPPORTED,
+			  "'%s' has %d dimensions with sizes beyond the 5th "
+			  "(%d, %d): at most 5 (x, y, z, 1, components) are "
+			  "supported", path, nim->dim[0], d[6], d[7]);
+		goto out;
+	}
+	if (d[4] != 1) {
+		rc = ferr(err, errsize, ARMSTG_EUNSUPPORTED,
+			  "'%s' is a 4-D series of %d volumes: ARMSTG volumes "
+			  "are 3-D (a trailing singleton 4th dimension is "
+			  "fine; vector fields are 5-D, (x,y,z,1,3))", path,
+			  d[4]);
+		goto out;
+	}
+	int nc = d[5];
+	if (nc > 64) {
+		rc = ferr(err, errsize, ARMSTG_EUNSUPPORTED,
+			  "'%s' has %d components per voxel (at most 64)",
+			  path, nc);
+		goto out;
+	}
+
+	/* element type */
+	int ndt = nim->datatype;
+	int vdt;
+	switch (ndt) {
+	case NIFTI_TYPE_UINT8: vdt = DT_U8; break;
+	case NIFTI_TYPE_INT16: vdt = DT_I16; break;
+	case NIFTI_TYPE_INT32: vdt = DT_I32; break;
+	case NIFTI_TYPE_FLOAT32: vdt = DT_F32; break;
+	case NIFTI_TYPE_FLOAT64: vdt = DT_F64; break;
+	case NIFTI_TYPE_INT8: vdt = DT_I16; break;
+	case NIFTI_TYPE_UINT16: vdt = DT_I32; break;
+	case NIFTI_TYPE_UINT32:
+	case NIFTI_TYPE_INT64:
+	case NIFTI_TYPE_UINT64: vdt = DT_I32; break; /* checked below */
+	default:
+		rc = ferr(err, errsize, ARMSTG_EUNSUPPORTED,
+			  "'%s': unsupported NIfTI datatype %s (code %d): "
+			  "use u8, i16, i32, f32 or f64", path,
+			  nifti_datatype_string(ndt), ndt);
+		goto out;
+	}
+	int native = (ndt == NIFTI_TYPE_UINT8 || ndt == NIFTI_TYPE_INT16 ||
+		      ndt == NIFTI_TYPE_INT32 || ndt == NIFTI_TYPE_FLOAT32 ||
+		      ndt == NIFTI_TYPE_FLOAT64);
+	int small = (ndt == NIFTI_TYPE_UINT8 || ndt == NIFTI_TYPE_INT8 ||
+		     ndt == NIFTI_TYPE_INT16 || ndt == NIFTI_TYPE_UINT16 ||
+		     ndt == NIFTI_TYPE_FLOAT32);
+
+	double slope = nim->scl_slope, inter = nim->scl_inter;
+	int scaled = isfinite(slope) && slope != 0 &&
+		     !(slope == 1 && inter == 0);
+	if (scaled && !isfinite(inter)) {
+		rc = ferr(err, errsize, ARMSTG_EINVAL,
+			  "'%s': scl_inter is not finite", path);
+		goto out;
+	}
+	if (!scaled) {
+		slope = 1;
+		inter = 0;
+	}
+	int is_vec = nc == 3;
+	if (scaled || (is_vec && vdt != DT_F32 && vdt != DT_F64))
+		vdt = small ? DT_F32 : DT_F64;
+
+	double A[16];
+	rc = nifti_affine(path, nim, A, err, errsize);
+	if (rc)
+		goto out;
+
+	if (nifti_image_load(nim) < 0 || !nim->data) {
+		rc = ferr(err, errsize, ARMSTG_EIO,
+			  "'%s': image data truncated or corrupt (expected "
+			  "%zu bytes of %s after the header)", path,
+			  (size_t)nim->nvox * (size_t)nim->nbyper,
+			  nifti_datatype_string(ndt));
+		goto out;
+	}
+	size_t n = (size_t)d[1] * d[2] * d[3] * nc;
+	if (n != nim->nvox) {
+		rc = ferr(err, errsize, ARMSTG_EINTERNAL,
+			  "'%s': voxel count mismatch (%zu vs %zu)", path, n,
+			  (size_t)nim->nvox);
+		goto out;
+	}
+	if (vdt == DT_I32 && !scaled && !fits_i32(nim->data, ndt, n))
+		vdt = DT_F64;
+
+	v = vol_new(d[1], d[2], d[3], nc, vdt, A);
+	if (!v) {
+		rc = ferr(err, errsize, ARMSTG_ENOMEM,
+			  "'%s': out of memory for %d x %d x %d x %d voxels",
+			  path, d[1], d[2], d[3], nc);
+		goto out;
+	}
+	if (native && !scaled && vol_dtype_size(vdt) == (size_t)nim->nbyper &&
+	    ((vdt == DT_U8 && ndt == NIFTI_TYPE_UINT8) ||
+	     (vdt == DT_I16 && ndt == NIFTI_TYPE_INT16) ||
+	     (vdt == DT_I32 && ndt == NIFTI_TYPE_INT32) ||
+	     (vdt == DT_F32 && ndt == NIFTI_TYPE_FLOAT32) ||
+	     (vdt == DT_F64 && ndt == NIFTI_TYPE_FLOAT64))) {
+		/* same layout: take niftilib's buffer (malloc'ed, same size)
+		 * instead of copying a possibly large volume */
+		free(v->data);
+		v->data = nim->data;
+		nim->data = NULL;
+	} else {
+		convert_data(v, nim->data, ndt, n, slope, inter);
+	}
+
+	if (is_vec) {
+		v->intent = NIFTI_INTENT_VECTOR;
+		if (nim->intent_code != NIFTI_INTENT_DISPVECT) {
+			/* LPS (ITK physical frame) -> RAS */
+			int64_t nv = vol_nvox(v);
+			for (int64_t e = 0; e < 2 * nv; e++)
+				vol_set(v, e, -vol_get(v, e));
+		}
+	} else {
+		v->intent = nim->intent_code;
+	}
+	*out = v;
+	v = NULL;
+	rc = 0;
+out:
+	if (v)
+		msg_unref(&v->base);
+	nifti_image_free(nim);
+	return rc;
+}
+
+/* ------------------------------------------------------------------ */
+/* writing                                                            */
+
+static int nifti_dtype_of(int dtype)
+{
+	switch (dtype) {
+	case DT_U8: return NIFTI_TYPE_UINT8;
+	case DT_I16: return NIFTI_TYPE_INT16;
+	case DT_I32: return NIFTI_TYPE_INT32;
+	case DT_F32: return NIFTI_TYPE_FLOAT32;
+	case DT_F64: return NIFTI_TYPE_FLOAT64;
+	default: return 0;
+	}
+}
+
+/* columns of the 3x3 part pairwise orthogonal (rotation times scaling,
+ * reflections allowed): then a qform can hold the matrix */
+static int affine_orthogonal(const double A[16])
+{
+	double col[3][3];
+	for (int c = 0; c < 3; c++)
+		for (int r = 0; r < 3; r++)
+			col[c][r] = A[r * 4 + c];
+	for (int i = 0; i < 3; i++)
+		for (int j = i + 1; j < 3; j++) {
+			double dot = 0, ni = 0, nj = 0;
+			for (int r = 0; r < 3; r++) {
+				dot += col[i][r] * col[j][r];
+				ni += col[i][r] * col[i][r];
+				nj += col[j][r] * col[j][r];
+			}
+			if (fabs(dot) > 1e-6 * sqrt(ni * nj))
+				return 0;
+		}
+	return 1;
+}
+
+static int zwrite(znzFile f, const void *p, size_t n)
+{
+	const char *c = p;
+	while (n) {
+		/* gzwrite takes an unsigned int length */
+		size_t k = n > (1u << 30) ? (1u << 30) : n;
+		if (znzwrite(c, 1, k, f) != k)
+			return -1;
+		c += k;
+		n -= k;
+	}
+	return 0;
+}
+
+int vol_write_nifti(const char *path, const vol_t *v, char *err,
+		    size_t errsize)
+{
+	if (err && errsize)
+		err[0] = 0;
+	if (!path || !*path)
+		return ferr(err, errsize, ARMSTG_EINVAL,
+			    "no NIfTI file name given");
+	if (!v || !msg_valid(&v->base, MSG_VOLUME))
+		return ferr(err, errsize, ARMSTG_EINVAL,
+			    "'%s': not a volume message", path);
+	if (!ends_with(path, ".nii") && !ends_with(path, ".nii.gz"))
+		return ferr(err, errsize, ARMSTG_EINVAL,
+			    "'%s': a NIfTI file name must end in .nii or "
+			    ".nii.gz", path);
+	int ndt = nifti_dtype_of(v->dtype);
+	if (!ndt)
+		return ferr(err, errsize, ARMSTG_EINVAL,
+			    "'%s': volume has an unknown dtype %d", path,
+			    v->dtype);
+	if (v->nx < 1 || v->ny < 1 || v->nz < 1 || v->nc < 1 ||
+	    v->nx > 32767 || v->ny > 32767 || v->nz > 32767 || v->nc > 32767)
+		return ferr(err, errsize, ARMSTG_EUNSUPPORTED,
+			    "'%s': grid %d x %d x %d x %d does not fit a "
+			    "NIfTI-1 header (each size 1..32767)", path, v->nx,
+			    v->ny, v->nz, v->nc);
+	int is_vec = v->nc == 3;
+	if (is_vec && v->dtype != DT_F32 && v->dtype != DT_F64)
+		return ferr(err, errsize, ARMSTG_EUNSUPPORTED,
+			    "'%s': a 3-component volume (vector field) must be "
+			    "f32 or f64 to be written, not %s", path,
+			    vol_dtype_name(v->dtype));
+	if (!affine_ok(v->affine))
+		return ferr(err, errsize, ARMSTG_EINVAL,
+			    "'%s': the volume's affine is singular or not "
+			    "finite", path);
+	pthread_once(&nifti_once, nifti_quiet);
+
+	nifti_1_header h;
+	memset(&h, 0, sizeof h);
+	h.sizeof_hdr = 348;
+	h.regular = 'r';
+	if (v->nc == 1) {
+		h.dim[0] = 3;
+	} else {
+		h.dim[0] = 5;
+		h.dim[5] = (short)v->nc;
+	}
+	h.dim[1] = (short)v->nx;
+	h.dim[2] = (short)v->ny;
+	h.dim[3] = (short)v->nz;
+	for (int i = 4; i < 8; i++)
+		if (!h.dim[i])
+			h.dim[i] = 1;
+	h.datatype = (short)ndt;
+	h.bitpix = (short)(8 * vol_dtype_size(v->dtype));
+	int intent = is_vec ? NIFTI_INTENT_VECTOR : v->intent;
+	h.intent_code = (short)(intent >= -32768 && intent <= 32767 ? intent : 0);
+	h.scl_slope = 1;
+	h.scl_inter = 0;
+	h.xyzt_units = NIFTI_UNITS_MM;
+	snprintf(h.descrip, sizeof h.descrip, "ARMSTG %s", ARMSTG_VERSION);
+	memcpy(h.magic, "n+1", 4);
+	for (int i = 0; i < 8; i++)
+		h.pixdim[i] = 1;
+
+	const double *A = v->affine;
+	mat44 R;
+	memset(&R, 0, sizeof R);
+	for (int r = 0; r < 3; r++) {
+		float *srow = r == 0 ? h.srow_x : r == 1 ? h.srow_y : h.srow_z;
+		for (int c = 0; c < 4; c++) {
+			srow[c] = (float)A[r * 4 + c];
+			R.m[r][c] = srow[c];
+		}
+	}
+	R.m[3][3] = 1;
+	h.sform_code = NIFTI_XFORM_SCANNER_ANAT;
+	for (int c = 0; c < 3; c++)
+		h.pixdim[c + 1] = (float)sqrt(A[c] * A[c] + A[4 + c] * A[4 + c] +
+					      A[8 + c] * A[8 + c]);
+	if (affine_orthogonal(A)) {
+		float qb, qc, qd, qx, qy, qz, dx, dy, dz, qfac;
+		nifti_mat44_to_quatern(R, &qb, &qc, &qd, &qx, &qy, &qz, &dx, &dy,
+				       &dz, &qfac);
+		h.quatern_b = qb;
+		h.quatern_c = qc;
+		h.quatern_d = qd;
+		h.qoffset_x = qx;
+		h.qoffset_y = qy;
+		h.qoffset_z = qz;
+		h.pixdim[0] = qfac;
+		h.qform_code = NIFTI_XFORM_SCANNER_ANAT;
+	}
+
+	/* exact double affine, as a comment extension (see the top) */
+	char ext[640];
+	memset(ext, 0, sizeof ext);
+	int tl = snprintf(ext + 8, sizeof ext - 8, "%s", AFFINE_EXT_TAG);
+	for (int i = 0; i < 12; i++)
+		tl += snprintf(ext + 8 + tl, sizeof ext - 8 - (size_t)tl,
+			       " %.17g", A[i]);
+	int esize = (8 + tl + 1 + 15) / 16 * 16;
+	int32_t ehead[2] = { esize, NIFTI_ECODE_COMMENT };
+	memcpy(ext, ehead, sizeof ehead);
+	char extender[4] = { 1, 0, 0, 0 };
+	h.vox_offset = (float)(348 + 4 + esize);
+
+	int gz = ends_with(path, ".gz");
+	errno = 0;
+	/* gzip level 6 (zlib's default), as nibabel and ITK write */
+	znzFile f = znzopen(path, gz ? "wb6" : "wb", gz);
+	if (znz_isnull(f))
+		return ferr(err, errsize, ARMSTG_EIO, "cannot create '%s': %s",
+			    path, strerror(errno ? errno : EIO));
+	int bad = zwrite(f, &h, sizeof h) || zwrite(f, extender, 4) ||
+		  zwrite(f, ext, (size_t)esize);
+	size_t es = vol_dtype_size(v->dtype);
+	int64_t nv = vol_nvox(v);
+	if (!bad && is_vec) {
+		/* RAS -> LPS for x and y, in chunks (fields can be large) */
+		enum { CH = 1 << 16 };
+		char *buf = malloc(CH * es);
+		if (!buf) {
+			znzclose(f);
+			unlink(path);
+			return ferr(err, errsize, ARMSTG_ENOMEM,
+				    "'%s': out of memory", path);
+		}
+		for (int64_t e0 = 0; !bad && e0 < 3 * nv; e0 += CH) {
+			int64_t k = 3 * nv - e0 < CH ? 3 * nv - e0 : CH;
+			memcpy(buf, (const char *)v->data + e0 * (int64_t)es,
+			       (size_t)k * es);
+			for (int64_t e = 0; e < k; e++) {
+				if (e0 + e >= 2 * nv)
+					break;
+				if (v->dtype == DT_F32)
+					((float *)buf)[e] = -((float *)buf)[e];
+				else
+					((double *)buf)[e] = -((double *)buf)[e];
+			}
+			bad = zwrite(f, buf, (size_t)k * es);
+		}
+		free(buf);
+	} else if (!bad) {
+		bad = zwrite(f, v->data, (size_t)nv * v->nc * es);
+	}
+	int saved = errno;
+	if (znzclose(f) != 0)
+		bad = 1;
+	if (bad) {
+		unlink(path);
+		return ferr(err, errsize, ARMSTG_EIO,
+			    "cannot write '%s': %s", path,
+			    strerror(saved ? saved : EIO));
+	}
+	return 0;
+}

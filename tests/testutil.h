@@ -1,0 +1,133 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Helpers shared by all cmocka test programs (tests/ and plugins/<p>/tests/).
+ *
+ *   tu_data_dir()       ../shared/data (or $ARMSTG_DATA), NULL when absent
+ *   TU_NEED_DATA()      skip the current test with a clear message if absent
+ *   TU_PLUGIN()         descriptor of the plugin linked into this test
+ *   tu_run(...)         run one stage (params, inputs) through the runtime
+ *                       exactly as a graph would: params are parsed and
+ *                       range-checked, init/process/fini are called
+ */
+#ifndef ARMSTG_TESTUTIL_H
+#define ARMSTG_TESTUTIL_H
+
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cmocka.h>
+
+#include "rt.h"
+
+static inline const char *tu_data_dir(void)
+{
+	static char buf[1024];
+	const char *env = getenv("ARMSTG_DATA");
+	snprintf(buf, sizeof buf, "%s", env && *env ? env : "../shared/data");
+	struct stat st;
+	if (stat(buf, &st) || !S_ISDIR(st.st_mode))
+		return NULL;
+	return buf;
+}
+
+/* path under the data folder, in a static buffer (one at a time per slot) */
+static inline const char *tu_data(const char *rel)
+{
+	static char buf[4][1024];
+	static int slot;
+	const char *d = tu_data_dir();
+	if (!d)
+		return NULL;
+	slot = (slot + 1) % 4;
+	snprintf(buf[slot], sizeof buf[slot], "%s/%s", d, rel);
+	return buf[slot];
+}
+
+#define TU_NEED_DATA()                                                        \
+	do {                                                                  \
+		if (!tu_data_dir()) {                                         \
+			print_message("skip: ../shared/data is absent "      \
+				      "(set ARMSTG_DATA to its folder)\n");   \
+			skip();                                               \
+		}                                                             \
+	} while (0)
+
+const armstg_plugin_t *armstg_plugin_entry(const armstg_host_t *host,
+					   const char **errmsg);
+#define TU_PLUGIN() armstg_plugin_entry(rt_host(), NULL)
+
+/*
+ * Run one stage of plugin d.  params: NULL-terminated "key=value" strings
+ * (or NULL).  inputs: d->n_inputs messages (NULL entries allowed for optional
+ * ports; the array itself may be NULL when there are none).  outputs:
+ * d->n_outputs slots that receive new references (caller unrefs), or NULL.
+ * Returns 0 or the stage's negative code; err receives the message.
+ * outdir: folder for relative sink paths (NULL = ".").
+ */
+static inline int tu_run_in(const armstg_plugin_t *d, const char *const *params,
+			    const msg_t *const *inputs, msg_t **outputs,
+			    const char *outdir, char *err, size_t errsize)
+{
+	char e[1024] = "";
+	int rc = 0;
+	const msg_t *none[64] = { 0 };
+	rt_stage_t *s = stage_new(d, d->name);
+	if (!s)
+		return ARMSTG_ENOMEM;
+	if (outdir)
+		stage_set_outdir(s, outdir);
+	for (int i = 0; params && params[i]; i++) {
+		char key[128];
+		const char *eq = strchr(params[i], '=');
+		size_t kl = eq ? (size_t)(eq - params[i]) : strlen(params[i]);
+		if (kl >= sizeof key)
+			kl = sizeof key - 1;
+		memcpy(key, params[i], kl);
+		key[kl] = 0;
+		rc = stage_set_param(s, key, eq ? eq + 1 : "", e, sizeof e);
+		if (rc)
+			goto out;
+	}
+	rc = stage_finish_params(s, e, sizeof e);
+	if (rc)
+		goto out;
+	rc = stage_init(s);
+	if (rc) {
+		snprintf(e, sizeof e, "%s", stage_error(s));
+		goto out;
+	}
+	rc = stage_process(s, inputs ? inputs : none);
+	if (rc) {
+		snprintf(e, sizeof e, "%s", stage_error(s));
+		goto out;
+	}
+	rc = stage_commit_files(s, e, sizeof e);
+	if (rc)
+		goto out;
+	for (int o = 0; outputs && o < d->n_outputs; o++)
+		outputs[o] = stage_take_output(s, o);
+out:
+	if (rc)
+		stage_discard_files(s);
+	stage_fini(s);
+	stage_free(s);
+	if (err && errsize)
+		snprintf(err, errsize, "%s", e);
+	return rc;
+}
+
+static inline int tu_run(const armstg_plugin_t *d, const char *const *params,
+			 const msg_t *const *inputs, msg_t **outputs,
+			 char *err, size_t errsize)
+{
+	return tu_run_in(d, params, inputs, outputs, NULL, err, errsize);
+}
+
+#endif
