@@ -249,17 +249,17 @@ static int cmd_describe(const char *name)
 	printf("\nparameters:\n");
 	for (int i = 0; i < d->n_params; i++) {
 		const armstg_param_t *q = &d->params[i];
-		char range[128] = "";
+		char range[160] = "", def[128];
 		if (q->type == PT_INT || q->type == PT_DOUBLE)
-			snprintf(range, sizeof range, "[%g, %g]", q->min,
-				 q->max);
+			snprintf(range, sizeof range, " range [%g, %g]%s%s",
+				 q->min, q->max, *q->unit ? " " : "", q->unit);
 		else if (q->type == PT_ENUM)
-			snprintf(range, sizeof range, "{%s}", q->choices);
-		printf("  %-14s %-6s default %-10s %-18s %-5s %s\n", q->name,
-		       ptype(q->type),
-		       (q->flags & PARAM_REQUIRED) ? "(required)"
-		       : q->def ? q->def : "(unset)",
-		       range, q->unit, q->help);
+			snprintf(range, sizeof range, " one of %s", q->choices);
+		snprintf(def, sizeof def, "%s",
+			 (q->flags & PARAM_REQUIRED) ? "required"
+			 : q->def ? q->def : "unset");
+		printf("  %-16s %-6s = %-12s%s\n      %s\n", q->name,
+		       ptype(q->type), def, range, q->help);
 	}
 	if (!d->n_params)
 		printf("  (none)\n");

@@ -599,7 +599,7 @@ static int unpack_pointset(dec_t *d, const msgpack_object *root,
 	int rc = map_fields(d, root, "pointset", keys, 6, f);
 	if (rc)
 		return rc;
-	uint64_t n;
+	uint64_t n = 0;
 	rc = get_uint(d, f[2], "n", 0, UINT64_C(1) << 34, &n);
 	if (rc)
 		return rc;
@@ -695,7 +695,7 @@ static int unpack_table(dec_t *d, const msgpack_object *root, msg_t **out)
 	int rc = map_fields(d, root, "table", keys, 4, f);
 	if (rc)
 		return rc;
-	uint64_t nrows;
+	uint64_t nrows = 0;
 	rc = get_uint(d, f[2], "nrows", 0, INT32_MAX, &nrows);
 	if (rc)
 		return rc;

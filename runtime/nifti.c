@@ -59,6 +59,7 @@
 #include <unistd.h>
 
 #include <nifti1_io.h>
+#include <zlib.h>
 
 #include "rt.h"
 
@@ -113,32 +114,36 @@ static uint32_t bswap32(uint32_t x)
 }
 
 /*
- * niftilib refused the file: read the raw header ourselves to say why.
+ * Check the raw header before niftilib sees it: niftilib silently turns a
+ * zero dimension into 1 and prints to stderr on other defects; here every
+ * defect is an error naming the file.  Returns 0 when it looks sane.
  */
-static int nifti_diagnose(const char *path, char *err, size_t errsize)
+static int header_check(const char *path, char *err, size_t errsize)
 {
 	unsigned char raw[348];
 	int gz = ends_with(path, ".gz");
-	znzFile f = znzopen(path, "rb", gz);
-	if (znz_isnull(f))
+	errno = 0;
+	gzFile g = gzopen(path, "rb"); /* plain files are read as they are */
+	if (!g)
 		return ferr(err, errsize, ARMSTG_EIO, "cannot open '%s': %s",
 			    path, strerror(errno ? errno : EIO));
-	size_t got = znzread(raw, 1, sizeof raw, f);
-	znzclose(f);
-	if (!gz && got >= 2 && raw[0] == 0x1f && raw[1] == 0x8b)
+	int got = gzread(g, raw, sizeof raw);
+	int direct = gzdirect(g);
+	gzclose_r(g);
+	if (got < 0)
+		got = 0;
+	if (!gz && !direct)
 		return ferr(err, errsize, ARMSTG_EIO,
 			    "'%s' is gzip-compressed: name it .nii.gz", path);
-	if (got < sizeof raw)
+	if ((size_t)got < sizeof raw)
 		return ferr(err, errsize, ARMSTG_EIO,
-			    "'%s': not a NIfTI-1 file: only %zu of the 348 "
+			    "'%s': not a NIfTI-1 file: only %d of the 348 "
 			    "header bytes could be read%s",
 			    path, got, gz ? " (truncated or corrupt gzip?)" : "");
 	nifti_1_header h;
 	memcpy(&h, raw, sizeof h);
 	uint32_t sz = (uint32_t)h.sizeof_hdr;
-	int swap = 0;
-	if (sz != 348 && bswap32(sz) == 348)
-		swap = 1;
+	int swap = sz != 348 && bswap32(sz) == 348;
 	if (sz == 540 || bswap32(sz) == 540)
 		return ferr(err, errsize, ARMSTG_EUNSUPPORTED,
 			    "'%s' is a NIfTI-2 file: only NIfTI-1 is supported "
@@ -163,9 +168,7 @@ static int nifti_diagnose(const char *path, char *err, size_t errsize)
 	if (!nifti_is_valid_datatype(dt))
 		return ferr(err, errsize, ARMSTG_EUNSUPPORTED,
 			    "'%s': unknown NIfTI datatype code %d", path, dt);
-	return ferr(err, errsize, ARMSTG_EIO,
-		    "'%s': niftilib refused the header (corrupt or "
-		    "inconsistent NIfTI-1 file)", path);
+	return 0;
 }
 
 /* qform in double precision: the NIfTI-1 quaternion formula (nifti1.h,
@@ -354,10 +357,69 @@ static int fits_i32(const void *src, int ndt, size_t n)
 	}
 }
 
+/*
+ * Read the image data ourselves rather than with nifti_image_load: the
+ * niftilib of Debian bookworm (3.0.1) zero-fills a truncated file with only
+ * a warning, takes znzread's (size_t)-1 for a corrupt gzip stream as a
+ * complete read, and replaces NaN/Inf floats by 0.  Here any short read,
+ * gzip error or bad gzip check value (CRC) is an error, and the data is
+ * kept bit for bit (byte-swapped when the file's order differs).  zlib is
+ * used directly so its error state (gzerror, gzclose_r) can be checked.
+ */
+static int read_raw(const char *path, const nifti_image *nim, void *buf,
+		    size_t nbytes, char *err, size_t errsize)
+{
+	const char *iname = nim->iname ? nim->iname : path;
+	errno = 0;
+	/* zlib reads uncompressed files transparently too */
+	gzFile g = gzopen(iname, "rb");
+	if (!g)
+		return ferr(err, errsize, ARMSTG_EIO, "cannot open '%s': %s",
+			    iname, strerror(errno ? errno : EIO));
+	gzbuffer(g, 1u << 18);
+	int bad = gzseek(g, (z_off_t)nim->iname_offset, SEEK_SET) !=
+		  (z_off_t)nim->iname_offset;
+	char *p = buf;
+	size_t left = nbytes;
+	while (!bad && left) {
+		unsigned want = left > (1u << 30) ? (1u << 30) : (unsigned)left;
+		int got = gzread(g, p, want);
+		if (got < 0 || (unsigned)got != want)
+			bad = 1;
+		p += want;
+		left -= want;
+	}
+	if (!bad) {
+		/* read to the end so zlib checks the gzip CRC and length;
+		 * bytes after the data are allowed */
+		char extra[4096];
+		int got;
+		while ((got = gzread(g, extra, sizeof extra)) > 0)
+			;
+		int zerr = Z_OK;
+		gzerror(g, &zerr);
+		if (got < 0 || (zerr != Z_OK && zerr != Z_STREAM_END))
+			bad = 1;
+	}
+	if (gzclose_r(g) != Z_OK)
+		bad = 1;
+	if (bad)
+		return ferr(err, errsize, ARMSTG_EIO,
+			    "'%s': image data truncated or corrupt (expected "
+			    "%zu bytes of %s after byte %d)", path, nbytes,
+			    nifti_datatype_string(nim->datatype),
+			    nim->iname_offset);
+	if (nim->byteorder != nifti_short_order() && nim->swapsize > 1)
+		nifti_swap_Nbytes(nbytes / (size_t)nim->swapsize, nim->swapsize,
+				  buf);
+	return 0;
+}
+
 int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize)
 {
 	nifti_image *nim = NULL;
 	vol_t *v = NULL;
+	void *raw = NULL;
 	int rc;
 
 	if (err && errsize)
@@ -382,10 +444,15 @@ int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize)
 			    "'%s': not a NIfTI file name (expected .nii or "
 			    ".nii.gz)", path);
 
+	rc = header_check(path, err, errsize);
+	if (rc)
+		return rc;
 	errno = 0;
 	nim = nifti_image_read(path, 0);
 	if (!nim)
-		return nifti_diagnose(path, err, errsize);
+		return ferr(err, errsize, ARMSTG_EIO,
+			    "'%s': niftilib refused the header (corrupt or "
+			    "inconsistent NIfTI-1 file)", path);
 
 	/* dimensions beyond dim[0] count as 1 */
 	int d[8];
@@ -470,14 +537,6 @@ int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize)
 	if (rc)
 		goto out;
 
-	if (nifti_image_load(nim) < 0 || !nim->data) {
-		rc = ferr(err, errsize, ARMSTG_EIO,
-			  "'%s': image data truncated or corrupt (expected "
-			  "%zu bytes of %s after the header)", path,
-			  (size_t)nim->nvox * (size_t)nim->nbyper,
-			  nifti_datatype_string(ndt));
-		goto out;
-	}
 	size_t n = (size_t)d[1] * d[2] * d[3] * nc;
 	if (n != nim->nvox) {
 		rc = ferr(err, errsize, ARMSTG_EINTERNAL,
@@ -485,7 +544,35 @@ int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize)
 			  (size_t)nim->nvox);
 		goto out;
 	}
-	if (vdt == DT_I32 && !scaled && !fits_i32(nim->data, ndt, n))
+	size_t nbytes = n * (size_t)nim->nbyper;
+	/* before allocating what the header claims: a plain file must hold
+	 * it, and gzip cannot compress by more than about 1032:1 */
+	struct stat ib;
+	const char *iname = nim->iname ? nim->iname : path;
+	if (stat(iname, &ib) == 0) {
+		double have = (double)ib.st_size - nim->iname_offset;
+		double can = nifti_is_gzfile(iname) ? 1100.0 * ib.st_size + 4096
+						    : have;
+		if ((double)nbytes > can) {
+			rc = ferr(err, errsize, ARMSTG_EIO,
+				  "'%s': image data truncated: the header "
+				  "says %zu bytes of %s from byte %d, the "
+				  "file has %lld bytes", path, nbytes,
+				  nifti_datatype_string(ndt),
+				  nim->iname_offset, (long long)ib.st_size);
+			goto out;
+		}
+	}
+	raw = malloc(nbytes ? nbytes : 1);
+	if (!raw) {
+		rc = ferr(err, errsize, ARMSTG_ENOMEM,
+			  "'%s': out of memory for %zu bytes", path, nbytes);
+		goto out;
+	}
+	rc = read_raw(path, nim, raw, nbytes, err, errsize);
+	if (rc)
+		goto out;
+	if (vdt == DT_I32 && !scaled && !fits_i32(raw, ndt, n))
 		vdt = DT_F64;
 
 	v = vol_new(d[1], d[2], d[3], nc, vdt, A);
@@ -495,19 +582,19 @@ int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize)
 			  path, d[1], d[2], d[3], nc);
 		goto out;
 	}
-	if (native && !scaled && vol_dtype_size(vdt) == (size_t)nim->nbyper &&
+	if (native && !scaled &&
 	    ((vdt == DT_U8 && ndt == NIFTI_TYPE_UINT8) ||
 	     (vdt == DT_I16 && ndt == NIFTI_TYPE_INT16) ||
 	     (vdt == DT_I32 && ndt == NIFTI_TYPE_INT32) ||
 	     (vdt == DT_F32 && ndt == NIFTI_TYPE_FLOAT32) ||
 	     (vdt == DT_F64 && ndt == NIFTI_TYPE_FLOAT64))) {
-		/* same layout: take niftilib's buffer (malloc'ed, same size)
-		 * instead of copying a possibly large volume */
+		/* same layout: keep our buffer instead of copying a possibly
+		 * large volume (both are malloc'ed, same size) */
 		free(v->data);
-		v->data = nim->data;
-		nim->data = NULL;
+		v->data = raw;
+		raw = NULL;
 	} else {
-		convert_data(v, nim->data, ndt, n, slope, inter);
+		convert_data(v, raw, ndt, n, slope, inter);
 	}
 
 	if (is_vec) {
@@ -525,6 +612,7 @@ int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize)
 	v = NULL;
 	rc = 0;
 out:
+	free(raw);
 	if (v)
 		msg_unref(&v->base);
 	nifti_image_free(nim);

@@ -39,6 +39,8 @@ struct rt_stage {
 	msg_t **outs;
 	pending_file_t *files;
 	int nfiles;
+	char **made_dirs;             /* folders out_path created */
+	int nmade;
 	double last_progress;         /* monotonic seconds */
 	double last_fraction;
 };
@@ -106,7 +108,19 @@ static int h_cancelled(armstg_stage_t *st)
 	return rt_interrupted != 0;
 }
 
-static int mkdirs(const char *dir)
+static void note_dir(rt_stage_t *s, const char *d)
+{
+	char **n = realloc(s->made_dirs, (size_t)(s->nmade + 1) * sizeof *n);
+	if (!n)
+		return;
+	s->made_dirs = n;
+	if ((n[s->nmade] = strdup(d)))
+		s->nmade++;
+}
+
+/* mkdir -p; the folders it creates are noted so a discarded run can remove
+ * them again when they stay empty */
+static int mkdirs(rt_stage_t *s, const char *dir)
 {
 	char buf[PATH_MAX];
 	if (snprintf(buf, sizeof buf, "%s", dir) >= (int)sizeof buf)
@@ -115,11 +129,15 @@ static int mkdirs(const char *dir)
 		if (*p != '/')
 			continue;
 		*p = 0;
-		if (mkdir(buf, 0777) && errno != EEXIST)
+		if (!mkdir(buf, 0777))
+			note_dir(s, buf);
+		else if (errno != EEXIST)
 			return -1;
 		*p = '/';
 	}
-	if (mkdir(buf, 0777) && errno != EEXIST)
+	if (!mkdir(buf, 0777))
+		note_dir(s, buf);
+	else if (errno != EEXIST)
 		return -1;
 	return 0;
 }
@@ -150,7 +168,7 @@ static int h_out_path(armstg_stage_t *st, const char *path, char *tmp,
 		dir[dl ? dl : 1] = 0;
 		if (!dl)
 			dir[0] = '/';
-		if (mkdirs(dir))
+		if (mkdirs(s, dir))
 			return h_fail(st, ARMSTG_EIO,
 				      "cannot create folder '%s': %s", dir,
 				      strerror(errno));
@@ -651,6 +669,9 @@ int stage_commit_files(rt_stage_t *s, char *err, size_t errsize)
 		}
 	}
 	s->nfiles = 0;
+	for (int i = 0; i < s->nmade; i++)
+		free(s->made_dirs[i]);
+	s->nmade = 0;
 	return rc;
 }
 
@@ -659,6 +680,11 @@ void stage_discard_files(rt_stage_t *s)
 	for (int i = 0; i < s->nfiles; i++)
 		unlink(s->files[i].tmp);
 	s->nfiles = 0;
+	for (int i = s->nmade - 1; i >= 0; i--) {
+		rmdir(s->made_dirs[i]); /* only succeeds when empty */
+		free(s->made_dirs[i]);
+	}
+	s->nmade = 0;
 }
 
 /* list of final paths still pending (for the scheduler's summary) */
@@ -688,6 +714,7 @@ void stage_free(rt_stage_t *s)
 		stage_fini(s);
 	stage_discard_files(s);
 	free(s->files);
+	free(s->made_dirs);
 	if (s->outs)
 		drop_outputs(s);
 	free(s->outs);

@@ -11,6 +11,13 @@
 #include "ls_kdtree.h"
 #include "ls_weno.h"
 
+static inline void vol_to_world_A(const double A[16], double i, double j,
+				  double k, double w[3])
+{
+	double p[3] = { i, j, k };
+	aff_apply(A, p, w);
+}
+
 /* ---------------------------------------------------------------- lists */
 
 static int pts_reserve(ls_pts_t *p, int64_t add)
@@ -186,6 +193,7 @@ typedef struct box {
 	double *d;           /* signed exact distance, + inside (mm) */
 	double *surf;        /* surface points (world), ns*3 */
 	int64_t *surf_vox;   /* inside box voxel of each surface point */
+	int8_t *surf_dir;    /* NB6 direction to the outside voxel */
 	int64_t ns;
 	kdtree_t kd;
 } box_t;
@@ -196,6 +204,7 @@ static void box_free(box_t *b)
 	free(b->d);
 	free(b->surf);
 	free(b->surf_vox);
+	free(b->surf_dir);
 	kd_free(&b->kd);
 	memset(b, 0, sizeof *b);
 }
@@ -243,6 +252,123 @@ static double surf_dist(const box_t *b, const double p[3], int64_t hint,
 	if (foot)
 		*foot = f;
 	return sqrt(best);
+}
+
+/*
+ * Constrained smoothing of the boundary points, after Gibson's constrained
+ * elastic surface nets (MERL TR 99-24, 1998) and Whitaker (2000): the face
+ * centres of a voxelised surface form a staircase, whose closest-point
+ * directions zig-zag.  Each point moves along its face normal only (so it
+ * stays on the segment between its tumour and non-tumour voxel centres:
+ * still on the mask boundary, within 0.45 voxel of the face) towards the
+ * mean of its neighbours within 1.5 voxel; LS_SMOOTH_ITERS Jacobi sweeps.
+ */
+#define LS_SMOOTH_ITERS 10
+static int smooth_surface(box_t *b)
+{
+	int64_t ns = b->ns;
+	if (ns < 2)
+		return 0;
+	int rc = -1;
+	int32_t *fid = malloc((size_t)b->nv * 6 * sizeof *fid);
+	int64_t *off = malloc((size_t)(ns + 1) * sizeof *off);
+	int32_t *nb = NULL;
+	double *orig = malloc((size_t)ns * 3 * sizeof *orig);
+	double *nxt = malloc((size_t)ns * 3 * sizeof *nxt);
+	if (!fid || !off || !orig || !nxt)
+		goto out;
+	for (int64_t e = 0; e < b->nv * 6; e++)
+		fid[e] = -1;
+	for (int64_t q = 0; q < ns; q++)
+		fid[b->surf_vox[q] * 6 + b->surf_dir[q]] = (int32_t)q;
+	memcpy(orig, b->surf, (size_t)ns * 3 * sizeof *orig);
+	double hmax = fmax(b->h[0], fmax(b->h[1], b->h[2]));
+	double r2 = 2.25 * hmax * hmax;
+	/* neighbour lists: faces of the 27 voxels around, within 1.5 h */
+	for (int pass = 0; pass < 2; pass++) {
+		int64_t cnt = 0;
+		for (int64_t q = 0; q < ns; q++) {
+			if (pass == 0)
+				off[q] = cnt;
+			int ijk[3];
+			box_ijk(b, b->surf_vox[q], ijk);
+			for (int dk = -1; dk <= 1; dk++)
+				for (int dj = -1; dj <= 1; dj++)
+					for (int di = -1; di <= 1; di++) {
+						int a = ijk[0] + di,
+						    c = ijk[1] + dj,
+						    e = ijk[2] + dk;
+						if (a < 0 || c < 0 || e < 0 ||
+						    a >= b->n[0] ||
+						    c >= b->n[1] ||
+						    e >= b->n[2])
+							continue;
+						int64_t u = bidx(b, a, c, e);
+						for (int f = 0; f < 6; f++) {
+							int32_t o = fid[u * 6 +
+									f];
+							if (o < 0)
+								continue;
+							double dx = orig[3 * o] -
+								    orig[3 * q],
+							       dy = orig[3 * o + 1] -
+								    orig[3 * q + 1],
+							       dz = orig[3 * o + 2] -
+								    orig[3 * q + 2];
+							if (dx * dx + dy * dy +
+								    dz * dz >
+							    r2)
+								continue;
+							if (pass == 1)
+								nb[cnt] = o;
+							cnt++;
+						}
+					}
+		}
+		if (pass == 0) {
+			off[ns] = cnt;
+			nb = malloc((size_t)(cnt ? cnt : 1) * sizeof *nb);
+			if (!nb)
+				goto out;
+		}
+	}
+	for (int it = 0; it < LS_SMOOTH_ITERS; it++) {
+		/* Taubin (SIGGRAPH 1995) lambda|mu steps: no shrinkage */
+		double lam = it % 2 == 0 ? 0.6307 : -0.6732;
+		for (int64_t q = 0; q < ns; q++) {
+			double m[3] = { 0, 0, 0 };
+			int64_t k = off[q + 1] - off[q];
+			for (int64_t j = off[q]; j < off[q + 1]; j++)
+				for (int c = 0; c < 3; c++)
+					m[c] += b->surf[3 * nb[j] + c];
+			int ax = NB6[b->surf_dir[q]][0] ? 0
+				 : NB6[b->surf_dir[q]][1] ? 1 : 2;
+			/* world unit vector of the face axis */
+			double e[3] = { b->A[ax], b->A[4 + ax], b->A[8 + ax] };
+			double el = b->h[ax];
+			double t = 0, t_now = 0;
+			for (int c = 0; c < 3; c++) {
+				t += (m[c] / (double)k - b->surf[3 * q + c]) *
+				     e[c] / el;
+				t_now += (b->surf[3 * q + c] - orig[3 * q + c]) *
+					 e[c] / el;
+			}
+			t = t_now + lam * t;
+			double lim = 0.45 * el;
+			t = fmax(-lim, fmin(lim, t));
+			for (int c = 0; c < 3; c++)
+				nxt[3 * q + c] = orig[3 * q + c] + t * e[c] / el;
+		}
+		memcpy(b->surf, nxt, (size_t)ns * 3 * sizeof *nxt);
+	}
+	rc = 0;
+out:
+	free(fid);
+	free(off);
+	free(nb);
+	free(orig);
+	free(nxt);
+	return rc;
 }
 
 static int box_setup(box_t *b, const ls_mask_t *mk, const int32_t *lab,
@@ -297,7 +423,8 @@ static int box_setup(box_t *b, const ls_mask_t *mk, const int32_t *lab,
 	b->ns = ns;
 	b->surf = malloc((size_t)(ns ? ns : 1) * 3 * sizeof(double));
 	b->surf_vox = malloc((size_t)(ns ? ns : 1) * sizeof(int64_t));
-	if (!b->surf || !b->surf_vox)
+	b->surf_dir = malloc((size_t)(ns ? ns : 1));
+	if (!b->surf || !b->surf_vox || !b->surf_dir)
 		return -1;
 	ns = 0;
 	for (int64_t v = 0; v < b->nv; v++) {
@@ -313,9 +440,12 @@ static int box_setup(box_t *b, const ls_mask_t *mk, const int32_t *lab,
 			box_world(b, ijk[0] + 0.5 * NB6[f][0],
 				  ijk[1] + 0.5 * NB6[f][1],
 				  ijk[2] + 0.5 * NB6[f][2], b->surf + 3 * ns);
+			b->surf_dir[ns] = (int8_t)f;
 			b->surf_vox[ns++] = v;
 		}
 	}
+	if (smooth_surface(b))
+		return -1;
 	if (kd_build(&b->kd, b->surf, ns))
 		return -1;
 	/* exact signed distance at every box voxel; raster order with the
@@ -628,16 +758,9 @@ static int emit_layer0(comp_ctx_t *cx)
 		double g[3], n[3], iw[3];
 		box_grad(b, b->d, ijk, g);
 		box_world(b, ijk[0], ijk[1], ijk[2], iw);
-		int jk[3] = { ijk[0], ijk[1], ijk[2] };
-		/* the outside voxel lies at 2 x - iw */
-		double q[3];
+		int jk[3];
 		for (int c = 0; c < 3; c++)
-			q[c] = 2 * x[c] - iw[c];
-		double inv[16], qi[3];
-		aff_invert(b->A, inv);
-		aff_apply(inv, q, qi);
-		for (int c = 0; c < 3; c++)
-			jk[c] = (int)lround(qi[c]) - b->lo[c];
+			jk[c] = ijk[c] + NB6[b->surf_dir[s]][c];
 		double g2[3];
 		box_grad(b, b->d, jk, g2);
 		for (int c = 0; c < 3; c++)
@@ -671,6 +794,7 @@ static int exact_layer(comp_ctx_t *cx, int k, double *f)
 		return -1;
 	}
 	int64_t base = o->n;
+	double hmin = fmin(b->h[0], fmin(b->h[1], b->h[2]));
 #pragma omp parallel for num_threads(cx->p->threads) schedule(static)
 	for (int64_t i = 0; i < nx; i++) {
 		int vi[3], wi[3];
@@ -686,14 +810,19 @@ static int exact_layer(comp_ctx_t *cx, int k, double *f)
 		double t = x[i].t;
 		int side = 0;
 		int64_t foot = -1;
-		for (int it = 0; it < 6; it++) {
+		double bestF = INFINITY, bestt = t;
+		for (int it = 0; it < 100; it++) {
 			for (int c = 0; c < 3; c++)
 				p[c] = pv[c] + t * (pw[c] - pv[c]);
 			double dd = surf_dist(b, p, foot, &foot);
 			if (!b->in[x[i].w] && t > 0.5)
 				dd = -dd;
 			double F = dd - L;
-			if (fabs(F) < 1e-6 * cx->spacing)
+			if (fabs(F) < bestF) {
+				bestF = fabs(F);
+				bestt = t;
+			}
+			if (fabs(F) < 1e-10 * cx->spacing || t1 - t0 < 1e-14)
 				break;
 			if (F >= 0) {
 				t0 = t;
@@ -709,19 +838,73 @@ static int exact_layer(comp_ctx_t *cx, int k, double *f)
 				side = -1;
 			}
 			t = t0 + (t1 - t0) * F0 / (F0 - F1);
+			/* safeguard: bisect when the secant stalls */
+			if (!(t > t0 && t < t1) || it % 4 == 3)
+				t = 0.5 * (t0 + t1);
 		}
+		t = bestt;
 		for (int c = 0; c < 3; c++)
 			p[c] = pv[c] + t * (pw[c] - pv[c]);
-		double dd = surf_dist(b, p, foot, &foot);
+		surf_dist(b, p, foot, &foot);
+		/*
+		 * Parent: the point's position on the previous front d = Lp.
+		 * The closest-point direction u_cp (towards the nearest
+		 * boundary point) is exact but zig-zags at voxel scale on a
+		 * voxelised boundary; -grad d by central differences over
+		 * +-delta averages it over a voxel but is wrong where the
+		 * stencil straddles the medial axis.  Take the differenced
+		 * direction when the two agree within 30 degrees, step one
+		 * spacing along it, and put the result exactly on the
+		 * previous front by its own closest-point move (d is the
+		 * exact distance, so the front d = Lp is reached).
+		 */
 		const double *s = b->surf + 3 * foot;
-		double u[3] = { s[0] - p[0], s[1] - p[1], s[2] - p[2] };
-		if (normalise(u))
-			u[0] = u[1] = u[2] = 0;
+		double ucp[3] = { s[0] - p[0], s[1] - p[1], s[2] - p[2] };
+		if (normalise(ucp))
+			ucp[0] = ucp[1] = ucp[2] = 0;
+		double delta = fmin(hmin, 0.5 * L);
+		double u[3];
+		for (int c = 0; c < 3; c++) {
+			double q[3] = { p[0], p[1], p[2] };
+			q[c] = p[c] + delta;
+			double dp = surf_dist(b, q, foot, NULL);
+			q[c] = p[c] - delta;
+			double dm = surf_dist(b, q, foot, NULL);
+			u[c] = -(dp - dm) / (2 * delta);
+		}
+		if (normalise(u) ||
+		    u[0] * ucp[0] + u[1] * ucp[1] + u[2] * ucp[2] < 0.866)
+			memcpy(u, ucp, sizeof u);
+		/* step one spacing along u, then onto the front d = Lp by
+		 * the closest-point move of that point; if this lands more
+		 * than 1.15 spacings from p (u left the closest-point
+		 * field's domain), take the exact closest point instead */
+		double step = L - Lp, xq[3];
+		for (int c = 0; c < 3; c++)
+			xq[c] = p[c] + step * u[c];
+		int64_t fx;
+		double dx = surf_dist(b, xq, foot, &fx);
+		if (dx > Lp) {
+			const double *sx = b->surf + 3 * fx;
+			double v[3] = { sx[0] - xq[0], sx[1] - xq[1],
+					sx[2] - xq[2] };
+			if (!normalise(v))
+				for (int c = 0; c < 3; c++)
+					xq[c] += (dx - Lp) * v[c];
+		}
+		double dd2 = 0;
+		for (int c = 0; c < 3; c++)
+			dd2 += (xq[c] - p[c]) * (xq[c] - p[c]);
+		if (dd2 > 1.15 * 1.15 * step * step) {
+			memcpy(u, ucp, sizeof u);
+			for (int c = 0; c < 3; c++)
+				xq[c] = p[c] + step * u[c];
+		}
 		int64_t oi = base + i;
-		double step = dd - Lp;
+
 		for (int c = 0; c < 3; c++) {
 			o->xyz[3 * oi + c] = p[c];
-			o->parent[3 * oi + c] = p[c] + step * u[c];
+			o->parent[3 * oi + c] = xq[c];
 			o->normal[3 * oi + c] = u[c];
 		}
 		o->label[oi] = cx->label;
@@ -785,8 +968,21 @@ static int weno_layer(void *ctxp, int k, const double *phi)
 	for (int64_t v = 0; v < b->nv && !any; v++)
 		if (b->in[v] && phi[v] >= 0)
 			any = 1;
-	if (!any || k >= cx->p->max_layers)
+	if (!any)
 		return 1;
+	if (k >= cx->p->max_layers) {
+		/* out of layers: whatever is left collapses here */
+		double *g = malloc((size_t)b->nv * sizeof *g);
+		if (!g)
+			return -2;
+		for (int64_t v = 0; v < b->nv; v++)
+			g[v] = b->in[v] ? phi[v] : -1;
+		int e = find_seeds(b, g, NULL, k * cx->spacing, k - 1,
+				   cx->label, cx->p->seed_spacing,
+				   &cx->r->seeds);
+		free(g);
+		return e ? -2 : 1;
+	}
 	/* restrict crossings to the tumour: outside voxels are negative */
 	double *f = malloc((size_t)b->nv * sizeof *f);
 	if (!f)
@@ -805,8 +1001,6 @@ static int weno_layer(void *ctxp, int k, const double *phi)
 		free(f);
 		return -2;
 	}
-	double inv[16];
-	aff_invert(b->A, inv);
 	for (int64_t i = 0; i < nx; i++) {
 		int vi[3], wi[3];
 		box_ijk(b, x[i].v, vi);

@@ -316,13 +316,10 @@ static int label_metrics(mctx_t *c)
 	}
 	for (int i = 0; i < want.n; i++) {
 		int found = 0;
-		for (int32_t L = want.lo[i]; !found; L++) {
-			if (L >= vmin && L <= vmax &&
-			    (cnt[3 * (L - vmin)] || cnt[3 * (L - vmin) + 1]))
-				found = 1;
-			if (L == want.hi[i])
-				break;
-		}
+		int64_t a = want.lo[i] > vmin ? want.lo[i] : vmin,
+			b = want.hi[i] < vmax ? want.hi[i] : vmax;
+		for (int64_t L = a; L <= b && !found; L++)
+			found = cnt[3 * (L - vmin)] || cnt[3 * (L - vmin) + 1];
 		if (!found) {
 			if (want.lo[i] == want.hi[i])
 				rc = c->h->fail(st, ARMSTG_EINVAL,
@@ -591,7 +588,7 @@ static int field_metrics(mctx_t *c)
 				goto out;
 			}
 			for (int64_t e = 0; e < n; e++)
-				if (!feat[e] && d2[e] <= b2 * (1 + 1e-9))
+				if (!feat[e] && d2[e] <= b2 * (1 + 1e-6))
 					selb[e] = 1;
 		}
 		if (selm)

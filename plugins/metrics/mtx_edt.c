@@ -84,7 +84,7 @@ int mtx_edt_sq(const uint8_t *feat, int nx, int ny, int nz, const double sp[3],
 		int64_t nlines = nvox / n;
 		if (n == 1)
 			continue; /* nothing moves along a 1-voxel axis */
-#pragma omp parallel num_threads(nthreads)
+#pragma omp parallel num_threads(nthreads) if (nvox > (1 << 17))
 		{
 			double *f = malloc(sizeof(double) * (size_t)nmax);
 			double *d = malloc(sizeof(double) * (size_t)nmax);

@@ -296,7 +296,8 @@ int mtx_field_on(const vol_t *src, const vol_t *ref, const char *what,
 		if (!isfinite(x)) {
 			int64_t v = e % ns;
 			ERR(ARMSTG_EINVAL,
-			    "%s: component %d at voxel (%d,%d,%d) is %g",
+			    "%s: component %d at voxel (%d,%d,%d) is not finite "
+			    "(%g)",
 			    what, (int)(e / ns), (int)(v % src->nx),
 			    (int)(v / src->nx % src->ny),
 			    (int)(v / ((int64_t)src->nx * src->ny)), x);

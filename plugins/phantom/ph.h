@@ -64,7 +64,7 @@ double ph_rng_normal(ph_rng_t *r);
 void ph_rng_dir(ph_rng_t *r, double d[3]);     /* uniform unit vector */
 
 /* ---- smooth random fields: sums of plane waves ---- */
-#define PH_MAXMODES 24
+#define PH_MAXMODES 32
 typedef struct ph_modes {
 	int n;
 	double k[PH_MAXMODES][3];    /* wave vectors, rad/mm */
@@ -143,9 +143,13 @@ typedef struct ph_blob {
 	int nlobe;
 	double dir[PH_MAXLOBES][3], w[PH_MAXLOBES];
 	double wnorm;
+	double reach;     /* beyond this distance from c: no core, no edema */
 	int grade;        /* 1: necrotic core + enhancing rim; 0: mostly
 			     non-enhancing with patchy enhancement */
 } ph_blob_t;
+
+/* set b->reach once the blob and the edema reach are known */
+void ph_blob_set_reach(ph_blob_t *b, double edema_mm);
 
 typedef struct ph_tumour {
 	int nblob;

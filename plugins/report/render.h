@@ -111,6 +111,15 @@ void rp_draw_text(rp_img_t *im, int x, int y, const char *s, int scale,
 int64_t rp_window(const vol_t *img, double lo_q, double hi_q, double *lo,
 		  double *hi);
 
+/*
+ * Stacked line charts of the numeric columns of t (plot.c): x = row number,
+ * or a numeric column named step/iter/iteration; log10 y for positive
+ * columns spanning more than two decades.  *npanels = 0 (and nothing
+ * allocated) when t has fewer than 2 rows or no plottable column; else im
+ * is allocated (caller frees).  0 or ENOMEM.
+ */
+int rp_plot_columns(const tab_t *t, rp_img_t *im, int *npanels);
+
 /* PNG (8-bit RGB) through libpng; description goes into a tEXt chunk.
  * 0 or negative code, message in err. */
 int rp_png_write(const char *path, const rp_img_t *im, const char *title,

@@ -77,6 +77,9 @@ typedef struct sts_thr {
 	double th_alpha;  /* brain: v != bg (constant bg) or v > th_alpha */
 	double mode;      /* main tissue mode of the brain histogram */
 	double sigma;     /* its width: narrower half width at half max/1.1774 */
+	double mode_hi;   /* brightest healthy-tissue mode (grey matter in
+	                     FLAIR when it forms its own mode), else mode */
+	double sigma_hi;  /* its right-side width (th_2 and th_omega use it) */
 	double th_1;      /* tissue vs CSF (CSF below for T1/T1c/FLAIR,
 	                     above for T2) */
 	double th_2;      /* hyperintense (tumour candidate) level */

@@ -9,6 +9,8 @@
 #include "sts_algo.h"
 
 #define SG_MAX_ORDER 8
+/* a histogram mode holding this fraction of the brain is healthy tissue */
+#define STS_TISSUE_FRAC 0.15
 
 /*
  * Least squares: fit p(u) = sum_j a_j u^j to samples at u_i = (i-half)/half
@@ -156,7 +158,9 @@ int sts_hist_build(const float *v, const uint8_t *mask, int64_t n,
 		edge0 = lo - 0.5 * quantum;
 		h->quantum = quantum;
 	}
-	int nb = (int)ceil((hi - edge0) / w + 1e-9);
+	int nb = (int)ceil((hi - edge0) / w - 1e-9);
+	if (nb < 1)
+		nb = 1;
 	if (nb < 2 * sg_half + 1)
 		nb = 2 * sg_half + 1;
 	h->nbins = nb;
@@ -174,6 +178,8 @@ int sts_hist_build(const float *v, const uint8_t *mask, int64_t n,
 		if (mask && !mask[i])
 			continue;
 		double b = (v[i] - edge0) / w;
+		if (b >= nb && v[i] <= hi)
+			b = nb - 1;   /* hi itself belongs to the last bin */
 		if (b < 0 || b >= nb)
 			continue;
 		h->count[(int)b] += 1;
@@ -200,6 +206,56 @@ static double half_cross(const sts_hist_t *h, int m, int dir, double level)
 		}
 	}
 	return NAN;
+}
+
+/*
+ * Is there a significant mode at bin b?  A slope sign change + -> - at b
+ * (the derivative filter's zero may sit a bin off the smoothed maximum, so
+ * the top is found by climbing hs from b), at least minh high, whose
+ * prominence (the drop to the lowest point before a higher maximum, or the
+ * histogram's end, on the shallower side) is at least 20% of its height:
+ * noise wiggles on a flank or in a valley are not modes.  Returns the top
+ * bin, or -1.
+ */
+static int mode_at(const sts_hist_t *h, int b, double minh)
+{
+	const double *hs = h->smooth, *d = h->slope;
+	int nb = h->nbins;
+	if (b < 1 || b >= nb || !(d[b - 1] > 0 && d[b] <= 0))
+		return -1;
+	int top = b;
+	while (top + 1 < nb && hs[top + 1] > hs[top])
+		top++;
+	while (top > 0 && hs[top - 1] > hs[top])
+		top--;
+	if (abs(top - b) > 3 || hs[top] < minh)
+		return -1;
+	/* the histogram is zero beyond its ends: reaching an end without a
+	 * higher point is a full drop on that side */
+	double lmin = hs[top], rmin = hs[top];
+	int c;
+	for (c = top - 1; c >= 0 && hs[c] <= hs[top]; c--)
+		lmin = hs[c] < lmin ? hs[c] : lmin;
+	if (c < 0)
+		lmin = 0;
+	for (c = top + 1; c < nb && hs[c] <= hs[top]; c++)
+		rmin = hs[c] < rmin ? hs[c] : rmin;
+	if (c >= nb)
+		rmin = 0;
+	double base = lmin > rmin ? lmin : rmin;
+	return hs[top] - base >= 0.2 * hs[top] ? top : -1;
+}
+
+/* first significant mode with its top above bin `after` (searching sign
+ * changes from after+1), or -1 */
+static int next_mode(const sts_hist_t *h, int after, double minh)
+{
+	for (int b = after + 1; b < h->nbins; b++) {
+		int t = mode_at(h, b, minh);
+		if (t > after)
+			return t;
+	}
+	return -1;
 }
 
 int sts_hist_thresholds(const sts_hist_t *h, const sts_params_t *p,
@@ -237,9 +293,9 @@ int sts_hist_thresholds(const sts_hist_t *h, const sts_params_t *p,
 	 * the main mode (smaller wiggles are noise of the tail) */
 	double minh = 0.02 * peak;
 	int nmodes = 0;
-	for (int b = 1; b < nb; b++)
-		if (d[b - 1] > 0 && d[b] <= 0 && hs[b] >= minh)
-			nmodes++;
+	for (int b = next_mode(h, -1, minh); b >= 0;
+	     b = next_mode(h, b, minh))
+		nmodes++;
 	t->n_modes = nmodes ? nmodes : 1;
 
 	/* th_1: the valley between a CSF mode and the tissue mode when the
@@ -252,9 +308,10 @@ int sts_hist_thresholds(const sts_hist_t *h, const sts_params_t *p,
 		int best_mode = -1;
 		for (int b = m + dir; b >= 1 && b < nb; b += dir) {
 			/* local max of hs on the CSF side */
-			int lm = d[b - 1] > 0 && d[b] <= 0 && hs[b] >= minh;
-			if (lm && (best_mode < 0 || hs[b] > hs[best_mode]))
-				best_mode = b;
+			int tb = mode_at(h, b, minh);
+			if (tb >= 0 && tb != m &&
+			    (best_mode < 0 || hs[tb] > hs[best_mode]))
+				best_mode = tb;
 		}
 		if (best_mode >= 0) {
 			int lo_b = best_mode < m ? best_mode : m;
@@ -276,17 +333,70 @@ int sts_hist_thresholds(const sts_hist_t *h, const sts_params_t *p,
 	}
 	t->th_1 = th1;
 
+	/* Healthy tissue may show several modes (white matter, then grey
+	 * matter brighter in FLAIR and T2).  Walking up from the main mode,
+	 * every next mode whose basin (valley to valley) holds at least
+	 * STS_TISSUE_FRAC of the brain is still healthy tissue: a tumour
+	 * rarely fills that much of the brain, grey matter always does.  th_2
+	 * is measured from the brightest tissue mode and its own right-side
+	 * width.  (Not for T2, where the next big bright mode is CSF.) */
+	double mref = mode, sref = sigma;
+	int mr = m;
+	if (!bright_csf) {
+		double total = 0;
+		for (int b = 0; b < nb; b++)
+			total += h->count[b];
+		for (;;) {
+			/* next mode right of mr, and the valley between */
+			int nm = next_mode(h, mr, minh);
+			if (nm < 0)
+				break;
+			int nn = next_mode(h, nm, minh);
+			if (nn < 0)
+				nn = nb;
+			int v0 = mr, v1 = nb - 1;
+			for (int b = mr; b <= nm; b++)
+				if (hs[b] < hs[v0])
+					v0 = b;
+			if (nn < nb) {
+				v1 = nm;
+				for (int b = nm; b <= nn; b++)
+					if (hs[b] < hs[v1])
+						v1 = b;
+			}
+			double area = 0;
+			for (int b = v0; b <= v1; b++)
+				area += h->count[b];
+			/* a real mode: its valley is clearly below its peak
+			 * (not a wiggle on the main mode's flank) */
+			if (area < STS_TISSUE_FRAC * total ||
+			    hs[v0] > 0.8 * hs[nm])
+				break;
+			mr = nm;
+		}
+		if (mr != m) {
+			double xr2 = half_cross(h, mr, +1, 0.5 * hs[mr]);
+			mref = sts_hist_x(h, mr);
+			if (isfinite(xr2) && xr2 > mref)
+				sref = (xr2 - mref) / sqrt(2 * log(2.0));
+			if (sref < h->width)
+				sref = h->width;
+		}
+	}
+	t->mode_hi = mref;
+	t->sigma_hi = sref;
+
 	/* th_2: beyond the tissue distribution, mode + k_hyper sigma; lowered
 	 * to the valley in front of a hyperintense mode when the histogram
 	 * shows one there (slope sign change - -> + followed by a mode). */
-	double th2 = mode + p->k_hyper * sigma;
+	double th2 = mref + p->k_hyper * sref;
 	t->th2_from_valley = 0;
 	if (!bright_csf) {
-		for (int b = m + 1; b < nb - 1; b++) {
+		for (int b = mr + 1; b < nb - 1; b++) {
 			double x = sts_hist_x(h, b);
 			if (x >= th2)
 				break;
-			if (x < mode + 2 * sigma)
+			if (x < mref + 2 * sref)
 				continue;
 			if (d[b - 1] < 0 && d[b] >= 0) {
 				int has_mode = 0;
@@ -305,7 +415,7 @@ int sts_hist_thresholds(const sts_hist_t *h, const sts_params_t *p,
 		}
 	}
 	t->th_2 = th2;
-	t->th_omega = mode + p->k_marker * sigma;
+	t->th_omega = mref + p->k_marker * sref;
 	if (t->th_omega < th2)
 		t->th_omega = th2;
 	return 0;

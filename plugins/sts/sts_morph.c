@@ -283,7 +283,7 @@ int sts_reconstruct(const sts_grid_t *g, const uint8_t *marker,
 int sts_fill_holes(const sts_grid_t *g, const uint8_t *m, uint8_t *out)
 {
 	int64_t n = gnvox(g), nq = 0;
-	uint8_t *bg = malloc((size_t)n), *outside = calloc((size_t)n, 1);
+	uint8_t *bg = calloc((size_t)n, 1), *outside = calloc((size_t)n, 1);
 	int64_t *queue = malloc(sizeof(int64_t) * n);
 	if (!bg || !outside || !queue) {
 		free(bg);

@@ -125,6 +125,7 @@ typedef struct tled_model {
 	int32_t *ipmat;     /* nip tled_mat_id */
 	int64_t *ipptr;     /* nip+1: CSR into the support arrays */
 	int64_t *ipnode;    /* support node ids */
+	int64_t *entip;     /* ip of each support entry */
 	double *N;          /* shape function values N_a(x_ip) */
 	double *dN;         /* 3 per entry: corrected dN_a/dX at x_ip, 1/m */
 	double ip_h;        /* background cell size, m */

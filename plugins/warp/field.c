@@ -293,28 +293,31 @@ int field_vol_all_zero(const vol_t *v)
 /* ------------------------------------------------------------------ */
 
 /* Axis set-up for "inside" sampling: 0 when c is outside [-0.5, n-0.5]. */
-static inline int ax_in(double c, int n, int *a, int *b, float *t)
+#define FIELD_INLINE static inline __attribute__((always_inline))
+
+FIELD_INLINE int ax_in(double c, int n, int *a, int *b, float *t)
 {
 	if (!(c >= -0.5 && c <= n - 0.5))
 		return 0;
-	double fl = floor(c);
-	int i = (int)fl;
-	if (i < 0) {
+	if (c < 0) {
 		*a = *b = 0;
 		*t = 0;
-	} else if (i >= n - 1) {
+		return 1;
+	}
+	int i = (int)c; /* c >= 0: truncation is floor, no libm call */
+	if (i >= n - 1) {
 		*a = *b = n - 1;
 		*t = 0;
 	} else {
 		*a = i;
 		*b = i + 1;
-		*t = (float)(c - fl);
+		*t = (float)(c - i);
 	}
 	return 1;
 }
 
 /* Clamped axis set-up: always succeeds. */
-static inline void ax_clamp(double c, int n, int *a, int *b, float *t)
+FIELD_INLINE void ax_clamp(double c, int n, int *a, int *b, float *t)
 {
 	if (!(c > 0)) { /* also NaN */
 		*a = *b = 0;
@@ -326,10 +329,10 @@ static inline void ax_clamp(double c, int n, int *a, int *b, float *t)
 		*t = 0;
 		return;
 	}
-	double fl = floor(c);
-	*a = (int)fl;
-	*b = *a + 1;
-	*t = (float)(c - fl);
+	int i = (int)c; /* c > 0: truncation is floor */
+	*a = i;
+	*b = i + 1;
+	*t = (float)(c - i);
 }
 
 typedef struct stencil {
@@ -337,7 +340,7 @@ typedef struct stencil {
 	float w[8];
 } stencil_t;
 
-static inline void stencil_make(const fgrid_t *g, int i0, int i1, float ti,
+FIELD_INLINE void stencil_make(const fgrid_t *g, int i0, int i1, float ti,
 				int j0, int j1, float tj, int k0, int k1,
 				float tk, stencil_t *s)
 {
@@ -363,7 +366,7 @@ static inline void stencil_make(const fgrid_t *g, int i0, int i1, float ti,
 	s->w[7] = ti * tj * tk;
 }
 
-static inline float stencil_eval(const float *d, const stencil_t *s)
+FIELD_INLINE float stencil_eval(const float *d, const stencil_t *s)
 {
 	return s->w[0] * d[s->o[0]] + s->w[1] * d[s->o[1]] +
 	       s->w[2] * d[s->o[2]] + s->w[3] * d[s->o[3]] +
@@ -371,7 +374,7 @@ static inline float stencil_eval(const float *d, const stencil_t *s)
 	       s->w[6] * d[s->o[6]] + s->w[7] * d[s->o[7]];
 }
 
-static inline void stencil_clamp(const fgrid_t *g, const double c[3],
+FIELD_INLINE void stencil_clamp(const fgrid_t *g, const double c[3],
 				 stencil_t *s)
 {
 	int i0, i1, j0, j1, k0, k1;
@@ -383,7 +386,7 @@ static inline void stencil_clamp(const fgrid_t *g, const double c[3],
 }
 
 /* 0 when outside */
-static inline int stencil_in(const fgrid_t *g, const double c[3],
+FIELD_INLINE int stencil_in(const fgrid_t *g, const double c[3],
 			     stencil_t *s)
 {
 	int i0, i1, j0, j1, k0, k1;
@@ -492,8 +495,10 @@ int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
 							dst->d[e + q * nvd] = outside;
 						continue;
 					}
-					int a = (int)lround(c[0]), b = (int)lround(c[1]),
-					    cc = (int)lround(c[2]);
+					/* c >= -0.5: truncation of c + 0.5 is
+					 * rounding */
+					int a = (int)(c[0] + 0.5), b = (int)(c[1] + 0.5),
+					    cc = (int)(c[2] + 0.5);
 					a = a < 0 ? 0 : a >= sg->nx ? sg->nx - 1 : a;
 					b = b < 0 ? 0 : b >= sg->ny ? sg->ny - 1 : b;
 					cc = cc < 0 ? 0 : cc >= sg->nz ? sg->nz - 1 : cc;

@@ -1,0 +1,733 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * demons: non-parametric deformable registration of a moving volume onto a
+ * fixed one (mono-modal, sum of squared differences).
+ *
+ *   Thirion, "Image matching as a diffusion process: an analogy with
+ *     Maxwell's demons", Med Image Anal 2(3) 1998 (forces, Gaussian
+ *     regularisation);
+ *   Vercauteren, Pennec, Perchant, Ayache, "Non-parametric diffeomorphic
+ *     image registration with the demons algorithm", MICCAI 2007, and
+ *     "Diffeomorphic demons: efficient non-parametric image registration",
+ *     NeuroImage 45(1) 2009 (symmetric/ESM forces, update bound sigma_x,
+ *     diffeomorphic update s <- s o exp(u), fluid and diffusion smoothing).
+ *
+ * The field s lives on the fixed grid, RAS world mm, ITK convention:
+ * warped(x) = moving(x + s(x)).  Fixed and moving may have any grids and
+ * orientations: the moving image is only ever sampled at world points.
+ *
+ * One iteration at a pyramid level (images smoothed by 0.5 f voxels and
+ * the fixed one shrunk by f = 2^(levels-1-level)):
+ *   W(x)  = M(x + s(x))                                   (trilinear)
+ *   J(x)  = (grad F + grad W) / 2  (symmetric) or grad F  (thirion)
+ *   u(x)  = (F - W) J / (|J|^2 + (F - W)^2 / sigma_x^2)    (|u| <= sigma_x/2)
+ *           sigma_x = 2 * max_step * rms spacing (ITK's normaliser), u = 0
+ *           outside the masks, where x + s(x) leaves the moving image and
+ *           where |F - W| < diff_threshold;
+ *   u     <- G_{sigma_fluid} * u                            (fluid-like)
+ *   s     <- s o exp(u)   (diffeomorphic: s(x) = v(x) + s(x + v(x)))
+ *   or s  <- s + u        (additive, Thirion)
+ *   s     <- G_{sigma_field} * s                            (diffusion-like)
+ * A level stops after its iterations or when the MSE improved by less than
+ * tol (relative) over the last 5 iterations.
+ */
+#include <math.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "armstg/plugin.h"
+#include "armstg/volmath.h"
+#include "field.h"
+
+#define MAX_LEVELS 8
+
+enum { FORCE_SYMMETRIC, FORCE_THIRION };
+enum { UPD_DIFFEO, UPD_ADDITIVE };
+enum { IN_FIXED, IN_MOVING, IN_FMASK, IN_MMASK, IN_INIT };
+enum { OUT_FIELD, OUT_WARPED, OUT_TABLE };
+
+typedef struct demons_priv {
+	int force;
+	int update;
+	double sigma_field;  /* mm */
+	double sigma_fluid;  /* mm */
+	int levels;
+	const char *iterations;
+	double max_step;     /* voxels */
+	double tol;
+	double diff_threshold;
+	int normalize;
+	/* parsed in init */
+	int niter[MAX_LEVELS];
+	int nlist;
+} demons_priv_t;
+
+static const armstg_port_t demons_inputs[] = {
+	{ "fixed", MSG_VOLUME, 0, "fixed volume (the field lives on its grid)" },
+	{ "moving", MSG_VOLUME, 0, "moving volume (any grid and orientation)" },
+	{ "fixed_mask", MSG_VOLUME, 1, "forces only where > 0 (fixed space)" },
+	{ "moving_mask", MSG_VOLUME, 1,
+	  "forces only where the warped moving mask is > 0" },
+	{ "initial_field", MSG_VOLUME, 1,
+	  "starting displacement field (RAS mm, any grid)" },
+};
+
+static const armstg_port_t demons_outputs[] = {
+	{ "field", MSG_VOLUME, 0,
+	  "displacement on the fixed grid, RAS mm, ITK convention: "
+	  "warped(x) = moving(x + field(x))" },
+	{ "warped", MSG_VOLUME, 1, "moving volume resampled on the fixed grid" },
+	{ "table", MSG_TABLE, 1,
+	  "convergence: level, iteration, mse, mean/max update (mm), time (s); "
+	  "last row: Jacobian statistics" },
+};
+
+#define OFF(f) offsetof(demons_priv_t, f)
+static const armstg_param_t demons_params[] = {
+	{ "force", PT_ENUM, "symmetric", 0, 0, "",
+	  "demons force: symmetric (ESM, mean of fixed and warped gradients) "
+	  "or thirion (fixed gradient)", "symmetric|thirion", OFF(force), 0 },
+	{ "update", PT_ENUM, "diffeomorphic", 0, 0, "",
+	  "diffeomorphic: s <- s o exp(u) (Vercauteren 2007); additive: "
+	  "s <- s + u (Thirion)", "diffeomorphic|additive", OFF(update), 0 },
+	{ "sigma_field", PT_DOUBLE, "1.5", 0, 50, "mm",
+	  "Gaussian smoothing of the field after each update (diffusion-like "
+	  "regularisation; 0 = off)", NULL, OFF(sigma_field), 0 },
+	{ "sigma_fluid", PT_DOUBLE, "0", 0, 50, "mm",
+	  "Gaussian smoothing of each update (fluid-like regularisation; "
+	  "0 = off)", NULL, OFF(sigma_fluid), 0 },
+	{ "levels", PT_INT, "3", 1, MAX_LEVELS, "",
+	  "multi-resolution levels (each coarser level halves the fixed grid)",
+	  NULL, OFF(levels), 0 },
+	{ "iterations", PT_STRING, "30,20,10", 0, 0, "iterations",
+	  "iterations per level, coarse to fine, comma separated (one value "
+	  "applies to every level)", NULL, OFF(iterations), 0 },
+	{ "max_step", PT_DOUBLE, "1", 0.01, 10, "voxels",
+	  "bound on the length of one update (sigma_x / 2)", NULL,
+	  OFF(max_step), 0 },
+	{ "tol", PT_DOUBLE, "1e-4", 0, 1, "",
+	  "stop a level when the MSE improved by less than this fraction over "
+	  "5 iterations (0: always run every iteration)", NULL, OFF(tol), 0 },
+	{ "diff_threshold", PT_DOUBLE, "0.001", 0, 1e30, "intensity",
+	  "no force where |fixed - warped| is below this (after "
+	  "normalisation)", NULL, OFF(diff_threshold), 0 },
+	{ "normalize", PT_BOOL, "true", 0, 1, "",
+	  "map each volume's intensity range to [0, 1] first", NULL,
+	  OFF(normalize), 0 },
+};
+
+#define FAIL(code, ...) st->host->fail(st, code, __VA_ARGS__)
+
+static int demons_init(armstg_stage_t *st)
+{
+	demons_priv_t *p = st->priv;
+	const char *s = p->iterations ? p->iterations : "30,20,10";
+	p->nlist = 0;
+	while (*s) {
+		char *end;
+		while (*s == ' ' || *s == '\t')
+			s++;
+		long v = strtol(s, &end, 10);
+		if (end == s || v < 0 || v > 100000)
+			return FAIL(ARMSTG_EINVAL,
+				    "parameter 'iterations': '%s' is not a comma "
+				    "separated list of counts (e.g. 30,20,10)",
+				    p->iterations);
+		if (p->nlist == MAX_LEVELS)
+			return FAIL(ARMSTG_EINVAL,
+				    "parameter 'iterations': more than %d values",
+				    MAX_LEVELS);
+		p->niter[p->nlist++] = (int)v;
+		s = end;
+		while (*s == ' ' || *s == '\t')
+			s++;
+		if (*s == ',')
+			s++;
+		else if (*s)
+			return FAIL(ARMSTG_EINVAL,
+				    "parameter 'iterations': unexpected '%c' in "
+				    "'%s'", *s, p->iterations);
+	}
+	if (p->nlist == 0)
+		return FAIL(ARMSTG_EINVAL, "parameter 'iterations' is empty");
+	if (p->nlist != 1 && p->nlist != p->levels)
+		return FAIL(ARMSTG_EINVAL,
+			    "parameter 'iterations' has %d values but levels = "
+			    "%d (give one per level, coarse to fine, or one for "
+			    "all)", p->nlist, p->levels);
+	return 0;
+}
+
+static double now_s(void)
+{
+	struct timespec t;
+	clock_gettime(CLOCK_MONOTONIC, &t);
+	return t.tv_sec + 1e-9 * t.tv_nsec;
+}
+
+/* min/max of an image; 0 when constant */
+static void minmax(const fimg_t *f, float *lo, float *hi)
+{
+	int64_t n = fgrid_nvox(&f->g);
+	float a = f->d[0], b = f->d[0];
+	for (int64_t e = 1; e < n; e++) {
+		if (f->d[e] < a)
+			a = f->d[e];
+		if (f->d[e] > b)
+			b = f->d[e];
+	}
+	*lo = a;
+	*hi = b;
+}
+
+static void rescale(fimg_t *f, float lo, float hi)
+{
+	int64_t n = fgrid_nvox(&f->g);
+	float s = 1.0f / (hi - lo);
+	for (int64_t e = 0; e < n; e++)
+		f->d[e] = (f->d[e] - lo) * s;
+}
+
+static int64_t count_pos(const fimg_t *f)
+{
+	int64_t n = fgrid_nvox(&f->g), c = 0;
+	for (int64_t e = 0; e < n; e++)
+		c += f->d[e] > 0;
+	return c;
+}
+
+/* resample a (field or image) src onto grid g, edge-clamped */
+static int resample_clamp(const fimg_t *src, const fgrid_t *g, fimg_t *out,
+			  int nt)
+{
+	int rc = fimg_alloc(out, g, src->nc);
+	if (rc)
+		return rc;
+	const int64_t nv = fgrid_nvox(g);
+#pragma omp parallel for num_threads(nt > 0 ? nt : 1) schedule(static)
+	for (int64_t e = 0; e < nv; e++) {
+		double p[3] = { (double)(e % g->nx), (double)(e / g->nx % g->ny),
+				(double)(e / ((int64_t)g->nx * g->ny)) },
+		       w[3];
+		aff_apply(g->v2w, p, w);
+		for (int c = 0; c < src->nc; c++)
+			out->d[e + c * nv] = fimg_sample_clamp(src, c, w);
+	}
+	return 0;
+}
+
+/* Everything one level needs. */
+typedef struct level {
+	fgrid_t g;
+	fimg_t F;   /* fixed, smoothed and shrunk */
+	fimg_t M;   /* moving, smoothed, on the moving grid */
+	fimg_t FM;  /* fixed mask on g (0/1), or empty */
+	fimg_t W;   /* warped moving (NaN outside) */
+	fimg_t WM;  /* warped moving mask, or empty */
+} level_t;
+
+static void level_free(level_t *L)
+{
+	fimg_free(&L->F);
+	fimg_free(&L->M);
+	fimg_free(&L->FM);
+	fimg_free(&L->W);
+	fimg_free(&L->WM);
+}
+
+/*
+ * Demons force into U (nc 3) for the current W; returns the number of
+ * voxels used and the sum of squared differences.
+ */
+static void compute_force(const demons_priv_t *p, const level_t *L,
+			  fimg_t *U, double sx2, double *ssd, int64_t *nused,
+			  int nt)
+{
+	const fgrid_t *g = &L->g;
+	const int nx = g->nx, ny = g->ny, nz = g->nz;
+	const int64_t nv = fgrid_nvox(g);
+	const int64_t st[3] = { 1, nx, (int64_t)nx * ny };
+	const int dims[3] = { nx, ny, nz };
+	double Li[3][3];
+	for (int a = 0; a < 3; a++)
+		for (int w = 0; w < 3; w++)
+			Li[a][w] = g->w2v[a * 4 + w];
+	const float *F = L->F.d, *W = L->W.d;
+	const float *FM = L->FM.d, *WM = L->WM.d;
+	const int sym = p->force == FORCE_SYMMETRIC;
+	const double thr = p->diff_threshold;
+	double s2 = 0;
+	int64_t nu = 0;
+#pragma omp parallel for num_threads(nt) schedule(static) \
+	reduction(+ : s2, nu)
+	for (int k = 0; k < nz; k++)
+		for (int j = 0; j < ny; j++)
+			for (int i = 0; i < nx; i++) {
+				int64_t e = ((int64_t)k * ny + j) * nx + i;
+				U->d[e] = U->d[e + nv] = U->d[e + 2 * nv] = 0;
+				float w = W[e];
+				if (isnan(w) || (FM && FM[e] <= 0) ||
+				    (WM && !(WM[e] > 0.5f)))
+					continue;
+				double diff = (double)F[e] - w;
+				s2 += diff * diff;
+				nu++;
+				if (fabs(diff) < thr)
+					continue;
+				const int idx[3] = { i, j, k };
+				double gf[3], gw[3];
+				for (int a = 0; a < 3; a++) {
+					int lo = idx[a] > 0, hi = idx[a] < dims[a] - 1;
+					int64_t el = lo ? e - st[a] : e,
+						eh = hi ? e + st[a] : e;
+					double h = lo + hi;
+					gf[a] = h > 0 ? (F[eh] - F[el]) / h : 0;
+					if (sym) {
+						/* one-sided where a neighbour is
+						 * outside the moving image */
+						float wl = W[el], wh = W[eh];
+						if (isnan(wl)) {
+							wl = w;
+							h -= lo;
+						}
+						if (isnan(wh)) {
+							wh = w;
+							h -= hi;
+						}
+						gw[a] = h > 0 ? (wh - wl) / h : 0;
+					}
+				}
+				double J[3];
+				for (int c = 0; c < 3; c++) {
+					double sf = 0, sw = 0;
+					for (int a = 0; a < 3; a++) {
+						sf += gf[a] * Li[a][c];
+						if (sym)
+							sw += gw[a] * Li[a][c];
+					}
+					J[c] = sym ? 0.5 * (sf + sw) : sf;
+				}
+				double den = J[0] * J[0] + J[1] * J[1] + J[2] * J[2] +
+					     diff * diff / sx2;
+				if (den < 1e-12)
+					continue;
+				double f = diff / den;
+				U->d[e] = (float)(f * J[0]);
+				U->d[e + nv] = (float)(f * J[1]);
+				U->d[e + 2 * nv] = (float)(f * J[2]);
+			}
+	*ssd = s2;
+	*nused = nu;
+}
+
+static void update_stats(const fimg_t *U, double *mean, double *max)
+{
+	const int64_t nv = fgrid_nvox(&U->g);
+	double s = 0, m = 0;
+	int64_t n = 0;
+	for (int64_t e = 0; e < nv; e++) {
+		double a = U->d[e], b = U->d[e + nv], c = U->d[e + 2 * nv];
+		double r = sqrt(a * a + b * b + c * c);
+		if (r > 0) {
+			s += r;
+			n++;
+		}
+		if (r > m)
+			m = r;
+	}
+	*mean = n ? s / (double)n : 0;
+	*max = m;
+}
+
+/* scaling and squaring into B using A as scratch (A is destroyed);
+ * on return *res points at the buffer holding exp(u) (A or B). */
+static void exp_inplace(fimg_t *A, fimg_t *B, fimg_t **res, int nt)
+{
+	double mvox;
+	fimg_field_maxnorm(A, NULL, &mvox);
+	int n = 0;
+	while (mvox / ldexp(1.0, n) > 0.5 && n < 30)
+		n++;
+	if (n == 0) {
+		*res = A;
+		return;
+	}
+	const int64_t ne = fgrid_nvox(&A->g) * 3;
+	const float s = (float)ldexp(1.0, -n);
+	for (int64_t e = 0; e < ne; e++)
+		A->d[e] *= s;
+	fimg_t *a = A, *b = B;
+	for (int i = 0; i < n; i++) {
+		fimg_compose(a, a, b, nt);
+		fimg_t *t = a;
+		a = b;
+		b = t;
+	}
+	*res = a;
+}
+
+static int add_row(armstg_stage_t *st, tab_t *t, int level, int it,
+		   double mse, double mean_u, double max_u, double secs)
+{
+	const armstg_host_t *h = st->host;
+	if (!t)
+		return 0;
+	int64_t r = h->tab_add_row(t);
+	if (r < 0)
+		return ARMSTG_ENOMEM;
+	h->tab_set_num(t, r, "level", level);
+	h->tab_set_num(t, r, "iteration", it);
+	h->tab_set_num(t, r, "mse", mse);
+	h->tab_set_num(t, r, "mean_update_mm", mean_u);
+	h->tab_set_num(t, r, "max_update_mm", max_u);
+	h->tab_set_num(t, r, "seconds", secs);
+	return 0;
+}
+
+static int check_mask(armstg_stage_t *st, const vol_t *m, const char *what,
+		      const fgrid_t *target, fimg_t *out, int nt)
+{
+	char err[512];
+	if (field_check_vol(m, what, 1, 2, err, sizeof err))
+		return FAIL(ARMSTG_EINVAL, "%s", err);
+	fimg_t raw;
+	int rc = fimg_from_vol(&raw, m);
+	if (rc)
+		return FAIL(rc, "%s: cannot read (%s)", what,
+			    st->host->strerror(rc));
+	if (!count_pos(&raw)) {
+		fimg_free(&raw);
+		return FAIL(ARMSTG_EINVAL,
+			    "%s is empty (no voxel > 0): nothing to register",
+			    what);
+	}
+	if (!target || fgrid_same(&raw.g, target, 1e-4)) {
+		*out = raw;
+	} else {
+		rc = fimg_alloc(out, target, 1);
+		if (!rc)
+			rc = fimg_resample(&raw, NULL, FIELD_NEAREST, 0, out, nt);
+		fimg_free(&raw);
+		if (rc)
+			return FAIL(rc, "%s: resampling failed", what);
+		if (!count_pos(out)) {
+			fimg_free(out);
+			return FAIL(ARMSTG_EINVAL,
+				    "%s does not overlap the fixed volume in "
+				    "world space (check its affine)", what);
+		}
+	}
+	for (int64_t e = 0; e < fgrid_nvox(&out->g); e++)
+		out->d[e] = out->d[e] > 0 ? 1.0f : 0.0f;
+	return 0;
+}
+
+static int demons_process(armstg_stage_t *st)
+{
+	demons_priv_t *p = st->priv;
+	const armstg_host_t *h = st->host;
+	const vol_t *vf = (const vol_t *)st->in[IN_FIXED];
+	const vol_t *vm = (const vol_t *)st->in[IN_MOVING];
+	const vol_t *vfm = (const vol_t *)st->in[IN_FMASK];
+	const vol_t *vmm = (const vol_t *)st->in[IN_MMASK];
+	const vol_t *vinit = (const vol_t *)st->in[IN_INIT];
+	int nt = h->threads ? h->threads(st) : 1;
+	if (nt < 1)
+		nt = 1;
+	char err[512];
+	int rc = 0;
+	const double t0 = now_s();
+
+	if (field_check_vol(vf, "fixed volume", 1, 2, err, sizeof err) ||
+	    field_check_vol(vm, "moving volume", 1, 2, err, sizeof err))
+		return FAIL(ARMSTG_EINVAL, "%s", err);
+	if (vinit && field_check_vol(vinit, "initial_field", 3, 2, err,
+				     sizeof err))
+		return FAIL(ARMSTG_EINVAL, "%s", err);
+
+	fimg_t F0 = { 0 }, M0 = { 0 }, FM0 = { 0 }, MM0 = { 0 }, init = { 0 };
+	fimg_t S = { 0 }, A = { 0 }, B = { 0 };
+	level_t L = { 0 };
+	tab_t *tab = NULL;
+	vol_t *ofield = NULL, *owarp = NULL;
+
+	if ((rc = fimg_from_vol(&F0, vf)) || (rc = fimg_from_vol(&M0, vm))) {
+		rc = FAIL(rc, "out of memory reading the inputs");
+		goto out;
+	}
+	if (fgrid_overlap(&F0.g, &M0.g) <= 0) {
+		rc = FAIL(ARMSTG_EINVAL,
+			  "fixed (%dx%dx%d) and moving (%dx%dx%d) volumes do "
+			  "not overlap in world space: check their affines",
+			  vf->nx, vf->ny, vf->nz, vm->nx, vm->ny, vm->nz);
+		goto out;
+	}
+	float flo, fhi, mlo, mhi;
+	minmax(&F0, &flo, &fhi);
+	minmax(&M0, &mlo, &mhi);
+	if (!(fhi > flo) || !(mhi > mlo)) {
+		int fx = !(fhi > flo);
+		float v = fx ? flo : mlo;
+		rc = FAIL(ARMSTG_EINVAL,
+			  "%s volume is %s (every voxel = %g): no image "
+			  "structure to register", fx ? "fixed" : "moving",
+			  v == 0 ? "all zero" : "constant", (double)v);
+		goto out;
+	}
+	if (p->normalize) {
+		rescale(&F0, flo, fhi);
+		rescale(&M0, mlo, mhi);
+	}
+	if (vfm && (rc = check_mask(st, vfm, "fixed_mask", &F0.g, &FM0, nt)))
+		goto out;
+	if (vmm && (rc = check_mask(st, vmm, "moving_mask", NULL, &MM0, nt)))
+		goto out;
+	if (vinit && (rc = fimg_from_vol(&init, vinit))) {
+		rc = FAIL(rc, "out of memory (initial_field)");
+		goto out;
+	}
+
+	/* levels: the coarsest keeps at least 4 voxels along every axis */
+	int nlev = p->levels;
+	while (nlev > 1) {
+		int f = 1 << (nlev - 1);
+		if (vf->nx / f >= 4 && vf->ny / f >= 4 && vf->nz / f >= 4)
+			break;
+		nlev--;
+	}
+	if (nlev < p->levels)
+		h->log(st, LOG_WARN,
+		       "fixed volume %dx%dx%d is too small for %d levels: using "
+		       "%d", vf->nx, vf->ny, vf->nz, p->levels, nlev);
+	int iters[MAX_LEVELS], total = 0;
+	for (int l = 0; l < nlev; l++) {
+		/* the list is coarse to fine for p->levels levels; dropped
+		 * levels are the coarsest ones */
+		int idx = p->nlist == 1 ? 0 : l + (p->levels - nlev);
+		iters[l] = p->niter[idx];
+		total += iters[l];
+	}
+	tab = h->tab_new();
+	if (!tab) {
+		rc = FAIL(ARMSTG_ENOMEM, "out of memory (table)");
+		goto out;
+	}
+
+	int done = 0;
+	for (int l = 0; l < nlev; l++) {
+		const int f = 1 << (nlev - 1 - l);
+		fgrid_t g;
+		fgrid_shrink(&F0.g, f, &g);
+		/* fixed: smooth by 0.5 f voxels, sample on the coarse grid */
+		double sig_f = f > 1 ? 0.5 * f * (F0.g.sp[0] + F0.g.sp[1] + F0.g.sp[2]) / 3 : 0;
+		double sig_m = f > 1 ? 0.5 * f * (M0.g.sp[0] + M0.g.sp[1] + M0.g.sp[2]) / 3 : 0;
+		level_free(&L);
+		L.g = g;
+		fimg_t Fs = { 0 };
+		if ((rc = fimg_alloc(&Fs, &F0.g, 1)) ||
+		    (rc = fimg_alloc(&L.F, &g, 1)) ||
+		    (rc = fimg_alloc(&L.M, &M0.g, 1)) ||
+		    (rc = fimg_alloc(&L.W, &g, 1))) {
+			fimg_free(&Fs);
+			rc = FAIL(rc, "out of memory (level %d)", l);
+			goto out;
+		}
+		memcpy(Fs.d, F0.d, sizeof(float) * fgrid_nvox(&F0.g));
+		memcpy(L.M.d, M0.d, sizeof(float) * fgrid_nvox(&M0.g));
+		fimg_smooth(&Fs, sig_f, nt);
+		fimg_smooth(&L.M, sig_m, nt);
+		fimg_resample(&Fs, NULL, FIELD_LINEAR, 0, &L.F, nt);
+		fimg_free(&Fs);
+		if (FM0.d) {
+			if ((rc = fimg_alloc(&L.FM, &g, 1))) {
+				rc = FAIL(rc, "out of memory (mask)");
+				goto out;
+			}
+			/* a coarse voxel is in the mask when its centre is */
+			fimg_resample(&FM0, NULL, FIELD_NEAREST, 0, &L.FM, nt);
+		}
+		if (MM0.d && (rc = fimg_alloc(&L.WM, &g, 1))) {
+			rc = FAIL(rc, "out of memory (mask)");
+			goto out;
+		}
+		/* field: start or carry over from the coarser level */
+		fimg_t Snew = { 0 };
+		const fimg_t *from = S.d ? &S : init.d ? &init : NULL;
+		if (from)
+			rc = resample_clamp(from, &g, &Snew, nt);
+		else
+			rc = fimg_alloc(&Snew, &g, 3);
+		fimg_free(&S);
+		fimg_free(&A);
+		fimg_free(&B);
+		S = Snew;
+		if (rc || (rc = fimg_alloc(&A, &g, 3)) ||
+		    (rc = fimg_alloc(&B, &g, 3))) {
+			rc = FAIL(ARMSTG_ENOMEM, "out of memory (fields, level %d)",
+				  l);
+			goto out;
+		}
+		/* sigma_x^2 = 4 N, N = max_step^2 * mean squared spacing */
+		double ms2 = (g.sp[0] * g.sp[0] + g.sp[1] * g.sp[1] +
+			      g.sp[2] * g.sp[2]) / 3;
+		const double sx2 = 4 * p->max_step * p->max_step * ms2;
+		double hist[8] = { 0 };
+		h->log(st, LOG_INFO, "level %d/%d: %dx%dx%d, %.2f mm voxels, %d "
+		       "iterations", l + 1, nlev, g.nx, g.ny, g.nz, g.sp[0],
+		       iters[l]);
+		for (int it = 0; it < iters[l]; it++) {
+			if (h->cancelled && h->cancelled(st)) {
+				rc = FAIL(ARMSTG_ECANCELLED,
+					  "cancelled at level %d iteration %d",
+					  l + 1, it + 1);
+				goto out;
+			}
+			fimg_resample(&L.M, &S, FIELD_LINEAR, NAN, &L.W, nt);
+			if (L.WM.d)
+				fimg_resample(&MM0, &S, FIELD_NEAREST, 0, &L.WM, nt);
+			double ssd;
+			int64_t nused;
+			compute_force(p, &L, &A, sx2, &ssd, &nused, nt);
+			if (nused == 0) {
+				rc = FAIL(ARMSTG_EINVAL,
+					  "no voxel where fixed, moving and masks "
+					  "overlap at level %d: check the masks "
+					  "and affines", l + 1);
+				goto out;
+			}
+			double mse = ssd / (double)nused;
+			if (p->sigma_fluid > 0)
+				fimg_smooth(&A, p->sigma_fluid, nt);
+			double mu, mx;
+			update_stats(&A, &mu, &mx);
+			if (p->update == UPD_DIFFEO) {
+				fimg_t *v;
+				exp_inplace(&A, &B, &v, nt);
+				/* s <- s o v, written into v, then swapped */
+				fimg_compose(&S, v, v, nt);
+				fimg_t t = S;
+				S = *v;
+				*v = t;
+			} else {
+				int64_t ne = fgrid_nvox(&g) * 3;
+				for (int64_t e = 0; e < ne; e++)
+					S.d[e] += A.d[e];
+			}
+			if (p->sigma_field > 0)
+				fimg_smooth(&S, p->sigma_field, nt);
+			double secs = now_s() - t0;
+			if ((rc = add_row(st, tab, l + 1, it + 1, mse, mu, mx, secs))) {
+				rc = FAIL(rc, "out of memory (table)");
+				goto out;
+			}
+			done++;
+			h->progress(st, total ? (double)done / total : 1,
+				    "level %d/%d iter %d/%d mse %.5g mean update "
+				    "%.3g mm", l + 1, nlev, it + 1, iters[l], mse, mu);
+			/* convergence: relative MSE gain over 5 iterations */
+			hist[it % 8] = mse;
+			if (p->tol > 0 && it >= 5) {
+				double old = hist[(it - 5) % 8];
+				if (old > 0 && (old - mse) < p->tol * old) {
+					h->log(st, LOG_INFO,
+					       "level %d converged after %d "
+					       "iterations (mse %.5g)", l + 1,
+					       it + 1, mse);
+					done += iters[l] - it - 1;
+					break;
+				}
+			}
+		}
+	}
+
+	/* outputs on the full fixed grid (the finest level's grid) */
+	ofield = h->vol_new(vf->nx, vf->ny, vf->nz, 3, DT_F32, vf->affine);
+	owarp = h->vol_new(vf->nx, vf->ny, vf->nz, 1, DT_F32, vf->affine);
+	if (!ofield || !owarp) {
+		rc = FAIL(ARMSTG_ENOMEM, "out of memory (outputs)");
+		goto out;
+	}
+	fimg_to_vol(&S, ofield);
+	ofield->intent = 1007;
+	{
+		/* warped: the original (unnormalised) moving volume */
+		fimg_t Mr = { 0 }, Wr = { 0 };
+		if ((rc = fimg_from_vol(&Mr, vm)) ||
+		    (rc = fimg_alloc(&Wr, &F0.g, 1))) {
+			fimg_free(&Mr);
+			rc = FAIL(rc, "out of memory (warped)");
+			goto out;
+		}
+		fimg_resample(&Mr, &S, FIELD_LINEAR, 0, &Wr, nt);
+		fimg_to_vol(&Wr, owarp);
+		fimg_free(&Mr);
+		fimg_free(&Wr);
+	}
+	{
+		fimg_t Jd = { 0 };
+		field_jac_stats_t js;
+		if (!fimg_alloc(&Jd, &F0.g, 1) && !fimg_jacobian(&S, &Jd, &js, nt)) {
+			int64_t r = tab->nrows - 1;
+			if (r >= 0) {
+				h->tab_set_num(tab, r, "jacobian_min", js.min);
+				h->tab_set_num(tab, r, "jacobian_max", js.max);
+				h->tab_set_num(tab, r, "folded_voxels",
+					       (double)js.n_nonpositive);
+			}
+			h->log(st, js.n_nonpositive ? LOG_WARN : LOG_INFO,
+			       "done in %.1f s: Jacobian det in [%.3f, %.3f], %lld "
+			       "folded voxels", now_s() - t0, js.min, js.max,
+			       (long long)js.n_nonpositive);
+		}
+		fimg_free(&Jd);
+	}
+	st->out[OUT_FIELD] = &ofield->base;
+	st->out[OUT_WARPED] = &owarp->base;
+	st->out[OUT_TABLE] = &tab->base;
+	ofield = owarp = NULL;
+	tab = NULL;
+	rc = 0;
+out:
+	if (ofield)
+		h->msg_unref(&ofield->base);
+	if (owarp)
+		h->msg_unref(&owarp->base);
+	if (tab)
+		h->msg_unref(&tab->base);
+	level_free(&L);
+	fimg_free(&F0);
+	fimg_free(&M0);
+	fimg_free(&FM0);
+	fimg_free(&MM0);
+	fimg_free(&init);
+	fimg_free(&S);
+	fimg_free(&A);
+	fimg_free(&B);
+	return rc;
+}
+
+static const armstg_plugin_t demons_plugin = {
+	ARMSTG_PLUGIN_HEADER,
+	.name = "demons",
+	.description = "deformable registration: Thirion / symmetric (ESM) "
+		       "demons, diffeomorphic update (Vercauteren 2007), "
+		       "multi-resolution, masks",
+	.version = "1.0.0",
+	.license = "MIT",
+	.inputs = demons_inputs,
+	.n_inputs = ARMSTG_COUNT(demons_inputs),
+	.outputs = demons_outputs,
+	.n_outputs = ARMSTG_COUNT(demons_outputs),
+	.params = demons_params,
+	.n_params = ARMSTG_COUNT(demons_params),
+	.priv_size = sizeof(demons_priv_t),
+	.devices = DEV_CPU,
+	.init = demons_init,
+	.process = demons_process,
+	.fini = NULL,
+};
+
+ARMSTG_PLUGIN(demons_plugin)

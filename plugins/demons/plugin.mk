@@ -1,0 +1,3 @@
+# demons uses the shared field library of the warp plugin
+demons_EXTRA_SRC := plugins/warp/field.c
+demons_CFLAGS := -Iplugins/warp

@@ -1,0 +1,432 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * demons against a known answer: a synthetic head (blurred ellipsoids,
+ * ventricles, texture) warped by a known smooth diffeomorphic field.  The
+ * fixed image is the moving one sampled analytically at x + u(x), so the
+ * true field (ITK convention) is exactly u, with no interpolation error.
+ * Fixed and moving are on different grids (LAS vs LPS, other sizes).
+ */
+#include <math.h>
+
+#include "testutil.h"
+#include "field.h"
+
+enum { IN_FIXED, IN_MOVING, IN_FMASK, IN_MMASK, IN_INIT };
+enum { OUT_FIELD, OUT_WARPED, OUT_TABLE };
+
+#define SP 1.5 /* mm */
+
+static double sigm(double d)
+{
+	return 1.0 / (1.0 + exp(-d));
+}
+
+/* ellipsoid indicator, smooth edge of about w mm */
+static double ell(const double y[3], const double c[3], const double a[3],
+		  double w)
+{
+	double e = 0;
+	for (int q = 0; q < 3; q++)
+		e += (y[q] - c[q]) * (y[q] - c[q]) / (a[q] * a[q]);
+	e = sqrt(e);
+	double r = (a[0] + a[1] + a[2]) / 3;
+	return sigm((1 - e) * r / w);
+}
+
+static const double C0[3] = { 0, 0, 0 };
+static const double ABRAIN[3] = { 27, 31, 23 };
+
+static double brain(const double y[3])
+{
+	return ell(y, C0, ABRAIN, 0.8);
+}
+
+static double phantom(const double y[3])
+{
+	static const double cw[3] = { 0, 2, 3 }, aw[3] = { 18, 21, 14 };
+	static const double cv1[3] = { 6, 3, 4 }, cv2[3] = { -6, 3, 4 },
+			    av[3] = { 3.5, 10, 5 };
+	static const double cb[3] = { 12, -15, -8 }, ab[3] = { 5, 4, 6 };
+	double b = brain(y);
+	double v = 0.45 * b + 0.35 * ell(y, cw, aw, 1.0) -
+		   0.5 * ell(y, cv1, av, 0.8) - 0.5 * ell(y, cv2, av, 0.8) +
+		   0.25 * ell(y, cb, ab, 1.0);
+	v += 0.12 * b * sin(y[0] / 3.1) * sin(y[1] / 3.7 + 1) * cos(y[2] / 2.9);
+	return v;
+}
+
+static void true_u(const double x[3], double u[3])
+{
+	u[0] = 2.6 * sin(x[1] / 9.0) * cos(x[2] / 11.0);
+	u[1] = 2.2 * sin(x[0] / 10.0 + x[2] / 13.0);
+	u[2] = 1.8 * cos(x[0] / 8.0) * sin(x[1] / 12.0 + 0.5);
+}
+
+/* fixed: LAS grid centred on 0; moving: LPS grid, other size and origin */
+static void aff_las(double A[16], int nx, int ny, int nz)
+{
+	double R[16] = { -SP, 0, 0, SP * (nx - 1) / 2.0,
+			 0, SP, 0, -SP * (ny - 1) / 2.0,
+			 0, 0, SP, -SP * (nz - 1) / 2.0,
+			 0, 0, 0, 1 };
+	memcpy(A, R, sizeof R);
+}
+
+static void aff_lps(double A[16], int nx, int ny, int nz)
+{
+	double R[16] = { -SP, 0, 0, SP * (nx - 1) / 2.0 + 0.7,
+			 0, -SP, 0, SP * (ny - 1) / 2.0 - 0.4,
+			 0, 0, SP, -SP * (nz - 1) / 2.0 + 0.3,
+			 0, 0, 0, 1 };
+	memcpy(A, R, sizeof R);
+}
+
+/* warped = 1: F(x) = P(x + u(x));  0: M(y) = P(y) */
+static vol_t *make_img(const double A[16], int nx, int ny, int nz, int warped,
+		       int mask)
+{
+	vol_t *v = vol_new(nx, ny, nz, 1, mask ? DT_U8 : DT_F32, A);
+	for (int k = 0; k < nz; k++)
+		for (int j = 0; j < ny; j++)
+			for (int i = 0; i < nx; i++) {
+				double x[3], u[3] = { 0, 0, 0 }, y[3];
+				vol_to_world(v, i, j, k, x);
+				if (warped)
+					true_u(x, u);
+				for (int q = 0; q < 3; q++)
+					y[q] = x[q] + u[q];
+				double val = mask ? brain(y) > 0.5 : phantom(y);
+				vol_set(v, vol_idx(v, i, j, k), val);
+			}
+	return v;
+}
+
+typedef struct reg_out {
+	vol_t *field, *warped;
+	tab_t *tab;
+} reg_out_t;
+
+static int run_demons(const char *const *params, const vol_t *f,
+		      const vol_t *m, const vol_t *fm, const vol_t *mm,
+		      reg_out_t *o, char *err, size_t errsize)
+{
+	const msg_t *in[5] = { f ? &f->base : NULL, m ? &m->base : NULL,
+			       fm ? &fm->base : NULL, mm ? &mm->base : NULL,
+			       NULL };
+	msg_t *out[3] = { 0 };
+	int rc = tu_run(TU_PLUGIN(), params, in, out, err, errsize);
+	o->field = (vol_t *)out[OUT_FIELD];
+	o->warped = (vol_t *)out[OUT_WARPED];
+	o->tab = (tab_t *)out[OUT_TABLE];
+	return rc;
+}
+
+static void reg_free(reg_out_t *o)
+{
+	if (o->field)
+		msg_unref(&o->field->base);
+	if (o->warped)
+		msg_unref(&o->warped->base);
+	if (o->tab)
+		msg_unref(&o->tab->base);
+	memset(o, 0, sizeof *o);
+}
+
+/* mean |field - u_true| (mm) over the fixed brain; also mean |u_true| */
+static void field_error(const vol_t *fld, const vol_t *fmask, double *err,
+			double *base)
+{
+	int64_t nv = vol_nvox(fld), n = 0;
+	double s = 0, b = 0;
+	for (int64_t e = 0; e < nv; e++) {
+		if (vol_get(fmask, e) <= 0)
+			continue;
+		int i = (int)(e % fld->nx), j = (int)(e / fld->nx % fld->ny),
+		    k = (int)(e / ((int64_t)fld->nx * fld->ny));
+		double x[3], u[3];
+		vol_to_world(fld, i, j, k, x);
+		true_u(x, u);
+		double d2 = 0, b2 = 0;
+		for (int c = 0; c < 3; c++) {
+			double d = ((float *)fld->data)[e + c * nv] - u[c];
+			d2 += d * d;
+			b2 += u[c] * u[c];
+		}
+		s += sqrt(d2);
+		b += sqrt(b2);
+		n++;
+	}
+	*err = s / (double)n;
+	*base = b / (double)n;
+}
+
+static double jac_min(const vol_t *fld)
+{
+	vol_t *j = vol_new(fld->nx, fld->ny, fld->nz, 1, DT_F32, fld->affine);
+	field_jac_stats_t s;
+	assert_int_equal(field_jacobian_vol(fld, j, &s, 2), 0);
+	msg_unref(&j->base);
+	return s.min;
+}
+
+static double tab_last(const tab_t *t, const char *col)
+{
+	const tab_col_t *c = tab_col(t, col);
+	assert_non_null(c);
+	return c->num[t->nrows - 1];
+}
+
+#define FX 48
+#define FY 52
+#define FZ 40
+
+typedef struct fixture {
+	vol_t *fixed, *moving, *fmask;
+} fixture_t;
+
+static int setup(void **state)
+{
+	static fixture_t fx;
+	double Af[16], Am[16];
+	aff_las(Af, FX, FY, FZ);
+	aff_lps(Am, FX + 4, FY - 2, FZ + 2);
+	fx.fixed = make_img(Af, FX, FY, FZ, 1, 0);
+	fx.moving = make_img(Am, FX + 4, FY - 2, FZ + 2, 0, 0);
+	fx.fmask = make_img(Af, FX, FY, FZ, 1, 1);
+	*state = &fx;
+	return 0;
+}
+
+static int teardown(void **state)
+{
+	fixture_t *fx = *state;
+	msg_unref(&fx->fixed->base);
+	msg_unref(&fx->moving->base);
+	msg_unref(&fx->fmask->base);
+	return 0;
+}
+
+static void check_recovery(fixture_t *fx, const char *const *params,
+			   double max_err_vox, const char *name)
+{
+	char e[1024];
+	reg_out_t o = { 0 };
+	int rc = run_demons(params, fx->fixed, fx->moving, NULL, NULL, &o, e,
+			    sizeof e);
+	if (rc)
+		print_message("error: %s\n", e);
+	assert_int_equal(rc, 0);
+	assert_true(vol_same_grid(o.field, fx->fixed, 1e-9));
+	double err, base;
+	field_error(o.field, fx->fmask, &err, &base);
+	double mse0 = tab_col(o.tab, "mse")->num[0];
+	double mse1 = tab_last(o.tab, "mse");
+	double jm = jac_min(o.field);
+	print_message("%s: field error %.3f mm = %.2f voxel (true field mean "
+		      "%.2f mm), mse %.2e -> %.2e, min Jacobian %.3f, %lld "
+		      "iterations\n", name, err, err / SP, base, mse0, mse1, jm,
+		      (long long)o.tab->nrows);
+	assert_true(base > 2.0);              /* the problem is not trivial */
+	assert_true(err / SP < max_err_vox);
+	assert_true(mse1 < 0.2 * mse0);
+	assert_true(jm > 0);
+	assert_float_equal(tab_last(o.tab, "jacobian_min"), jm, 1e-3);
+	/* the warped output matches the fixed image much better than the
+	 * moving one resampled without the field */
+	double s1 = 0, s0 = 0;
+	vol_t *plain = vol_new(FX, FY, FZ, 1, DT_F32, fx->fixed->affine);
+	field_warp_vol(fx->moving, NULL, FIELD_LINEAR, 0, plain, 2);
+	for (int64_t v = 0; v < vol_nvox(fx->fixed); v++) {
+		double f = ((float *)fx->fixed->data)[v];
+		s1 += pow(((float *)o.warped->data)[v] - f, 2);
+		s0 += pow(((float *)plain->data)[v] - f, 2);
+	}
+	assert_true(s1 < 0.2 * s0);
+	msg_unref(&plain->base);
+	reg_free(&o);
+}
+
+static void test_recover_diffeo(void **state)
+{
+	const char *p[] = { "levels=3", "iterations=40,30,20", NULL };
+	check_recovery(*state, p, 0.5, "symmetric diffeomorphic");
+}
+
+static void test_recover_thirion_additive(void **state)
+{
+	const char *p[] = { "force=thirion", "update=additive",
+			    "levels=3", "iterations=40,30,20",
+			    "sigma_fluid=1.0", NULL };
+	check_recovery(*state, p, 0.6, "thirion additive");
+}
+
+static void test_identity(void **state)
+{
+	fixture_t *fx = *state;
+	char e[1024];
+	reg_out_t o = { 0 };
+	const char *p[] = { "iterations=5", NULL };
+	assert_int_equal(run_demons(p, fx->fixed, fx->fixed, NULL, NULL, &o, e,
+				    sizeof e), 0);
+	int64_t n = vol_nvox(o.field) * 3;
+	double m = 0;
+	for (int64_t v = 0; v < n; v++)
+		m = fmax(m, fabs(((float *)o.field->data)[v]));
+	print_message("identical inputs: max |field| = %g mm\n", m);
+	assert_true(m == 0);
+	assert_float_equal(tab_last(o.tab, "mse"), 0, 1e-12);
+	assert_float_equal(tab_last(o.tab, "jacobian_min"), 1, 1e-9);
+	reg_free(&o);
+}
+
+/* A->B and B->A: phi_ba o phi_ab should be the identity */
+static void test_inverse_consistency(void **state)
+{
+	fixture_t *fx = *state;
+	char e[1024];
+	reg_out_t ab = { 0 }, ba = { 0 };
+	const char *p[] = { "levels=3", "iterations=40,30,20", NULL };
+	assert_int_equal(run_demons(p, fx->fixed, fx->moving, NULL, NULL, &ab,
+				    e, sizeof e), 0);
+	assert_int_equal(run_demons(p, fx->moving, fx->fixed, NULL, NULL, &ba,
+				    e, sizeof e), 0);
+	assert_true(jac_min(ba.field) > 0);
+	vol_t *c = vol_new(FX, FY, FZ, 3, DT_F32, fx->fixed->affine);
+	/* c(x) = s_ab(x) + s_ba(x + s_ab(x)) */
+	assert_int_equal(field_compose_vol(ba.field, ab.field, c, 2), 0);
+	int64_t nv = vol_nvox(c), n = 0;
+	double s = 0, mx = 0;
+	for (int64_t v = 0; v < nv; v++) {
+		if (vol_get(fx->fmask, v) <= 0)
+			continue;
+		double d2 = 0;
+		for (int q = 0; q < 3; q++)
+			d2 += pow(((float *)c->data)[v + q * nv], 2);
+		s += sqrt(d2);
+		mx = fmax(mx, sqrt(d2));
+		n++;
+	}
+	print_message("inverse consistency |phi_ba o phi_ab - id| in brain: "
+		      "mean %.3f mm (%.2f voxel), max %.3f mm\n", s / n,
+		      s / n / SP, mx);
+	assert_true(s / n / SP < 0.5);
+	msg_unref(&c->base);
+	reg_free(&ab);
+	reg_free(&ba);
+}
+
+/* forces only inside the fixed mask: far outside it the field stays ~0 */
+static void test_fixed_mask(void **state)
+{
+	fixture_t *fx = *state;
+	char e[1024];
+	vol_t *half = vol_clone(fx->fmask);
+	for (int k = 0; k < FZ; k++)
+		for (int j = 0; j < FY; j++)
+			for (int i = FX / 2; i < FX; i++)
+				vol_set(half, vol_idx(half, i, j, k), 0);
+	reg_out_t o = { 0 };
+	const char *p[] = { "levels=2", "iterations=20,10", NULL };
+	assert_int_equal(run_demons(p, fx->fixed, fx->moving, half, NULL, &o, e,
+				    sizeof e), 0);
+	int64_t nv = vol_nvox(o.field);
+	double sin_ = 0, sout = 0;
+	int64_t nin = 0, nout = 0;
+	for (int k = 0; k < FZ; k++)
+		for (int j = 0; j < FY; j++)
+			for (int i = 0; i < FX; i++) {
+				int64_t v = vol_idx(half, i, j, k);
+				if (vol_get(fx->fmask, v) <= 0)
+					continue;
+				double d2 = 0;
+				for (int q = 0; q < 3; q++)
+					d2 += pow(((float *)o.field->data)[v + q * nv], 2);
+				if (i < FX / 2 - 4) {
+					sin_ += sqrt(d2);
+					nin++;
+				} else if (i > FX / 2 + 10) {
+					sout += sqrt(d2);
+					nout++;
+				}
+			}
+	print_message("fixed mask: mean |field| inside %.3f mm, far outside "
+		      "%.3f mm\n", sin_ / nin, sout / nout);
+	assert_true(sin_ / nin > 1.0);
+	assert_true(sout / nout < 0.1 * sin_ / nin);
+	msg_unref(&half->base);
+	reg_free(&o);
+}
+
+static void expect_err(const char *const *params, const vol_t *f,
+		       const vol_t *m, const vol_t *fm, const vol_t *mm,
+		       const char *want)
+{
+	char e[1024] = "";
+	reg_out_t o = { 0 };
+	int rc = run_demons(params, f, m, fm, mm, &o, e, sizeof e);
+	print_message("refused (%d): %s\n", rc, e);
+	assert_true(rc < 0);
+	assert_non_null(strstr(e, want));
+	assert_null(o.field);
+	assert_null(o.warped);
+	assert_null(o.tab);
+}
+
+static void test_bad_input(void **state)
+{
+	fixture_t *fx = *state;
+	const char *p[] = { "iterations=2", NULL };
+	vol_t *zero = vol_new(FX, FY, FZ, 1, DT_F32, fx->fixed->affine);
+	expect_err(p, zero, fx->moving, NULL, NULL, "fixed volume is all zero");
+	expect_err(p, fx->fixed, zero, NULL, NULL, "moving volume is all zero");
+	vol_t *nan = vol_clone(fx->moving);
+	((float *)nan->data)[77] = NAN;
+	expect_err(p, fx->fixed, nan, NULL, NULL, "moving volume contains NaN");
+	vol_t *slice = vol_new(FX, FY, 1, 1, DT_F32, fx->fixed->affine);
+	expect_err(p, slice, fx->moving, NULL, NULL, "single-slice");
+	vol_t *tiny = vol_new(1, 1, 1, 1, DT_F32, NULL);
+	expect_err(p, tiny, tiny, NULL, NULL, "single-slice");
+	vol_t *small = vol_new(4, 4, 4, 1, DT_F32, NULL); /* contract input */
+	expect_err(p, small, small, NULL, NULL, "all zero");
+	vol_t *emask = vol_new(FX, FY, FZ, 1, DT_U8, fx->fixed->affine);
+	expect_err(p, fx->fixed, fx->moving, emask, NULL, "fixed_mask is empty");
+	expect_err(p, fx->fixed, fx->moving, NULL, emask,
+		   "moving_mask is empty");
+	/* a mask far away in world space */
+	vol_t *farm = vol_clone(fx->fmask);
+	farm->affine[3] += 1000;
+	expect_err(p, fx->fixed, fx->moving, farm, NULL,
+		   "fixed_mask does not overlap");
+	vol_t *farv = vol_clone(fx->moving);
+	farv->affine[7] += 1000;
+	expect_err(p, fx->fixed, farv, NULL, NULL, "do not overlap");
+	/* the field is not a valid fixed image */
+	vol_t *vec = vol_new(FX, FY, FZ, 3, DT_F32, fx->fixed->affine);
+	expect_err(p, vec, fx->moving, NULL, NULL, "1 component");
+	const char *pl[] = { "levels=3", "iterations=10,5", NULL };
+	expect_err(pl, fx->fixed, fx->moving, NULL, NULL, "has 2 values");
+	const char *pb[] = { "iterations=10,x", NULL };
+	expect_err(pb, fx->fixed, fx->moving, NULL, NULL, "iterations");
+	msg_unref(&zero->base);
+	msg_unref(&nan->base);
+	msg_unref(&slice->base);
+	msg_unref(&tiny->base);
+	msg_unref(&small->base);
+	msg_unref(&emask->base);
+	msg_unref(&farm->base);
+	msg_unref(&farv->base);
+	msg_unref(&vec->base);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_recover_diffeo),
+		cmocka_unit_test(test_recover_thirion_additive),
+		cmocka_unit_test(test_identity),
+		cmocka_unit_test(test_inverse_consistency),
+		cmocka_unit_test(test_fixed_mask),
+		cmocka_unit_test(test_bad_input),
+	};
+	return cmocka_run_group_tests(tests, setup, teardown);
+}

@@ -1,0 +1,106 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * demons on the project's phantom (plugins/phantom, loaded at run time from
+ * $BUILD/plugins/phantom.so and run like a graph stage): a healthy subject
+ * (no tumour) deformed from the atlas by a known smooth random field.
+ * Asserts the recovered atlas->patient field matches the phantom's
+ * true_field to < 0.5 voxel mean inside the patient brain, with a positive
+ * Jacobian.  Skips cleanly when the phantom plugin is not built.
+ */
+#include <math.h>
+
+#include "testutil.h"
+#include "field.h"
+
+/* phantom output ports (plugins/phantom/phantom.c) */
+static int port(const armstg_plugin_t *d, const char *name)
+{
+	for (int i = 0; i < d->n_outputs; i++)
+		if (!strcmp(d->outputs[i].name, name))
+			return i;
+	return -1;
+}
+
+static void test_phantom_healthy(void **state)
+{
+	(void)state;
+	char path[1024], e[1024] = "";
+	const char *b = getenv("BUILD");
+	snprintf(path, sizeof path, "%s/plugins/phantom.so", b && *b ? b : "build");
+	rt_plugin_t pl;
+	if (access(path, R_OK) || plugin_load_file(path, &pl, e, sizeof e)) {
+		print_message("skip: %s not loadable (%s)\n", path, e);
+		skip();
+	}
+	const armstg_plugin_t *ph = pl.desc;
+	int o_ft1 = port(ph, "patient_t1"), o_mt1 = port(ph, "atlas_t1"),
+	    o_mask = port(ph, "patient_mask"), o_true = port(ph, "true_field");
+	assert_true(o_ft1 >= 0 && o_mt1 >= 0 && o_mask >= 0 && o_true >= 0);
+	msg_t *po[32] = { 0 };
+	const char *pp[] = { "tumour_radius=0", "mass_effect=0", "seed=3", NULL };
+	int rc = tu_run(ph, pp, NULL, po, e, sizeof e);
+	if (rc)
+		print_message("phantom: %s\n", e);
+	assert_int_equal(rc, 0);
+	vol_t *fixed = (vol_t *)po[o_ft1], *moving = (vol_t *)po[o_mt1],
+	      *mask = (vol_t *)po[o_mask], *truth = (vol_t *)po[o_true];
+	double sp[3];
+	vol_spacing(fixed, sp);
+
+	const msg_t *in[5] = { &fixed->base, &moving->base, NULL, NULL, NULL };
+	msg_t *out[3] = { 0 };
+	const char *dp[] = { "levels=3", "iterations=40,30,20",
+			     "sigma_field=2", NULL };
+	rc = tu_run(TU_PLUGIN(), dp, in, out, e, sizeof e);
+	if (rc)
+		print_message("demons: %s\n", e);
+	assert_int_equal(rc, 0);
+	vol_t *fld = (vol_t *)out[0];
+	assert_true(vol_same_grid(fld, truth, 1e-6));
+
+	/* truth sampled on the field grid (the same grid here) */
+	int64_t nv = vol_nvox(fld), n = 0;
+	double err = 0, base = 0;
+	for (int64_t v = 0; v < nv; v++) {
+		if (vol_get(mask, v) <= 0)
+			continue;
+		double d2 = 0, b2 = 0;
+		for (int c = 0; c < 3; c++) {
+			double t = vol_get(truth, v + c * nv);
+			double d = ((float *)fld->data)[v + c * nv] - t;
+			d2 += d * d;
+			b2 += t * t;
+		}
+		err += sqrt(d2);
+		base += sqrt(b2);
+		n++;
+	}
+	err /= n;
+	base /= n;
+	vol_t *j = vol_new(fld->nx, fld->ny, fld->nz, 1, DT_F32, fld->affine);
+	field_jac_stats_t js;
+	assert_int_equal(field_jacobian_vol(fld, j, &js, 2), 0);
+	print_message("phantom (healthy, %.1f mm voxels): true field mean %.2f "
+		      "mm, error %.3f mm = %.2f voxel, min Jacobian %.3f\n", sp[0],
+		      base, err, err / sp[0], js.min);
+	assert_true(base > 1.0);
+	assert_true(err / sp[0] < 0.5);
+	assert_true(err < 0.6 * base);
+	assert_true(js.min > 0);
+	msg_unref(&j->base);
+	for (int o = 0; o < 3; o++)
+		if (out[o])
+			msg_unref(out[o]);
+	for (int o = 0; o < ph->n_outputs; o++)
+		if (po[o])
+			msg_unref(po[o]);
+	plugin_unload(&pl);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_phantom_healthy),
+	};
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}

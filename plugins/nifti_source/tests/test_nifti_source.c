@@ -1,0 +1,118 @@
+/* SPDX-License-Identifier: MIT */
+/* nifti_source: reads through the host exactly what vol_read_nifti reads,
+ * converts dtypes on request, refuses a missing file naming it. */
+#include <math.h>
+
+#include "testutil.h"
+
+static char dir[256];
+
+static int setup(void **state)
+{
+	(void)state;
+	snprintf(dir, sizeof dir, "/tmp/armstg-nsrc-XXXXXX");
+	return mkdtemp(dir) ? 0 : -1;
+}
+
+static int teardown(void **state)
+{
+	(void)state;
+	char cmd[300];
+	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+	return system(cmd) ? -1 : 0;
+}
+
+static const double LPS[16] = { -1, 0, 0, 0, 0, -1, 0, 239, 0, 0, 1.5, 0,
+				0, 0, 0, 1 };
+
+static void test_read_and_convert(void **state)
+{
+	(void)state;
+	vol_t *v = vol_new(6, 5, 4, 1, DT_F32, LPS);
+	for (int64_t e = 0; e < vol_nvox(v); e++)
+		((float *)v->data)[e] = (float)(e % 5); /* labels as floats */
+	char path[512], arg[600], err[1024];
+	snprintf(path, sizeof path, "%s/labels.nii.gz", dir);
+	assert_int_equal(vol_write_nifti(path, v, err, sizeof err), 0);
+	snprintf(arg, sizeof arg, "path=%s", path);
+
+	const char *p1[] = { arg, NULL };
+	msg_t *out[1] = { NULL };
+	int rc = tu_run(TU_PLUGIN(), p1, NULL, out, err, sizeof err);
+	if (rc)
+		fail_msg("%s", err);
+	assert_true(msg_equal(&v->base, out[0]));
+	assert_true(out[0]->frozen);
+	msg_unref(out[0]);
+
+	const char *p2[] = { arg, "dtype=u8", NULL };
+	rc = tu_run(TU_PLUGIN(), p2, NULL, out, err, sizeof err);
+	if (rc)
+		fail_msg("%s", err);
+	const vol_t *u = (const vol_t *)out[0];
+	assert_int_equal(u->dtype, DT_U8);
+	assert_memory_equal(u->affine, LPS, sizeof LPS);
+	for (int64_t e = 0; e < vol_nvox(u); e++)
+		assert_int_equal(((uint8_t *)u->data)[e], e % 5);
+	msg_unref(out[0]);
+	msg_unref(&v->base);
+}
+
+static void test_refusals(void **state)
+{
+	(void)state;
+	char arg[600], err[1024];
+	snprintf(arg, sizeof arg, "path=%s/absent.nii.gz", dir);
+	const char *p1[] = { arg, NULL };
+	msg_t *out[1] = { NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), p1, NULL, out, err, sizeof err),
+			 ARMSTG_EIO);
+	assert_non_null(strstr(err, "absent.nii.gz"));
+	assert_non_null(strstr(err, "No such file or directory"));
+	assert_null(out[0]);
+	/* no path: the runtime refuses the missing required parameter */
+	assert_true(tu_run(TU_PLUGIN(), NULL, NULL, out, err, sizeof err) < 0);
+	assert_non_null(strstr(err, "path"));
+	const char *p2[] = { arg, "dtype=f16", NULL };
+	assert_true(tu_run(TU_PLUGIN(), p2, NULL, out, err, sizeof err) < 0);
+	assert_non_null(strstr(err, "dtype"));
+}
+
+/* the BraTS 2013 manual labels (float32 on disk) as u8, LPS */
+static void test_real_labels(void **state)
+{
+	(void)state;
+	TU_NEED_DATA();
+	char arg[1200], err[1024];
+	snprintf(arg, sizeof arg, "path=%s",
+		 tu_data("brats2013/brats_2013_pat0001_1/OTMultiClass.nii.gz"));
+	const char *p[] = { arg, "dtype=u8", NULL };
+	msg_t *out[1] = { NULL };
+	int rc = tu_run(TU_PLUGIN(), p, NULL, out, err, sizeof err);
+	if (rc)
+		fail_msg("%s", err);
+	const vol_t *v = (const vol_t *)out[0];
+	assert_int_equal(v->nx * v->ny * v->nz, 240 * 240 * 155);
+	assert_true(v->affine[0] == -1 && v->affine[5] == -1 &&
+		    v->affine[7] == 239);
+	int64_t hist[256] = { 0 };
+	for (int64_t e = 0; e < vol_nvox(v); e++)
+		hist[((uint8_t *)v->data)[e]]++;
+	int64_t tumour = hist[1] + hist[2] + hist[3] + hist[4];
+	print_message("pat0001 labels 1..4: %lld %lld %lld %lld voxels\n",
+		      (long long)hist[1], (long long)hist[2],
+		      (long long)hist[3], (long long)hist[4]);
+	assert_true(tumour > 10000);
+	assert_int_equal(hist[0] + tumour, vol_nvox(v));
+	msg_unref(out[0]);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_read_and_convert),
+		cmocka_unit_test(test_refusals),
+		cmocka_unit_test(test_real_labels),
+	};
+	return cmocka_run_group_tests(tests, setup, teardown);
+}

@@ -1,0 +1,1 @@
+png_slice_LDLIBS := -lpng -lz

@@ -1,0 +1,497 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * report plugin: PNGs re-read with libpng (size, overlay colour at a known
+ * pixel), orientation for LAS/LPS/RAS storage, the HTML page, bad inputs
+ * (clear errors, nothing left on disk).
+ */
+#include <ftw.h>
+#include <png.h>
+#include <stdlib.h>
+
+#include "testutil.h"
+
+enum { IMG, PL, AL, TUM, ATUM, MET, STATS, STATS2, RUN, NIN };
+
+/* ---- helpers ---- */
+
+static void affine(double A[16], const char *orient, const int n[3],
+		   const double h[3])
+{
+	/* grid centred on world (0,0,0) */
+	memset(A, 0, 16 * sizeof(double));
+	for (int a = 0; a < 3; a++) {
+		char l = orient[a];
+		double s = (l == 'R' || l == 'A' || l == 'S') ? 1 : -1;
+		A[4 * a + a] = s * h[a];
+		A[4 * a + 3] = -s * h[a] * (n[a] - 1) / 2.0;
+	}
+	A[15] = 1;
+}
+
+typedef double (*wfn)(const double w[3]);
+
+static vol_t *vol_fn(const char *orient, const int n[3], const double h[3],
+		     wfn f, int dtype)
+{
+	double A[16];
+	affine(A, orient, n, h);
+	vol_t *v = vol_new(n[0], n[1], n[2], 1, dtype, A);
+	for (int k = 0; k < n[2]; k++)
+		for (int j = 0; j < n[1]; j++)
+			for (int i = 0; i < n[0]; i++) {
+				double w[3];
+				vol_to_world(v, i, j, k, w);
+				vol_set(v, vol_idx(v, i, j, k), f(w));
+			}
+	return v;
+}
+
+static double f_grad(const double w[3])
+{
+	return 100 + w[0] + 0.5 * w[1] + 0.25 * w[2];
+}
+
+static double f_ball8(const double w[3])
+{
+	return w[0] * w[0] + w[1] * w[1] + w[2] * w[2] <= 64 ? 4 : 0;
+}
+
+static double f_ball5(const double w[3])
+{
+	return w[0] * w[0] + w[1] * w[1] + w[2] * w[2] <= 25 ? 7 : 0;
+}
+
+static double f_tum(const double w[3])
+{
+	double x = w[0] + 6, y = w[1] - 6;
+	return x * x + y * y + w[2] * w[2] <= 9 ? 1 : 0;
+}
+
+/* marker in the anterior-left of world space: x < 0 (Left), y > 0 */
+static double f_marker(const double w[3])
+{
+	return w[0] > -12 && w[0] < -5 && w[1] > 5 && w[1] < 12 ? 100 : 0;
+}
+
+typedef struct rgbimg {
+	int w, h;
+	uint8_t *px;
+} rgbimg_t;
+
+static int read_png(const char *path, rgbimg_t *out)
+{
+	png_image im;
+	memset(&im, 0, sizeof im);
+	im.version = PNG_IMAGE_VERSION;
+	if (!png_image_begin_read_from_file(&im, path))
+		return -1;
+	im.format = PNG_FORMAT_RGB;
+	out->px = malloc(PNG_IMAGE_SIZE(im));
+	if (!out->px || !png_image_finish_read(&im, NULL, out->px, 0, NULL)) {
+		free(out->px);
+		return -1;
+	}
+	out->w = (int)im.width;
+	out->h = (int)im.height;
+	return 0;
+}
+
+static const uint8_t *px(const rgbimg_t *im, int u, int v)
+{
+	return im->px + 3 * ((size_t)v * im->w + u);
+}
+
+static int is_rgb(const uint8_t *p, int r, int g, int b)
+{
+	return p[0] == r && p[1] == g && p[2] == b;
+}
+
+static char outdir[256];
+
+static int rm_cb(const char *p, const struct stat *sb, int flag,
+		 struct FTW *ftw)
+{
+	(void)sb;
+	(void)flag;
+	(void)ftw;
+	return remove(p);
+}
+
+static int setup(void **state)
+{
+	(void)state;
+	snprintf(outdir, sizeof outdir, "/tmp/armstg-report-XXXXXX");
+	return mkdtemp(outdir) ? 0 : -1;
+}
+
+static int teardown(void **state)
+{
+	(void)state;
+	return nftw(outdir, rm_cb, 16, FTW_DEPTH | FTW_PHYS);
+}
+
+static int count_entries(const char *dir)
+{
+	char cmd[512];
+	snprintf(cmd, sizeof cmd, "find '%s' -mindepth 1 -type f | wc -l",
+		 dir);
+	FILE *p = popen(cmd, "r");
+	int n = -1;
+	if (p) {
+		if (fscanf(p, "%d", &n) != 1)
+			n = -1;
+		pclose(p);
+	}
+	return n;
+}
+
+static int run(const char *const *params, msg_t *const in[NIN], msg_t **out,
+	       char *err, size_t errsize)
+{
+	msg_t *o[1] = { NULL };
+	int rc = tu_run_in(TU_PLUGIN(), params, (const msg_t *const *)in, o,
+			   outdir, err, errsize);
+	if (out)
+		*out = o[0];
+	else
+		msg_unref(o[0]);
+	return rc;
+}
+
+static void unref_all(msg_t *in[NIN])
+{
+	for (int i = 0; i < NIN; i++) {
+		msg_unref(in[i]);
+		in[i] = NULL;
+	}
+}
+
+static char *slurp(const char *path)
+{
+	FILE *f = fopen(path, "rb");
+	if (!f)
+		return NULL;
+	fseek(f, 0, SEEK_END);
+	long n = ftell(f);
+	fseek(f, 0, SEEK_SET);
+	char *s = malloc((size_t)n + 1);
+	if (s && fread(s, 1, (size_t)n, f) != (size_t)n) {
+		free(s);
+		s = NULL;
+	}
+	if (s)
+		s[n] = 0;
+	fclose(f);
+	return s;
+}
+
+/* ---- tests ---- */
+
+/*
+ * 40^3 grid of 1 mm, RAS, centred on 0; zoom 2 -> 0.5 mm pixels, 80x80.
+ * Axial view through z = 0, radiological: pixel u has world x =
+ * 19.75 - 0.5 u, row v has y = 19.75 - 0.5 v.  The patient ventricle ball
+ * (r = 8) has its right-most inside pixel at x = 7.75 (nearest voxel 7.5,
+ * inside) next to x = 8.25 (voxel 8.5, outside): u = 24 is contour, in the
+ * patient-ventricle colour, on row v = 39 (y = 0.25).  The atlas ball
+ * (r = 5) gives u = 30 (x = 4.75) in the atlas-ventricle colour.
+ */
+static void test_png_overlay(void **state)
+{
+	(void)state;
+	const int n[3] = { 40, 40, 40 };
+	const double h[3] = { 1, 1, 1 };
+	msg_t *in[NIN] = { 0 }, *files = NULL;
+	char err[1024] = "", path[512];
+	in[IMG] = &vol_fn("RAS", n, h, f_grad, DT_F32)->base;
+	in[PL] = &vol_fn("LPS", n, h, f_ball8, DT_I16)->base;
+	in[AL] = &vol_fn("LAS", n, h, f_ball5, DT_U8)->base;
+	const char *params[] = { "prefix=r1", "ventricles=7",
+				 "patient_ventricles=4", "slice_at=0,0,0",
+				 "zoom=2", NULL };
+	int rc = run(params, in, &files, err, sizeof err);
+	if (rc)
+		fail_msg("report failed: %s", err);
+	const tab_t *ft = (const tab_t *)files;
+	assert_int_equal(ft->nrows, 4);
+	assert_string_equal(tab_col(ft, "path")->str[0], "r1/axial.png");
+	assert_string_equal(tab_col(ft, "path")->str[3], "r1/index.html");
+	msg_unref(files);
+
+	static const char *const views[3] = { "axial", "coronal", "sagittal" };
+	for (int k = 0; k < 3; k++) {
+		rgbimg_t im;
+		snprintf(path, sizeof path, "%s/r1/%s.png", outdir, views[k]);
+		assert_int_equal(read_png(path, &im), 0);
+		assert_int_equal(im.w, 80);
+		assert_int_equal(im.h, 80);
+		/* every view passes through the ball centres: contour on the
+		 * centre row at u = 24 (radius 8) and u = 30 (radius 5) for
+		 * axial/coronal; sagittal runs along y (anterior left): same
+		 * distances from the centre */
+		const uint8_t *p = px(&im, 24, 39), *a = px(&im, 30, 39);
+		if (!is_rgb(p, 0, 220, 255) || !is_rgb(a, 255, 220, 0))
+			fail_msg("%s: pixel (24,39) = %d,%d,%d, (30,39) = "
+				 "%d,%d,%d", views[k], p[0], p[1], p[2],
+				 a[0], a[1], a[2]);
+		/* one pixel further out is not contour: grey */
+		const uint8_t *g = px(&im, 23, 39);
+		assert_true(g[0] == g[1] && g[1] == g[2]);
+		/* the centre is grey too */
+		g = px(&im, 39, 39);
+		assert_true(g[0] == g[1] && g[1] == g[2]);
+		free(im.px);
+	}
+	unref_all(in);
+}
+
+/*
+ * A bright block in the anterior-left of world space lands in the top-right
+ * quadrant of the axial view in radiological convention (top-left in
+ * neurological), whichever storage order (LAS, LPS, RAS) the file has.
+ * Coronal: right half (radiological); sagittal (anterior left): left half.
+ */
+static void quadrant_means(const rgbimg_t *im, double q[4])
+{
+	/* q: 0 top-left, 1 top-right, 2 bottom-left, 3 bottom-right */
+	double s[4] = { 0 };
+	int c[4] = { 0 };
+	for (int v = 0; v < im->h; v++)
+		for (int u = 0; u < im->w; u++) {
+			int k = (v >= im->h / 2) * 2 + (u >= im->w / 2);
+			s[k] += px(im, u, v)[0];
+			c[k]++;
+		}
+	for (int k = 0; k < 4; k++)
+		q[k] = s[k] / c[k];
+}
+
+static void test_orientation(void **state)
+{
+	(void)state;
+	const int n[3] = { 30, 30, 20 };
+	const double h[3] = { 1, 1, 1.5 };
+	const char *orients[3] = { "LAS", "LPS", "RAS" };
+	for (int o = 0; o < 3; o++)
+		for (int conv = 0; conv < 2; conv++) {
+			msg_t *in[NIN] = { 0 };
+			char err[1024] = "", path[512], pre[64], ppre[80];
+			in[IMG] = &vol_fn(orients[o], n, h, f_marker,
+					  DT_I16)->base;
+			snprintf(pre, sizeof pre, "o_%s_%d", orients[o], conv);
+			snprintf(ppre, sizeof ppre, "prefix=%s", pre);
+			const char *params[] = {
+				ppre, "slice_at=-8,8,0",
+				conv ? "convention=neurological"
+				     : "convention=radiological",
+				NULL
+			};
+			if (run(params, in, NULL, err, sizeof err))
+				fail_msg("%s: %s", orients[o], err);
+			rgbimg_t im;
+			double q[4];
+			snprintf(path, sizeof path, "%s/%s/axial.png", outdir,
+				 pre);
+			assert_int_equal(read_png(path, &im), 0);
+			assert_int_equal(im.w, 60);
+			assert_int_equal(im.h, 60);
+			quadrant_means(&im, q);
+			int want = conv ? 0 : 1;
+			for (int k = 0; k < 4; k++)
+				if (k != want && !(q[want] > 5 * q[k] + 10))
+					fail_msg("%s conv %d: axial quadrant "
+						 "means %.1f %.1f %.1f %.1f, "
+						 "want %d brightest",
+						 orients[o], conv, q[0], q[1],
+						 q[2], q[3], want);
+			free(im.px);
+			/* coronal: left-right only; marker spans all z */
+			snprintf(path, sizeof path, "%s/%s/coronal.png",
+				 outdir, pre);
+			assert_int_equal(read_png(path, &im), 0);
+			assert_int_equal(im.h, 60); /* 20 x 1.5 mm / 0.5 */
+			quadrant_means(&im, q);
+			double lh = q[0] + q[2], rh = q[1] + q[3];
+			assert_true(conv ? lh > 5 * rh + 10 : rh > 5 * lh + 10);
+			free(im.px);
+			/* sagittal: anterior on the left */
+			snprintf(path, sizeof path, "%s/%s/sagittal.png",
+				 outdir, pre);
+			assert_int_equal(read_png(path, &im), 0);
+			quadrant_means(&im, q);
+			lh = q[0] + q[2], rh = q[1] + q[3];
+			assert_true(lh > 5 * rh + 10);
+			free(im.px);
+			unref_all(in);
+		}
+}
+
+static void test_html(void **state)
+{
+	(void)state;
+	const int n[3] = { 40, 40, 40 };
+	const double h[3] = { 1, 1, 1 };
+	msg_t *in[NIN] = { 0 };
+	char err[1024] = "", path[512];
+	in[IMG] = &vol_fn("LPS", n, h, f_grad, DT_F32)->base;
+	in[TUM] = &vol_fn("LAS", n, h, f_tum, DT_U8)->base;
+	in[ATUM] = &vol_fn("RAS", n, h, f_tum, DT_U8)->base;
+	tab_t *m = tab_new();
+	int64_t r = tab_add_row(m);
+	tab_set_str(m, r, "metric", "dice");
+	tab_set_str(m, r, "structure", "tumour<&>");
+	tab_set_num(m, r, "value", 0.8125);
+	r = tab_add_row(m);
+	tab_set_str(m, r, "metric", "S");
+	tab_set_str(m, r, "structure", "ventricles");
+	tab_set_num(m, r, "value", 1834.25);
+	in[MET] = &m->base;
+	tab_t *s = tab_new();
+	r = tab_add_row(s);
+	tab_set_num(s, r, "residual", 3.5e-7);
+	in[STATS] = &s->base;
+	const char *params[] = { "prefix=h/page", "title=Case <7>", NULL };
+	if (run(params, in, NULL, err, sizeof err))
+		fail_msg("report failed: %s", err);
+	snprintf(path, sizeof path, "%s/h/page/index.html", outdir);
+	char *html = slurp(path);
+	assert_non_null(html);
+	assert_non_null(strstr(html, "<td class=\"num\">0.8125</td>"));
+	assert_non_null(strstr(html, "<td class=\"num\">1834.25</td>"));
+	assert_non_null(strstr(html, "<td class=\"num\">3.5e-07</td>"));
+	assert_non_null(strstr(html, "tumour&lt;&amp;&gt;"));
+	assert_non_null(strstr(html, "<title>Case &lt;7&gt;</title>"));
+	assert_non_null(strstr(html, "radiological"));
+	assert_non_null(strstr(html, "src=\"axial.png\""));
+	/* default slice point: the tumour centroid (-6, 6, 0) */
+	assert_non_null(strstr(html, "(-6.00, 6.00, 0.00) mm"));
+	assert_non_null(strstr(html, "tumour centroid"));
+	assert_non_null(strstr(html, "stored LPS"));
+	free(html);
+	/* exactly the 4 files, no temporary left behind */
+	snprintf(path, sizeof path, "%s/h/page", outdir);
+	assert_int_equal(count_entries(path), 4);
+	char cmd[600];
+	snprintf(cmd, sizeof cmd,
+		 "test -z \"$(find '%s' -name '.armstg-tmp*')\"", outdir);
+	assert_int_equal(system(cmd), 0);
+	unref_all(in);
+}
+
+/*
+ * Convergence plot of a stats table: columns step (x), residual 10^(-k/5)
+ * (log axis: spans 6 decades), energy (linear).  Panels of 480x110 stacked:
+ * 480x220.  Frame of panel p: x 8..472, y 110p+16..110p+102; points inset by
+ * 2 px: the first residual (the largest) at (10, 18), the last (smallest) at
+ * (470, 100); the energy rises linearly: first at (10, 110+100).
+ */
+static void test_plot(void **state)
+{
+	(void)state;
+	const int n[3] = { 8, 8, 8 };
+	const double h[3] = { 1, 1, 1 };
+	msg_t *in[NIN] = { 0 };
+	char err[1024] = "", path[512];
+	in[IMG] = &vol_fn("RAS", n, h, f_grad, DT_F32)->base;
+	tab_t *s = tab_new();
+	for (int k = 0; k <= 30; k++) {
+		int64_t r = tab_add_row(s);
+		tab_set_num(s, r, "step", k);
+		tab_set_num(s, r, "residual", pow(10, -k / 5.0));
+		tab_set_num(s, r, "energy", 2.0 * k);
+	}
+	in[STATS] = &s->base;
+	const char *params[] = { "prefix=plot", NULL };
+	if (run(params, in, NULL, err, sizeof err))
+		fail_msg("report failed: %s", err);
+	rgbimg_t im;
+	snprintf(path, sizeof path, "%s/plot/stats.png", outdir);
+	assert_int_equal(read_png(path, &im), 0);
+	assert_int_equal(im.w, 480);
+	assert_int_equal(im.h, 220);
+	assert_true(is_rgb(px(&im, 10, 18), 0, 90, 200));
+	assert_true(is_rgb(px(&im, 470, 100), 0, 90, 200));
+	assert_true(is_rgb(px(&im, 10, 210), 0, 90, 200));
+	assert_true(is_rgb(px(&im, 470, 128), 0, 90, 200));
+	/* a point off the curves is background */
+	assert_true(is_rgb(px(&im, 470, 18), 255, 255, 255));
+	free(im.px);
+	snprintf(path, sizeof path, "%s/plot/index.html", outdir);
+	char *html = slurp(path);
+	assert_non_null(html);
+	assert_non_null(strstr(html, "<img src=\"stats.png\""));
+	free(html);
+	unref_all(in);
+}
+
+static void expect_bad(const char *const *params, msg_t *const in[NIN],
+		       const char *needle)
+{
+	char err[1024] = "";
+	int before = count_entries(outdir);
+	int rc = run(params, in, NULL, err, sizeof err);
+	if (rc >= 0)
+		fail_msg("expected an error containing '%s'", needle);
+	if (!strstr(err, needle))
+		fail_msg("error '%s' does not contain '%s'", err, needle);
+	/* a failed run leaves nothing behind */
+	assert_int_equal(count_entries(outdir), before);
+}
+
+static double f_nan(const double w[3])
+{
+	(void)w;
+	return NAN;
+}
+
+static void test_bad_inputs(void **state)
+{
+	(void)state;
+	const int n[3] = { 12, 12, 12 };
+	const double h[3] = { 1, 1, 1 };
+	msg_t *in[NIN] = { 0 };
+	double A[16];
+	affine(A, "LPS", n, h);
+	const char *pb[] = { "prefix=bad", NULL };
+
+	in[IMG] = &vol_new(12, 12, 12, 3, DT_F32, A)->base;
+	expect_bad(pb, in, "scalar volume");
+	msg_unref(in[IMG]);
+	in[IMG] = &vol_fn("LPS", n, h, f_nan, DT_F32)->base;
+	expect_bad(pb, in, "no finite value");
+	msg_unref(in[IMG]);
+	in[IMG] = &vol_fn("LPS", n, h, f_grad, DT_F32)->base;
+	in[TUM] = &vol_new(12, 12, 12, 1, DT_U8, A)->base;
+	expect_bad(pb, in, "tumour mask is empty");
+	msg_unref(in[TUM]);
+	in[TUM] = NULL;
+	double F[16];
+	memcpy(F, A, sizeof F);
+	F[3] += 500;
+	in[PL] = &vol_new(12, 12, 12, 1, DT_U8, F)->base;
+	expect_bad(pb, in, "patient_labels does not overlap the image");
+	msg_unref(in[PL]);
+	in[PL] = NULL;
+	const char *p1[] = { "prefix=bad", "slice_at=1,2", NULL };
+	expect_bad(p1, in, "not a world point");
+	const char *p2[] = { "prefix=bad", "slice_at=0,0,99", NULL };
+	expect_bad(p2, in, "outside the image");
+	const char *p3[] = { "prefix=bad", "ventricles=4-x", NULL };
+	expect_bad(p3, in, "ventricles");
+	const char *p4[] = { "prefix=bad", "zoom=0", NULL };
+	expect_bad(p4, in, "zoom");
+	unref_all(in);
+	expect_bad(pb, in, "image");
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_png_overlay),
+		cmocka_unit_test(test_orientation),
+		cmocka_unit_test(test_html),
+		cmocka_unit_test(test_plot),
+		cmocka_unit_test(test_bad_inputs),
+	};
+	return cmocka_run_group_tests(tests, setup, teardown);
+}

@@ -1,0 +1,1166 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * MTLED model setup (see tled_model.h): node merging, background integration
+ * points, support domains, MLS shape functions and their derivatives, the
+ * integration-constraint correction, lumped masses, materials, boundary
+ * normals.  Pure C + OpenMP; no host calls.  SI units throughout.
+ */
+#include "tled_model.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+static int errf(char *err, size_t n, const char *fmt, ...)
+	__attribute__((format(printf, 3, 4)));
+static int errf(char *err, size_t n, const char *fmt, ...)
+{
+	if (err && n) {
+		va_list ap;
+		va_start(ap, fmt);
+		vsnprintf(err, n, fmt, ap);
+		va_end(ap);
+	}
+	return -1;
+}
+
+int tled_material_set(tled_material_t *m, double E, double nu, double rho)
+{
+	if (!(E > 0) || !(nu > -1 && nu < 0.5) || !(rho > 0))
+		return -1;
+	m->E = E;
+	m->nu = nu;
+	m->rho = rho;
+	m->mu = E / (2 * (1 + nu));
+	m->kappa = E / (3 * (1 - 2 * nu));
+	m->lambda = m->kappa - 2 * m->mu / 3;
+	m->c = sqrt((m->lambda + 2 * m->mu) / rho);
+	return 0;
+}
+
+void tled_model_opts_default(tled_model_opts_t *o)
+{
+	memset(o, 0, sizeof *o);
+	o->support_k = 20;
+	o->support_dilation = 1.2;
+	o->ip_factor = 1.0;
+	o->merge_tol = 1e-3 * TLED_MM;
+	/* thesis Table 3.1 */
+	tled_material_set(&o->mat[MAT_BRAIN], 3000, 0.49, 1000);
+	tled_material_set(&o->mat[MAT_CSF], 10, 0.1, 1000);
+	tled_material_set(&o->mat[MAT_TUMOUR], 3000, 0.49, 1000);
+}
+
+/* ------------------------------------------------------------------ grid */
+
+int tled_grid_build(tled_grid_t *g, const double *p, int64_t n, double cell)
+{
+	memset(g, 0, sizeof *g);
+	g->p = p;
+	g->n = n;
+	double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX };
+	double hi[3] = { -DBL_MAX, -DBL_MAX, -DBL_MAX };
+	for (int64_t i = 0; i < n; i++)
+		for (int c = 0; c < 3; c++) {
+			lo[c] = fmin(lo[c], p[3 * i + c]);
+			hi[c] = fmax(hi[c], p[3 * i + c]);
+		}
+	if (n == 0)
+		for (int c = 0; c < 3; c++)
+			lo[c] = hi[c] = 0;
+	if (!(cell > 0) || !isfinite(cell))
+		cell = 1;
+	/* cap the number of cells at ~4n + 64 */
+	for (;;) {
+		double nc = 1;
+		for (int c = 0; c < 3; c++)
+			nc *= floor((hi[c] - lo[c]) / cell) + 1;
+		if (nc <= 4.0 * (double)n + 64)
+			break;
+		cell *= 1.26;
+	}
+	g->cell = cell;
+	for (int c = 0; c < 3; c++) {
+		g->lo[c] = lo[c];
+		g->nc[c] = (int)floor((hi[c] - lo[c]) / cell) + 1;
+	}
+	int64_t ncell = (int64_t)g->nc[0] * g->nc[1] * g->nc[2];
+	g->start = calloc((size_t)ncell + 1, sizeof *g->start);
+	g->idx = malloc((size_t)(n ? n : 1) * sizeof *g->idx);
+	int64_t *cid = malloc((size_t)(n ? n : 1) * sizeof *cid);
+	if (!g->start || !g->idx || !cid) {
+		free(cid);
+		tled_grid_free(g);
+		return -1;
+	}
+	for (int64_t i = 0; i < n; i++) {
+		int ci[3];
+		for (int c = 0; c < 3; c++) {
+			ci[c] = (int)floor((p[3 * i + c] - lo[c]) / cell);
+			if (ci[c] < 0)
+				ci[c] = 0;
+			if (ci[c] >= g->nc[c])
+				ci[c] = g->nc[c] - 1;
+		}
+		cid[i] = ((int64_t)ci[2] * g->nc[1] + ci[1]) * g->nc[0] + ci[0];
+		g->start[cid[i] + 1]++;
+	}
+	for (int64_t c = 0; c < ncell; c++)
+		g->start[c + 1] += g->start[c];
+	int64_t *fill = malloc((size_t)ncell * sizeof *fill);
+	if (!fill) {
+		free(cid);
+		tled_grid_free(g);
+		return -1;
+	}
+	memcpy(fill, g->start, (size_t)ncell * sizeof *fill);
+	for (int64_t i = 0; i < n; i++)
+		g->idx[fill[cid[i]]++] = i;
+	free(fill);
+	free(cid);
+	return 0;
+}
+
+void tled_grid_free(tled_grid_t *g)
+{
+	free(g->start);
+	free(g->idx);
+	g->start = NULL;
+	g->idx = NULL;
+}
+
+static void knn_insert(int k, int *cnt, int64_t *ids, double *d2, int64_t id,
+		       double d)
+{
+	if (*cnt == k && d >= d2[k - 1])
+		return;
+	int j = *cnt < k ? (*cnt)++ : k - 1;
+	while (j > 0 && d2[j - 1] > d) {
+		d2[j] = d2[j - 1];
+		ids[j] = ids[j - 1];
+		j--;
+	}
+	d2[j] = d;
+	ids[j] = id;
+}
+
+int tled_grid_knn(const tled_grid_t *g, const double x[3], int k, int64_t skip,
+		  int64_t *ids, double *d2)
+{
+	if (k <= 0 || g->n == 0)
+		return 0;
+	int c0[3];
+	for (int c = 0; c < 3; c++) {
+		double f = floor((x[c] - g->lo[c]) / g->cell);
+		if (f < 0)
+			f = 0;
+		if (f > g->nc[c] - 1)
+			f = g->nc[c] - 1;
+		c0[c] = (int)f;
+	}
+	/* distance from x to the block of cells [c0-r, c0+r]: lower bound for
+	 * anything in ring r+1 */
+	int cnt = 0;
+	int rmax = g->nc[0];
+	if (g->nc[1] > rmax)
+		rmax = g->nc[1];
+	if (g->nc[2] > rmax)
+		rmax = g->nc[2];
+	for (int r = 0; r <= rmax; r++) {
+		for (int dz = -r; dz <= r; dz++) {
+			int cz = c0[2] + dz;
+			if (cz < 0 || cz >= g->nc[2])
+				continue;
+			for (int dy = -r; dy <= r; dy++) {
+				int cy = c0[1] + dy;
+				if (cy < 0 || cy >= g->nc[1])
+					continue;
+				int edge = (abs(dz) == r || abs(dy) == r);
+				for (int dx = -r; dx <= r; dx += edge ? 1 : 2 * r) {
+					int cx = c0[0] + dx;
+					if (cx >= 0 && cx < g->nc[0]) {
+						int64_t cc = ((int64_t)cz * g->nc[1] + cy) *
+							     g->nc[0] + cx;
+						for (int64_t e = g->start[cc];
+						     e < g->start[cc + 1]; e++) {
+							int64_t i = g->idx[e];
+							if (i == skip)
+								continue;
+							const double *q = g->p + 3 * i;
+							double d = (q[0] - x[0]) * (q[0] - x[0]) +
+								   (q[1] - x[1]) * (q[1] - x[1]) +
+								   (q[2] - x[2]) * (q[2] - x[2]);
+							knn_insert(k, &cnt, ids, d2, i, d);
+						}
+					}
+					if (r == 0)
+						break;
+				}
+			}
+		}
+		if (cnt == k) {
+			/* min distance from x to outside the block of ring r */
+			double lb = DBL_MAX;
+			for (int c = 0; c < 3; c++) {
+				double lo = g->lo[c] + (c0[c] - r) * g->cell;
+				double hi = g->lo[c] + (c0[c] + r + 1) * g->cell;
+				lb = fmin(lb, fmin(x[c] - lo, hi - x[c]));
+			}
+			if (lb > 0 && lb * lb >= d2[k - 1])
+				break;
+		}
+	}
+	return cnt;
+}
+
+/* ------------------------------------------------------------ small algebra */
+
+/* Inverse of a symmetric positive definite 4x4 by Gauss-Jordan with partial
+ * pivoting; returns -1 when the smallest pivot is below tol * max diag. */
+static int inv4(const double A[16], double Ai[16])
+{
+	double a[4][8];
+	double dmax = 0;
+	for (int i = 0; i < 4; i++) {
+		for (int j = 0; j < 4; j++) {
+			a[i][j] = A[4 * i + j];
+			a[i][4 + j] = i == j;
+		}
+		dmax = fmax(dmax, fabs(A[5 * i]));
+	}
+	if (!(dmax > 0))
+		return -1;
+	for (int c = 0; c < 4; c++) {
+		int piv = c;
+		for (int r = c + 1; r < 4; r++)
+			if (fabs(a[r][c]) > fabs(a[piv][c]))
+				piv = r;
+		if (!(fabs(a[piv][c]) > 1e-10 * dmax))
+			return -1;
+		if (piv != c)
+			for (int j = 0; j < 8; j++) {
+				double t = a[c][j];
+				a[c][j] = a[piv][j];
+				a[piv][j] = t;
+			}
+		double d = 1 / a[c][c];
+		for (int j = 0; j < 8; j++)
+			a[c][j] *= d;
+		for (int r = 0; r < 4; r++)
+			if (r != c && a[r][c] != 0) {
+				double f = a[r][c];
+				for (int j = 0; j < 8; j++)
+					a[r][j] -= f * a[c][j];
+			}
+	}
+	for (int i = 0; i < 4; i++)
+		for (int j = 0; j < 4; j++)
+			Ai[4 * i + j] = a[i][4 + j];
+	return 0;
+}
+
+/* eigen-decomposition of a symmetric 3x3 (Jacobi); V columns = vectors */
+static void eig3(const double A[9], double w[3], double V[9])
+{
+	double a[9];
+	memcpy(a, A, sizeof a);
+	for (int i = 0; i < 9; i++)
+		V[i] = (i % 4) == 0;
+	for (int sweep = 0; sweep < 50; sweep++) {
+		double off = fabs(a[1]) + fabs(a[2]) + fabs(a[5]);
+		if (off < 1e-300)
+			break;
+		for (int p = 0; p < 2; p++)
+			for (int q = p + 1; q < 3; q++) {
+				double apq = a[3 * p + q];
+				if (fabs(apq) < 1e-300)
+					continue;
+				double th = (a[3 * q + q] - a[3 * p + p]) / (2 * apq);
+				double t = (th >= 0 ? 1 : -1) /
+					   (fabs(th) + sqrt(th * th + 1));
+				double c = 1 / sqrt(t * t + 1), s = t * c;
+				for (int k = 0; k < 3; k++) {
+					double akp = a[3 * k + p], akq = a[3 * k + q];
+					a[3 * k + p] = c * akp - s * akq;
+					a[3 * k + q] = s * akp + c * akq;
+				}
+				for (int k = 0; k < 3; k++) {
+					double apk = a[3 * p + k], aqk = a[3 * q + k];
+					a[3 * p + k] = c * apk - s * aqk;
+					a[3 * q + k] = s * apk + c * aqk;
+				}
+				for (int k = 0; k < 3; k++) {
+					double vkp = V[3 * k + p], vkq = V[3 * k + q];
+					V[3 * k + p] = c * vkp - s * vkq;
+					V[3 * k + q] = s * vkp + c * vkq;
+				}
+			}
+	}
+	for (int i = 0; i < 3; i++)
+		w[i] = a[4 * i];
+}
+
+/* ------------------------------------------------------------ MLS */
+
+/* Cubic spline weight (Belytschko, Lu & Gu 1994), support r <= 1. */
+double tled_weight(double r, double *dwdr)
+{
+	if (r < 0.5) {
+		*dwdr = -8 * r + 12 * r * r;
+		return 2.0 / 3 - 4 * r * r + 4 * r * r * r;
+	}
+	if (r < 1) {
+		*dwdr = -4 + 8 * r - 4 * r * r;
+		return 4.0 / 3 - 4 * r + 4 * r * r - 4.0 / 3 * r * r * r;
+	}
+	*dwdr = 0;
+	return 0;
+}
+
+/*
+ * MLS with linear basis p(y) = [1, (y - x0)/R] about x0 = x (the ip):
+ *   M(x) = sum_a w_a(x) p_a p_a^T,  gamma = M^-1 p(x),
+ *   N_a = gamma^T p_a w_a,
+ *   dN_a/dx_k = (dgamma_k)^T p_a w_a + gamma^T p_a dw_a/dx_k,
+ *   dgamma_k = M^-1 (dp/dx_k - dM/dx_k gamma)      (Belytschko et al. 1994)
+ * At x = x0, p(x) = e1 and dp/dx_k = e_{k+1}/R.
+ */
+int tled_mls(const double *X, const int64_t *ids, int k, const double x[3],
+	     double R, double *N, double *dN, double *w)
+{
+	double M[16] = { 0 }, dM[3][16] = { { 0 } };
+	double pa[4], dw[3];
+	for (int i = 0; i < k; i++) {
+		const double *q = X + 3 * ids[i];
+		double d[3] = { q[0] - x[0], q[1] - x[1], q[2] - x[2] };
+		double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+		double dwdr;
+		w[i] = tled_weight(dist / R, &dwdr);
+		/* dw/dx_k = W'(r) * dr/dx_k, r = |x - X_a|/R */
+		for (int c = 0; c < 3; c++)
+			dw[c] = dist > 0 ? dwdr * (-d[c]) / (dist * R) : 0;
+		pa[0] = 1;
+		for (int c = 0; c < 3; c++)
+			pa[c + 1] = d[c] / R;
+		for (int r = 0; r < 4; r++)
+			for (int s = 0; s < 4; s++) {
+				M[4 * r + s] += w[i] * pa[r] * pa[s];
+				for (int c = 0; c < 3; c++)
+					dM[c][4 * r + s] += dw[c] * pa[r] * pa[s];
+			}
+	}
+	double Mi[16];
+	if (inv4(M, Mi))
+		return -1;
+	double g[4], dg[3][4];
+	for (int r = 0; r < 4; r++)
+		g[r] = Mi[4 * r];
+	for (int c = 0; c < 3; c++) {
+		double t[4];
+		for (int r = 0; r < 4; r++) {
+			double s = (r == c + 1) ? 1 / R : 0;
+			for (int q = 0; q < 4; q++)
+				s -= dM[c][4 * r + q] * g[q];
+			t[r] = s;
+		}
+		for (int r = 0; r < 4; r++) {
+			double s = 0;
+			for (int q = 0; q < 4; q++)
+				s += Mi[4 * r + q] * t[q];
+			dg[c][r] = s;
+		}
+	}
+	for (int i = 0; i < k; i++) {
+		const double *q = X + 3 * ids[i];
+		double d[3] = { q[0] - x[0], q[1] - x[1], q[2] - x[2] };
+		double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+		double dwdr;
+		tled_weight(dist / R, &dwdr);
+		pa[0] = 1;
+		for (int c = 0; c < 3; c++)
+			pa[c + 1] = d[c] / R;
+		double gp = g[0] * pa[0] + g[1] * pa[1] + g[2] * pa[2] +
+			    g[3] * pa[3];
+		N[i] = gp * w[i];
+		for (int c = 0; c < 3; c++) {
+			double dwc = dist > 0 ? dwdr * (-d[c]) / (dist * R) : 0;
+			double dgp = dg[c][0] * pa[0] + dg[c][1] * pa[1] +
+				     dg[c][2] * pa[2] + dg[c][3] * pa[3];
+			dN[3 * i + c] = dgp * w[i] + gp * dwc;
+		}
+	}
+	return 0;
+}
+
+/* ------------------------------------------------------------ helpers */
+
+static int label_priority(int32_t l)
+{
+	switch (l) {
+	case TL_BOUNDARY: return 6;
+	case TL_SEED: return 5;
+	case TL_TUMOUR_BND: return 4;
+	case TL_TUMOUR: return 3;
+	case TL_CSF: return 2;
+	default: return 1;
+	}
+}
+
+static int64_t uf_find(int64_t *par, int64_t i)
+{
+	while (par[i] != i) {
+		par[i] = par[par[i]];
+		i = par[i];
+	}
+	return i;
+}
+
+static int nthreads_of(int n)
+{
+#ifdef _OPENMP
+	return n > 0 ? n : omp_get_max_threads();
+#else
+	(void)n;
+	return 1;
+#endif
+}
+
+void tled_model_free(tled_model_t *m)
+{
+	if (!m)
+		return;
+	free(m->X);
+	free(m->label);
+	free(m->kind);
+	free(m->mass);
+	free(m->nn_dist);
+	free(m->rep);
+	free(m->ipX);
+	free(m->ipV);
+	free(m->ipmat);
+	free(m->ipptr);
+	free(m->ipnode);
+	free(m->entip);
+	free(m->N);
+	free(m->dN);
+	free(m->nptr);
+	free(m->nent);
+	free(m->bnode);
+	free(m->bX);
+	free(m->bn);
+	tled_grid_free(&m->bgrid);
+	memset(m, 0, sizeof *m);
+}
+
+double tled_boundary_side(const tled_model_t *m, const double y[3],
+			  int64_t *bid)
+{
+	if (bid)
+		*bid = -1;
+	if (m->nb == 0)
+		return -INFINITY;
+	int64_t id;
+	double d2;
+	if (tled_grid_knn(&m->bgrid, y, 1, -1, &id, &d2) < 1)
+		return -INFINITY;
+	if (bid)
+		*bid = id;
+	const double *p = m->bX + 3 * id, *nn = m->bn + 3 * id;
+	return (y[0] - p[0]) * nn[0] + (y[1] - p[1]) * nn[1] +
+	       (y[2] - p[2]) * nn[2];
+}
+
+/* outward normals of the boundary nodes: PCA of the 12 nearest boundary
+ * nodes, oriented away from the nearby interior nodes */
+static int boundary_setup(tled_model_t *m, const tled_grid_t *ng)
+{
+	int64_t nb = 0;
+	for (int64_t i = 0; i < m->n; i++)
+		nb += m->label[i] == TL_BOUNDARY;
+	m->nb = nb;
+	if (nb == 0)
+		return 0;
+	m->bnode = malloc((size_t)nb * sizeof *m->bnode);
+	m->bX = malloc((size_t)nb * 3 * sizeof *m->bX);
+	m->bn = malloc((size_t)nb * 3 * sizeof *m->bn);
+	if (!m->bnode || !m->bX || !m->bn)
+		return -1;
+	nb = 0;
+	double cen[3] = { 0, 0, 0 };
+	for (int64_t i = 0; i < m->n; i++) {
+		for (int c = 0; c < 3; c++)
+			cen[c] += m->X[3 * i + c] / (double)m->n;
+		if (m->label[i] == TL_BOUNDARY) {
+			m->bnode[nb] = i;
+			memcpy(m->bX + 3 * nb, m->X + 3 * i, 3 * sizeof(double));
+			nb++;
+		}
+	}
+	if (tled_grid_build(&m->bgrid, m->bX, nb, m->h_mean))
+		return -1;
+	int rc = 0;
+#pragma omp parallel for schedule(dynamic, 256) num_threads(m->nthreads)
+	for (int64_t b = 0; b < nb; b++) {
+		int64_t ids[24];
+		double d2[24];
+		const double *x = m->bX + 3 * b;
+		int k = tled_grid_knn(&m->bgrid, x, 12, -1, ids, d2);
+		double mean[3] = { 0, 0, 0 }, C[9] = { 0 };
+		for (int i = 0; i < k; i++)
+			for (int c = 0; c < 3; c++)
+				mean[c] += m->bX[3 * ids[i] + c] / k;
+		for (int i = 0; i < k; i++) {
+			double d[3];
+			for (int c = 0; c < 3; c++)
+				d[c] = m->bX[3 * ids[i] + c] - mean[c];
+			for (int r = 0; r < 3; r++)
+				for (int s = 0; s < 3; s++)
+					C[3 * r + s] += d[r] * d[s];
+		}
+		double w[3], V[9];
+		eig3(C, w, V);
+		int mn = 0;
+		for (int i = 1; i < 3; i++)
+			if (w[i] < w[mn])
+				mn = i;
+		double nrm[3] = { V[mn], V[3 + mn], V[6 + mn] };
+		/* interior side: mean of the nearest non-boundary nodes */
+		int kk = tled_grid_knn(ng, x, 24, -1, ids, d2);
+		double in[3] = { 0, 0, 0 };
+		int cnt = 0;
+		for (int i = 0; i < kk; i++)
+			if (m->label[ids[i]] != TL_BOUNDARY) {
+				for (int c = 0; c < 3; c++)
+					in[c] += m->X[3 * ids[i] + c];
+				cnt++;
+			}
+		if (cnt)
+			for (int c = 0; c < 3; c++)
+				in[c] /= cnt;
+		else
+			memcpy(in, cen, sizeof in);
+		double s = 0;
+		for (int c = 0; c < 3; c++)
+			s += (x[c] - in[c]) * nrm[c];
+		if (s < 0)
+			for (int c = 0; c < 3; c++)
+				nrm[c] = -nrm[c];
+		double l = sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
+		if (!(l > 0)) {
+			rc = -1;
+			l = 1;
+		}
+		for (int c = 0; c < 3; c++)
+			m->bn[3 * b + c] = nrm[c] / l;
+	}
+	return rc;
+}
+
+void tled_model_gradsum(const tled_model_t *m, double *g)
+{
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t a = 0; a < m->n; a++) {
+		double s[3] = { 0, 0, 0 };
+		for (int64_t t = m->nptr[a]; t < m->nptr[a + 1]; t++) {
+			int64_t e = m->nent[t];
+			for (int c = 0; c < 3; c++)
+				s[c] += m->ipV[m->entip[e]] * m->dN[3 * e + c];
+		}
+		for (int c = 0; c < 3; c++)
+			g[3 * a + c] = s[c];
+	}
+}
+
+void tled_model_grad(const tled_model_t *m, const double *u, double *H)
+{
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t p = 0; p < m->nip; p++) {
+		double h[9] = { 0 };
+		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+			const double *ua = u + 3 * m->ipnode[e];
+			const double *d = m->dN + 3 * e;
+			for (int i = 0; i < 3; i++)
+				for (int j = 0; j < 3; j++)
+					h[3 * i + j] += ua[i] * d[j];
+		}
+		memcpy(H + 9 * p, h, sizeof h);
+	}
+}
+
+/* ------------------------------------------------- consistency correction */
+
+/*
+ * Least-norm correction delta of the derivatives (one scalar problem per
+ * Cartesian component) such that
+ *   (i)  sum_a delta_a(ip) [1, X_a] = 0 at every ip  (linear reproduction),
+ *   (ii) sum_ip V_ip (dN_a + delta_a)(ip) = 0 for every constrained node a,
+ * minimising sum_ip V_ip sum_a delta_a(ip)^2 / w_a(ip).  Lagrange multipliers
+ * give delta_a(ip) = w_a (mu_a - p_a^T M^-1 sum_b w_b p_b mu_b) (mu = 0 on
+ * unconstrained nodes): the residual of the ip's MLS linear fit of mu.  The
+ * multipliers solve the SPD system Q mu = -g with
+ *   (Q v)_a = sum_ip V_ip w_a (v_a - p_a^T M^-1 sum_b w_b p_b v_b),
+ * by conjugate gradients (3 right-hand sides).
+ */
+typedef struct corr_ctx {
+	const tled_model_t *m;
+	const double *w;     /* per entry */
+	const double *P;     /* 4 per entry: p_a */
+	const double *Mi;    /* 16 per ip */
+	const uint8_t *con;  /* per node */
+	double *ev;          /* 3 per entry scratch */
+} corr_ctx_t;
+
+/* per-entry residual values  e = w_a (v_a - p_a^T c), c = M^-1 sum w p v */
+static void corr_resid(const corr_ctx_t *cx, const double *v, double *ev)
+{
+	const tled_model_t *m = cx->m;
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t p = 0; p < m->nip; p++) {
+		double b[4][3] = { { 0 } }, cc[4][3];
+		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+			int64_t a = m->ipnode[e];
+			if (!cx->con[a])
+				continue;
+			for (int r = 0; r < 4; r++)
+				for (int c = 0; c < 3; c++)
+					b[r][c] += cx->w[e] * cx->P[4 * e + r] *
+						   v[3 * a + c];
+		}
+		const double *Mi = cx->Mi + 16 * p;
+		for (int r = 0; r < 4; r++)
+			for (int c = 0; c < 3; c++)
+				cc[r][c] = Mi[4 * r] * b[0][c] + Mi[4 * r + 1] * b[1][c] +
+					   Mi[4 * r + 2] * b[2][c] +
+					   Mi[4 * r + 3] * b[3][c];
+		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+			int64_t a = m->ipnode[e];
+			const double *pa = cx->P + 4 * e;
+			for (int c = 0; c < 3; c++) {
+				double fit = pa[0] * cc[0][c] + pa[1] * cc[1][c] +
+					     pa[2] * cc[2][c] + pa[3] * cc[3][c];
+				double va = cx->con[a] ? v[3 * a + c] : 0;
+				ev[3 * e + c] = cx->w[e] * (va - fit);
+			}
+		}
+	}
+}
+
+static void corr_apply(const corr_ctx_t *cx, const double *v, double *out,
+		       const int64_t *ent_ip)
+{
+	const tled_model_t *m = cx->m;
+	corr_resid(cx, v, cx->ev);
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t a = 0; a < m->n; a++) {
+		double s[3] = { 0, 0, 0 };
+		if (cx->con[a])
+			for (int64_t t = m->nptr[a]; t < m->nptr[a + 1]; t++) {
+				int64_t e = m->nent[t];
+				double V = m->ipV[ent_ip[e]];
+				for (int c = 0; c < 3; c++)
+					s[c] += V * cx->ev[3 * e + c];
+			}
+		for (int c = 0; c < 3; c++)
+			out[3 * a + c] = s[c];
+	}
+}
+
+static int correct_gradients(tled_model_t *m, const double *w, const double *P,
+			     const double *Mi, const uint8_t *con,
+			     const int64_t *ent_ip, char *err, size_t errsize)
+{
+	int64_t n = m->n, ne = m->ipptr[m->nip];
+	double *g = calloc((size_t)(3 * n), sizeof *g);
+	double *x = calloc((size_t)(3 * n), sizeof *x);
+	double *r = malloc((size_t)(3 * n) * sizeof *r);
+	double *d = malloc((size_t)(3 * n) * sizeof *d);
+	double *q = malloc((size_t)(3 * n) * sizeof *q);
+	double *ev = malloc((size_t)(3 * (ne ? ne : 1)) * sizeof *ev);
+	int rc = 0;
+	if (!g || !x || !r || !d || !q || !ev) {
+		rc = errf(err, errsize, "out of memory in the gradient "
+			  "correction");
+		goto out;
+	}
+	corr_ctx_t cx = { m, w, P, Mi, con, ev };
+	tled_model_gradsum(m, g);
+	double g0[3] = { 0, 0, 0 }, rr[3] = { 0, 0, 0 };
+	for (int64_t a = 0; a < n; a++)
+		for (int c = 0; c < 3; c++) {
+			double v = con[a] ? -g[3 * a + c] : 0;
+			r[3 * a + c] = v;
+			d[3 * a + c] = v;
+			rr[c] += v * v;
+		}
+	for (int c = 0; c < 3; c++)
+		g0[c] = sqrt(rr[c]);
+	/* scale for the stopping test: sum |V dN| is O(h^2) per node */
+	int it;
+	for (it = 0; it < 5000; it++) {
+		int done = 1;
+		for (int c = 0; c < 3; c++)
+			if (sqrt(rr[c]) > 1e-13 * (g0[c] > 0 ? g0[c] : 1) &&
+			    g0[c] > 0)
+				done = 0;
+		if (done)
+			break;
+		corr_apply(&cx, d, q, ent_ip);
+		double dq[3] = { 0, 0, 0 };
+		for (int64_t a = 0; a < n; a++)
+			for (int c = 0; c < 3; c++)
+				dq[c] += d[3 * a + c] * q[3 * a + c];
+		double al[3], rn[3] = { 0, 0, 0 };
+		for (int c = 0; c < 3; c++)
+			al[c] = dq[c] > 0 ? rr[c] / dq[c] : 0;
+		for (int64_t a = 0; a < n; a++)
+			for (int c = 0; c < 3; c++) {
+				x[3 * a + c] += al[c] * d[3 * a + c];
+				r[3 * a + c] -= al[c] * q[3 * a + c];
+				rn[c] += r[3 * a + c] * r[3 * a + c];
+			}
+		for (int64_t a = 0; a < n; a++)
+			for (int c = 0; c < 3; c++)
+				d[3 * a + c] = r[3 * a + c] +
+					       (rr[c] > 0 ? rn[c] / rr[c] : 0) *
+						       d[3 * a + c];
+		for (int c = 0; c < 3; c++)
+			rr[c] = rn[c];
+	}
+	m->corr_iters = it;
+	/* apply: dN += w (mu - fit(mu)) */
+	corr_resid(&cx, x, ev);
+	for (int64_t e = 0; e < ne; e++)
+		for (int c = 0; c < 3; c++)
+			m->dN[3 * e + c] += ev[3 * e + c];
+	/* report the remaining constraint residual */
+	tled_model_gradsum(m, g);
+	double after = 0, before = 0;
+	for (int64_t a = 0; a < n; a++)
+		if (con[a])
+			for (int c = 0; c < 3; c++)
+				after += g[3 * a + c] * g[3 * a + c];
+	for (int c = 0; c < 3; c++)
+		before += g0[c] * g0[c];
+	m->corr_rel = before > 0 ? sqrt(after / before) : 0;
+out:
+	free(g);
+	free(x);
+	free(r);
+	free(d);
+	free(q);
+	free(ev);
+	return rc;
+}
+
+/* ------------------------------------------------------------ build */
+
+static int default_inside(const tled_model_t *m, const tled_grid_t *ng,
+			  const double x[3])
+{
+	int64_t id;
+	double d2;
+	if (tled_grid_knn(ng, x, 1, -1, &id, &d2) < 1)
+		return 0;
+	if (d2 > m->h_mean * m->h_mean)
+		return 0;
+	return !(tled_boundary_side(m, x, NULL) > 0);
+}
+
+int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
+		     int64_t nin, const uint8_t *kind0, const uint8_t *constrain,
+		     const tled_model_opts_t *o, char *err, size_t errsize)
+{
+	memset(m, 0, sizeof *m);
+	m->nthreads = nthreads_of(o->nthreads);
+	int rc = -1;
+	int64_t *par = NULL, *ent_ip = NULL;
+	double *w = NULL, *P = NULL, *Mi = NULL, *R = NULL;
+	uint8_t *con = NULL, *okip = NULL;
+	tled_grid_t ig = { 0 }, ng = { 0 };
+	int K = o->support_k;
+
+	if (nin < 5)
+		return errf(err, errsize, "too few nodes (%lld): the model needs "
+			    "at least 5", (long long)nin);
+	if (K < 5 || K > 256)
+		return errf(err, errsize, "support_k %d out of [5, 256]", K);
+	for (int i = 0; i < MAT_N; i++)
+		if (tled_material_set(&m->mat[i], o->mat[i].E, o->mat[i].nu,
+				      o->mat[i].rho))
+			return errf(err, errsize, "material %d: invalid E=%g "
+				    "Pa, nu=%g, rho=%g kg/m^3", i, o->mat[i].E,
+				    o->mat[i].nu, o->mat[i].rho);
+	for (int64_t i = 0; i < 3 * nin; i++)
+		if (!isfinite(Xin[i]))
+			return errf(err, errsize, "node %lld has a non-finite "
+				    "coordinate", (long long)(i / 3));
+
+	/* ---- merge coincident nodes (union-find, highest label wins) ---- */
+	{
+		double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX }, hi[3];
+		for (int c = 0; c < 3; c++)
+			hi[c] = -DBL_MAX;
+		for (int64_t i = 0; i < nin; i++)
+			for (int c = 0; c < 3; c++) {
+				lo[c] = fmin(lo[c], Xin[3 * i + c]);
+				hi[c] = fmax(hi[c], Xin[3 * i + c]);
+			}
+		double vol = 1;
+		for (int c = 0; c < 3; c++)
+			vol *= fmax(hi[c] - lo[c], 1e-9);
+		if (tled_grid_build(&ig, Xin, nin, cbrt(vol / (double)nin)))
+			goto oom;
+	}
+	par = malloc((size_t)nin * sizeof *par);
+	m->rep = malloc((size_t)nin * sizeof *m->rep);
+	m->nn_dist = NULL;
+	double *nnd_in = malloc((size_t)nin * sizeof *nnd_in);
+	if (!par || !m->rep || !nnd_in) {
+		free(nnd_in);
+		goto oom;
+	}
+	for (int64_t i = 0; i < nin; i++)
+		par[i] = i;
+	for (int64_t i = 0; i < nin; i++) {
+		int64_t nid[8];
+		double nd2[8];
+		int k = tled_grid_knn(&ig, Xin + 3 * i, 8, i, nid, nd2);
+		nnd_in[i] = k ? sqrt(nd2[0]) : INFINITY;
+		for (int j = 0; j < k; j++)
+			if (sqrt(nd2[j]) <= o->merge_tol) {
+				int64_t a = uf_find(par, i), b = uf_find(par, nid[j]);
+				if (a != b) {
+					/* root = higher priority, then lower id */
+					int pa = label_priority(lab[a]),
+					    pb = label_priority(lab[b]);
+					if (pb > pa || (pb == pa && b < a)) {
+						par[a] = b;
+					} else {
+						par[b] = a;
+					}
+				}
+			}
+	}
+	tled_grid_free(&ig);
+	/* compact */
+	m->n_in = nin;
+	int64_t n = 0;
+	for (int64_t i = 0; i < nin; i++)
+		if (uf_find(par, i) == i)
+			n++;
+	m->n = n;
+	m->n_merged = nin - n;
+	m->X = malloc((size_t)(3 * n) * sizeof *m->X);
+	m->label = malloc((size_t)n * sizeof *m->label);
+	m->kind = malloc((size_t)n * sizeof *m->kind);
+	m->mass = calloc((size_t)n, sizeof *m->mass);
+	m->nn_dist = malloc((size_t)n * sizeof *m->nn_dist);
+	con = malloc((size_t)n);
+	if (!m->X || !m->label || !m->kind || !m->mass || !m->nn_dist || !con) {
+		free(nnd_in);
+		goto oom;
+	}
+	{
+		int64_t *newid = malloc((size_t)nin * sizeof *newid);
+		if (!newid) {
+			free(nnd_in);
+			goto oom;
+		}
+		int64_t j = 0;
+		for (int64_t i = 0; i < nin; i++)
+			if (uf_find(par, i) == i) {
+				newid[i] = j;
+				memcpy(m->X + 3 * j, Xin + 3 * i, 3 * sizeof(double));
+				m->label[j] = lab[i];
+				m->kind[j] = kind0 ? kind0[i]
+					     : lab[i] == TL_BOUNDARY ? TLED_FIXED
+								     : TLED_FREE;
+				con[j] = constrain ? constrain[i]
+					 : m->kind[j] != TLED_FIXED;
+				j++;
+			}
+		for (int64_t i = 0; i < nin; i++)
+			m->rep[i] = newid[uf_find(par, i)];
+		/* a merged group is constrained if any member is */
+		if (constrain)
+			for (int64_t i = 0; i < nin; i++)
+				if (constrain[i])
+					con[m->rep[i]] = 1;
+		free(newid);
+	}
+	free(nnd_in);
+	free(par);
+	par = NULL;
+	if (n < 5) {
+		rc = errf(err, errsize, "only %lld distinct nodes after merging "
+			  "coincident ones (merge_tol %g mm)", (long long)n,
+			  o->merge_tol / TLED_MM);
+		goto fail;
+	}
+
+	/* ---- node spacing ---- */
+	{
+		double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX }, hi[3];
+		for (int c = 0; c < 3; c++)
+			hi[c] = -DBL_MAX;
+		for (int64_t i = 0; i < n; i++)
+			for (int c = 0; c < 3; c++) {
+				lo[c] = fmin(lo[c], m->X[3 * i + c]);
+				hi[c] = fmax(hi[c], m->X[3 * i + c]);
+			}
+		double vol = 1;
+		for (int c = 0; c < 3; c++)
+			vol *= fmax(hi[c] - lo[c], 1e-9);
+		if (tled_grid_build(&ng, m->X, n, cbrt(vol / (double)n)))
+			goto oom;
+	}
+	double hsum = 0, hmin = DBL_MAX;
+#pragma omp parallel for reduction(+ : hsum) reduction(min : hmin) \
+	num_threads(m->nthreads)
+	for (int64_t i = 0; i < n; i++) {
+		int64_t id;
+		double dd;
+		tled_grid_knn(&ng, m->X + 3 * i, 1, i, &id, &dd);
+		m->nn_dist[i] = sqrt(dd);
+		hsum += m->nn_dist[i];
+		hmin = fmin(hmin, m->nn_dist[i]);
+	}
+	m->h_mean = hsum / (double)n;
+	m->h_min = hmin;
+	if (!(m->h_min > 0)) {
+		rc = errf(err, errsize, "coincident nodes remain after merging "
+			  "(merge_tol %g mm)", o->merge_tol / TLED_MM);
+		goto fail;
+	}
+	if (K > n)
+		K = (int)n;
+
+	if (boundary_setup(m, &ng)) {
+		rc = errf(err, errsize, "cannot estimate brain boundary normals "
+			  "(degenerate boundary nodes)");
+		goto fail;
+	}
+
+	/* ---- background integration points ---- */
+	{
+		double h = o->ip_factor * m->h_mean;
+		m->ip_h = h;
+		double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX }, hi[3];
+		for (int c = 0; c < 3; c++)
+			hi[c] = -DBL_MAX;
+		for (int64_t i = 0; i < n; i++)
+			for (int c = 0; c < 3; c++) {
+				lo[c] = fmin(lo[c], m->X[3 * i + c]);
+				hi[c] = fmax(hi[c], m->X[3 * i + c]);
+			}
+		int nc[3];
+		double ncell = 1;
+		for (int c = 0; c < 3; c++) {
+			nc[c] = (int)ceil((hi[c] - lo[c]) / h);
+			if (nc[c] < 1)
+				nc[c] = 1;
+			/* centre the grid on the box */
+			lo[c] -= 0.5 * (nc[c] * h - (hi[c] - lo[c]));
+			ncell *= nc[c];
+		}
+		if (ncell > 2e8) {
+			rc = errf(err, errsize, "%.3g integration cells: node "
+				  "spacing too small for the domain", ncell);
+			goto fail;
+		}
+		int64_t nall = (int64_t)ncell;
+		okip = malloc((size_t)nall);
+		if (!okip)
+			goto oom;
+#pragma omp parallel for schedule(dynamic, 1024) num_threads(m->nthreads)
+		for (int64_t t = 0; t < nall; t++) {
+			int i = (int)(t % nc[0]), j = (int)((t / nc[0]) % nc[1]),
+			    k = (int)(t / ((int64_t)nc[0] * nc[1]));
+			double x[3] = { lo[0] + (i + 0.5) * h,
+					lo[1] + (j + 0.5) * h,
+					lo[2] + (k + 0.5) * h };
+			okip[t] = o->inside ? o->inside(x, o->inside_ctx) != 0
+					    : default_inside(m, &ng, x);
+		}
+		int64_t nip = 0;
+		for (int64_t t = 0; t < nall; t++)
+			nip += okip[t];
+		if (nip < 1) {
+			rc = errf(err, errsize, "no integration point falls "
+				  "inside the domain");
+			goto fail;
+		}
+		m->nip = nip;
+		m->ipX = malloc((size_t)(3 * nip) * sizeof *m->ipX);
+		m->ipV = malloc((size_t)nip * sizeof *m->ipV);
+		m->ipmat = malloc((size_t)nip * sizeof *m->ipmat);
+		m->ipptr = malloc((size_t)(nip + 1) * sizeof *m->ipptr);
+		if (!m->ipX || !m->ipV || !m->ipmat || !m->ipptr)
+			goto oom;
+		int64_t p = 0;
+		for (int64_t t = 0; t < nall; t++)
+			if (okip[t]) {
+				int i = (int)(t % nc[0]),
+				    j = (int)((t / nc[0]) % nc[1]),
+				    k = (int)(t / ((int64_t)nc[0] * nc[1]));
+				m->ipX[3 * p] = lo[0] + (i + 0.5) * h;
+				m->ipX[3 * p + 1] = lo[1] + (j + 0.5) * h;
+				m->ipX[3 * p + 2] = lo[2] + (k + 0.5) * h;
+				m->ipV[p] = h * h * h;
+				m->ipptr[p] = (int64_t)K * p;
+				p++;
+			}
+		m->ipptr[nip] = (int64_t)K * nip;
+		free(okip);
+		okip = NULL;
+	}
+
+	/* ---- supports, shape functions ---- */
+	int64_t nip = m->nip, ne = (int64_t)K * nip;
+	m->ipnode = malloc((size_t)ne * sizeof *m->ipnode);
+	m->N = malloc((size_t)ne * sizeof *m->N);
+	m->dN = malloc((size_t)(3 * ne) * sizeof *m->dN);
+	w = malloc((size_t)ne * sizeof *w);
+	P = malloc((size_t)(4 * ne) * sizeof *P);
+	Mi = malloc((size_t)(16 * nip) * sizeof *Mi);
+	R = malloc((size_t)nip * sizeof *R);
+	ent_ip = m->entip = malloc((size_t)ne * sizeof *ent_ip);
+	if (!m->ipnode || !m->N || !m->dN || !w || !P || !Mi || !R || !ent_ip)
+		goto oom;
+	int64_t bad = -1;
+#pragma omp parallel num_threads(m->nthreads)
+	{
+		double *kd2 = malloc((size_t)K * sizeof *kd2);
+#pragma omp for schedule(dynamic, 256)
+		for (int64_t p = 0; p < nip; p++) {
+			const double *x = m->ipX + 3 * p;
+			int64_t *sid = m->ipnode + (int64_t)K * p;
+			int k = kd2 ? tled_grid_knn(&ng, x, K, -1, sid, kd2) : 0;
+			int ok = k == K;
+			if (ok) {
+				/* material: callback, else nearest node */
+				int mat = o->material ? o->material(x, o->material_ctx)
+						      : -1;
+				if (mat < 0 || mat >= MAT_N) {
+					int32_t l = m->label[sid[0]];
+					mat = l == TL_CSF ? MAT_CSF
+					      : (l == TL_TUMOUR || l == TL_TUMOUR_BND ||
+						 l == TL_SEED)
+						      ? MAT_TUMOUR
+						      : MAT_BRAIN;
+				}
+				m->ipmat[p] = mat;
+				R[p] = o->support_dilation * sqrt(kd2[K - 1]);
+				int64_t e0 = (int64_t)K * p;
+				ok = !tled_mls(m->X, sid, K, x, R[p], m->N + e0,
+					       m->dN + 3 * e0, w + e0);
+				if (ok) {
+					/* moment matrix inverse for the correction */
+					double M[16] = { 0 };
+					for (int i = 0; i < K; i++) {
+						double *pa = P + 4 * (e0 + i);
+						pa[0] = 1;
+						for (int c = 0; c < 3; c++)
+							pa[c + 1] = (m->X[3 * sid[i] + c] -
+								     x[c]) / R[p];
+						for (int r = 0; r < 4; r++)
+							for (int s = 0; s < 4; s++)
+								M[4 * r + s] += w[e0 + i] *
+										pa[r] * pa[s];
+					}
+					ok = !inv4(M, Mi + 16 * p);
+				}
+				for (int i = 0; i < K; i++)
+					ent_ip[(int64_t)K * p + i] = p;
+			}
+			if (!ok) {
+#pragma omp critical
+				if (bad < 0 || p < bad)
+					bad = p;
+			}
+		}
+		free(kd2);
+	}
+	if (bad >= 0) {
+		const double *x = m->ipX + 3 * bad;
+		rc = errf(err, errsize, "singular MLS moment matrix at the "
+			  "integration point (%.3f, %.3f, %.3f) mm: its %d "
+			  "support nodes are coplanar or coincident (raise "
+			  "support_k or remove duplicate nodes)",
+			  x[0] / TLED_MM, x[1] / TLED_MM, x[2] / TLED_MM, K);
+		goto fail;
+	}
+
+	/* ---- transposed CSR node -> entries ---- */
+	m->nptr = calloc((size_t)(n + 1), sizeof *m->nptr);
+	m->nent = malloc((size_t)ne * sizeof *m->nent);
+	if (!m->nptr || !m->nent)
+		goto oom;
+	for (int64_t e = 0; e < ne; e++)
+		m->nptr[m->ipnode[e] + 1]++;
+	for (int64_t a = 0; a < n; a++)
+		m->nptr[a + 1] += m->nptr[a];
+	{
+		int64_t *fill = malloc((size_t)n * sizeof *fill);
+		if (!fill)
+			goto oom;
+		memcpy(fill, m->nptr, (size_t)n * sizeof *fill);
+		for (int64_t e = 0; e < ne; e++)
+			m->nent[fill[m->ipnode[e]]++] = e;
+		free(fill);
+	}
+
+	/* ---- lumped masses: each ip's mass split by normalised weights ---- */
+	for (int64_t p = 0; p < nip; p++) {
+		double ws = 0;
+		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++)
+			ws += w[e];
+		double mp = m->mat[m->ipmat[p]].rho * m->ipV[p];
+		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++)
+			m->mass[m->ipnode[e]] += mp * w[e] / ws;
+	}
+	/* nodes outside every support (orphans) cannot move: fix them, and
+	 * drop them from the correction */
+	for (int64_t a = 0; a < n; a++)
+		if (!(m->mass[a] > 0)) {
+			m->kind[a] = TLED_FIXED;
+			con[a] = 0;
+		}
+
+	/* ---- integration-constraint correction ---- */
+	if (correct_gradients(m, w, P, Mi, con, ent_ip, err, errsize))
+		goto fail;
+
+	/* wave-speed time step estimate: h_min / c_max */
+	{
+		double cmax = 0;
+		for (int i = 0; i < MAT_N; i++)
+			cmax = fmax(cmax, m->mat[i].c);
+		m->dt_wave = m->h_min / cmax;
+	}
+	rc = 0;
+	goto out;
+oom:
+	rc = errf(err, errsize, "out of memory building the model (%lld "
+		  "nodes)", (long long)nin);
+fail:
+	tled_model_free(m);
+out:
+	tled_grid_free(&ig);
+	tled_grid_free(&ng);
+	free(par);
+	free(w);
+	free(P);
+	free(Mi);
+	free(R);
+	free(con);
+	free(okip);
+	return rc;
+}

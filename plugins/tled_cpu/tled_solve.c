@@ -1,0 +1,516 @@
+/* SPDX-License-Identifier: MIT */
+/* MTLED solver: time step, dynamic relaxation, contact, watchdogs. */
+#include "tled_solve.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int errf(char *err, size_t n, const char *fmt, ...)
+	__attribute__((format(printf, 3, 4)));
+static int errf(char *err, size_t n, const char *fmt, ...)
+{
+	if (err && n) {
+		va_list ap;
+		va_start(ap, fmt);
+		vsnprintf(err, n, fmt, ap);
+		va_end(ap);
+	}
+	return -1;
+}
+
+static const tled_ops_t cpu_ops = { tled_forces_c, tled_cd_step_c };
+
+void tled_solver_opts_default(tled_solver_opts_t *o)
+{
+	memset(o, 0, sizeof *o);
+	o->dt = 0;
+	o->dt_safety = 0.8;
+	o->dt_policy = TLED_DT_REFUSE;
+	o->dt_estimate = TLED_DTE_EIGEN;
+	o->tol = 1e-3 * TLED_MM;
+	o->max_iter = 20000;
+	o->ramp_iter = 100;
+	o->damping = -1;
+	o->contact = 1;
+	o->blowup = 100;
+	o->lanczos_iter = 80;
+}
+
+void tled_solver_free(tled_solver_t *s)
+{
+	if (!s)
+		return;
+	free(s->u);
+	free(s->v);
+	free(s->f);
+	free(s->fprev);
+	free(s->VP);
+	free(s->ustart);
+	free(s->tmp);
+	free(s->tmp2);
+	free(s->s0);
+	free(s->ipact);
+	memset(s, 0, sizeof *s);
+}
+
+int tled_solver_init(tled_solver_t *s, tled_model_t *m, char *err,
+		     size_t errsize)
+{
+	memset(s, 0, sizeof *s);
+	s->m = m;
+	size_t n3 = (size_t)(3 * m->n);
+	s->u = calloc(n3, sizeof(double));
+	s->v = calloc(n3, sizeof(double));
+	s->f = calloc(n3, sizeof(double));
+	s->fprev = calloc(n3, sizeof(double));
+	s->ustart = calloc(n3, sizeof(double));
+	s->tmp = calloc(n3, sizeof(double));
+	s->tmp2 = calloc(n3, sizeof(double));
+	s->s0 = calloc((size_t)m->n, sizeof(double));
+	s->VP = calloc((size_t)(9 * m->nip), sizeof(double));
+	s->ipact = calloc((size_t)m->nip, 1);
+	if (!s->u || !s->v || !s->f || !s->fprev || !s->ustart || !s->tmp ||
+	    !s->tmp2 || !s->s0 || !s->VP || !s->ipact) {
+		tled_solver_free(s);
+		return errf(err, errsize, "out of memory (solver, %lld nodes)",
+			    (long long)m->n);
+	}
+	/* contact allowance: how far beyond the nearest boundary tangent plane
+	 * a node already sits in the reference state (concave boundaries) */
+	for (int64_t a = 0; a < m->n; a++) {
+		double side = tled_boundary_side(m, m->X + 3 * a, NULL);
+		s->s0[a] = side > 0 ? side : 0;
+	}
+	tled_solver_update_active(s);
+	return 0;
+}
+
+void tled_solver_update_active(tled_solver_t *s)
+{
+	const tled_model_t *m = s->m;
+	int64_t nf = 0;
+	for (int64_t a = 0; a < m->n; a++)
+		nf += m->kind[a] == TLED_FREE;
+	s->nfree = nf;
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t p = 0; p < m->nip; p++) {
+		uint8_t act = 0;
+		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1] && !act; e++)
+			act = m->kind[m->ipnode[e]] == TLED_FREE;
+		s->ipact[p] = act;
+	}
+}
+
+/* ------------------------------------------------------------ Lanczos */
+
+/* number of eigenvalues of the symmetric tridiagonal (a, b) below x */
+static int sturm(const double *a, const double *b, int k, double x)
+{
+	int cnt = 0;
+	double q = 1;
+	for (int i = 0; i < k; i++) {
+		double bb = i ? b[i] * b[i] : 0;
+		q = a[i] - x - (i ? bb / q : 0);
+		if (q == 0)
+			q = 1e-300;
+		if (q < 0)
+			cnt++;
+	}
+	return cnt;
+}
+
+static double tri_eig(const double *a, const double *b, int k, int which)
+{
+	double lo = DBL_MAX, hi = -DBL_MAX;
+	for (int i = 0; i < k; i++) {
+		double r = (i ? fabs(b[i]) : 0) + (i + 1 < k ? fabs(b[i + 1]) : 0);
+		lo = fmin(lo, a[i] - r);
+		hi = fmax(hi, a[i] + r);
+	}
+	/* which = 0: smallest (count >= 1), 1: largest (count >= k) */
+	int target = which ? k : 1;
+	for (int it = 0; it < 200; it++) {
+		double mid = 0.5 * (lo + hi);
+		if (sturm(a, b, k, mid) >= target)
+			hi = mid;
+		else
+			lo = mid;
+		if (hi - lo <= 1e-14 * fmax(fabs(lo), fabs(hi)))
+			break;
+	}
+	return 0.5 * (lo + hi);
+}
+
+/* y = M^-1/2 K M^-1/2 x on free dofs (K by central differences of f) */
+static void op_apply(tled_solver_t *s, const tled_ops_t *ops, const double *x,
+		     double *y)
+{
+	tled_model_t *m = s->m;
+	int64_t n = m->n;
+	double *up = s->tmp2, *fp = s->fprev;
+	double xmax = 0;
+	for (int64_t a = 0; a < n; a++)
+		if (m->kind[a] == TLED_FREE)
+			for (int i = 0; i < 3; i++)
+				xmax = fmax(xmax, fabs(x[3 * a + i]) /
+							  sqrt(m->mass[a]));
+	if (!(xmax > 0)) {
+		memset(y, 0, (size_t)(3 * n) * sizeof *y);
+		return;
+	}
+	double eps = 1e-6 * m->h_mean / xmax;
+	for (int sgn = 0; sgn < 2; sgn++) {
+		for (int64_t a = 0; a < n; a++) {
+			double im = m->kind[a] == TLED_FREE ? 1 / sqrt(m->mass[a]) : 0;
+			for (int i = 0; i < 3; i++)
+				up[3 * a + i] = s->u[3 * a + i] +
+						(sgn ? -eps : eps) * im * x[3 * a + i];
+		}
+		ops->forces(m, s->ipact, up, s->VP, sgn ? fp : y, NULL);
+	}
+	for (int64_t a = 0; a < n; a++) {
+		double im = m->kind[a] == TLED_FREE ? 1 / sqrt(m->mass[a]) : 0;
+		for (int i = 0; i < 3; i++)
+			y[3 * a + i] = im * (y[3 * a + i] - fp[3 * a + i]) /
+				       (2 * eps);
+	}
+}
+
+int tled_solver_eigs(tled_solver_t *s, const tled_solver_opts_t *o,
+		     double *lmax, double *lmin)
+{
+	tled_model_t *m = s->m;
+	const tled_ops_t *ops = o->ops ? o->ops : &cpu_ops;
+	int64_t n3 = 3 * m->n;
+	int kmax = o->lanczos_iter > 4 ? o->lanczos_iter : 80;
+	if (s->nfree == 0) {
+		*lmax = *lmin = 0;
+		return 0;
+	}
+	if (kmax > 3 * s->nfree)
+		kmax = (int)(3 * s->nfree);
+	double *al = calloc((size_t)kmax + 1, sizeof *al);
+	double *be = calloc((size_t)kmax + 2, sizeof *be);
+	double *v0 = calloc((size_t)n3, sizeof *v0);
+	double *v1 = calloc((size_t)n3, sizeof *v1);
+	double *w = calloc((size_t)n3, sizeof *w);
+	if (!al || !be || !v0 || !v1 || !w) {
+		free(al);
+		free(be);
+		free(v0);
+		free(v1);
+		free(w);
+		return -1;
+	}
+	/* deterministic pseudo-random start (xorshift) */
+	uint64_t r = 0x9e3779b97f4a7c15ull;
+	double nrm = 0;
+	for (int64_t i = 0; i < n3; i++) {
+		r ^= r << 13;
+		r ^= r >> 7;
+		r ^= r << 17;
+		v1[i] = m->kind[i / 3] == TLED_FREE
+				? (double)(r >> 11) / 9007199254740992.0 - 0.5
+				: 0;
+		nrm += v1[i] * v1[i];
+	}
+	nrm = sqrt(nrm);
+	for (int64_t i = 0; i < n3; i++)
+		v1[i] /= nrm;
+	double prev = 0, top = 0, bot = 0;
+	int k;
+	for (k = 0; k < kmax; k++) {
+		op_apply(s, ops, v1, w);
+		double a = 0;
+		for (int64_t i = 0; i < n3; i++)
+			a += w[i] * v1[i];
+		al[k] = a;
+		double b = 0;
+		for (int64_t i = 0; i < n3; i++) {
+			w[i] -= a * v1[i] + be[k] * v0[i];
+			b += w[i] * w[i];
+		}
+		b = sqrt(b);
+		top = tri_eig(al, be, k + 1, 1);
+		bot = tri_eig(al, be, k + 1, 0);
+		if (k >= 15 && fabs(top - prev) <= 1e-7 * fabs(top))
+			break;
+		prev = top;
+		if (!(b > 1e-14 * fabs(top)))
+			break;
+		be[k + 1] = b;
+		for (int64_t i = 0; i < n3; i++) {
+			v0[i] = v1[i];
+			v1[i] = w[i] / b;
+		}
+	}
+	free(al);
+	free(be);
+	free(v0);
+	free(v1);
+	free(w);
+	*lmax = top;
+	*lmin = bot;
+	s->lmax = top;
+	s->lmin = bot;
+	return 0;
+}
+
+int tled_solver_pick_dt(tled_solver_t *s, const tled_solver_opts_t *o,
+			double *dt, char *err, size_t errsize)
+{
+	double lmax, lmin;
+	if (tled_solver_eigs(s, o, &lmax, &lmin))
+		return errf(err, errsize, "out of memory (time step estimate)");
+	s->dt_eigen = lmax > 0 ? 2 / sqrt(lmax) : INFINITY;
+	s->dt_crit = o->dt_estimate == TLED_DTE_WAVE ? s->m->dt_wave
+						      : s->dt_eigen;
+	if (!isfinite(s->dt_crit))
+		s->dt_crit = s->m->dt_wave;
+	double safety = o->dt_safety > 0 && o->dt_safety <= 1 ? o->dt_safety : 0.8;
+	if (o->dt <= 0) {
+		*dt = safety * s->dt_crit;
+		return 0;
+	}
+	if (o->dt > s->dt_crit && o->dt_policy == TLED_DT_REFUSE)
+		return errf(err, errsize, "time step %.4g s is above the "
+			    "critical time step %.4g s (%s estimate; wave-speed "
+			    "estimate h_min/c = %.4g s): lower dt, set dt=0 "
+			    "(auto) or dt_policy=reduce", o->dt, s->dt_crit,
+			    o->dt_estimate == TLED_DTE_WAVE ? "wave-speed"
+							     : "eigenvalue",
+			    s->m->dt_wave);
+	if (o->dt > s->dt_crit && o->dt_policy == TLED_DT_REDUCE)
+		*dt = safety * s->dt_crit;
+	else
+		*dt = o->dt;
+	return 0;
+}
+
+/* ------------------------------------------------------------ contact */
+
+int64_t tled_contact(tled_solver_t *s)
+{
+	tled_model_t *m = s->m;
+	if (m->nb == 0)
+		return 0;
+	int64_t cnt = 0;
+#pragma omp parallel for schedule(static) reduction(+ : cnt) \
+	num_threads(m->nthreads)
+	for (int64_t a = 0; a < m->n; a++) {
+		if (m->kind[a] == TLED_FIXED)
+			continue;
+		double y[3];
+		for (int i = 0; i < 3; i++)
+			y[i] = m->X[3 * a + i] + s->u[3 * a + i];
+		int64_t b;
+		double side = tled_boundary_side(m, y, &b);
+		if (b < 0 || !(side > s->s0[a]))
+			continue;
+		const double *nb = m->bn + 3 * b;
+		double pen = side - s->s0[a], vn = 0;
+		for (int i = 0; i < 3; i++) {
+			s->u[3 * a + i] -= pen * nb[i];
+			vn += s->v[3 * a + i] * nb[i];
+		}
+		if (vn > 0)
+			for (int i = 0; i < 3; i++)
+				s->v[3 * a + i] -= vn * nb[i];
+		cnt++;
+	}
+	return cnt;
+}
+
+/* ------------------------------------------------------------ relax */
+
+static void node_mm(const tled_solver_t *s, int64_t a, double out[3])
+{
+	for (int i = 0; i < 3; i++)
+		out[i] = (s->m->X[3 * a + i] + s->u[3 * a + i]) / TLED_MM;
+}
+
+int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
+	       const double *target, const char *tag, tled_relax_stats_t *st,
+	       char *err, size_t errsize)
+{
+	tled_model_t *m = s->m;
+	const tled_ops_t *ops = o->ops ? o->ops : &cpu_ops;
+	int64_t n = m->n;
+	memset(st, 0, sizeof *st);
+	tled_solver_update_active(s);
+	double dt;
+	if (tled_solver_pick_dt(s, o, &dt, err, errsize))
+		return -1;
+	st->dt = dt;
+	st->dt_crit = s->dt_crit;
+	st->dt_eigen = s->dt_eigen;
+	st->dt_wave = m->dt_wave;
+	memcpy(s->ustart, s->u, (size_t)(3 * n) * sizeof *s->u);
+	memset(s->v, 0, (size_t)(3 * n) * sizeof *s->v);
+
+	double lam = s->lmin > 0 ? s->lmin : 0; /* omega_min^2 estimate */
+	if (s->lmax > 0 && lam < 1e-10 * s->lmax)
+		lam = 1e-10 * s->lmax;
+	double c = o->damping >= 0 ? o->damping : 2 * sqrt(lam);
+	int ramp = target ? (o->ramp_iter > 0 ? o->ramp_iter : 1) : 0;
+	double Eh2 = m->mat[MAT_BRAIN].E * m->h_mean * m->h_mean;
+	double E0 = -1, Wext = 0, Wfloor = 1e-30;
+	double blow = o->blowup > 1 ? o->blowup : 100;
+	double L = 0; /* domain size for the displacement sanity check */
+	for (int i = 0; i < 3; i++) {
+		double lo = DBL_MAX, hi = -DBL_MAX;
+		for (int64_t a = 0; a < n; a++) {
+			lo = fmin(lo, m->X[3 * a + i]);
+			hi = fmax(hi, m->X[3 * a + i]);
+		}
+		L = fmax(L, hi - lo);
+	}
+	int have_prev = 0, nconv = 0;
+	double lam_old = -1, lam_mid = -1;
+	tled_force_info_t fi = { 0 };
+	tled_cd_info_t ci = { 0 };
+	double err_est = INFINITY;
+	int it;
+	s->contacts = 0;
+	for (it = 1; it <= o->max_iter; it++) {
+		/* prescribed displacements of driven nodes (linear ramp) */
+		if (target && it <= ramp + 1) {
+			double r = it > ramp ? 1 : (double)it / ramp;
+			for (int64_t a = 0; a < n; a++)
+				if (m->kind[a] == TLED_DRIVEN)
+					for (int i = 0; i < 3; i++) {
+						double nu = s->ustart[3 * a + i] +
+							    r * (target[3 * a + i] -
+								 s->ustart[3 * a + i]);
+						/* driver work: reaction . du */
+						Wext += s->f[3 * a + i] *
+							(nu - s->u[3 * a + i]);
+						s->u[3 * a + i] = nu;
+					}
+		}
+		ops->forces(m, s->ipact, s->u, s->VP, s->f, &fi);
+		if (fi.nbad > 0) {
+			int64_t p = fi.ip_bad;
+			return errf(err, errsize, "%s, iteration %d: %s at the "
+				    "integration point (%.2f, %.2f, %.2f) mm "
+				    "(%lld such points; min det F = %.3g): the "
+				    "step deforms the tissue too much (smaller "
+				    "growth steps, larger ramp_iter, or finer "
+				    "nodes)",
+				    tag, it,
+				    isfinite(fi.Jmin) ? "inverted material (det F <= 0)"
+						      : "non-finite stress",
+				    m->ipX[3 * p] / TLED_MM,
+				    m->ipX[3 * p + 1] / TLED_MM,
+				    m->ipX[3 * p + 2] / TLED_MM, (long long)fi.nbad,
+				    fi.Jmin);
+		}
+		if (E0 < 0)
+			E0 = fi.W;
+		/* adaptive damping: Rayleigh quotient of the last increment */
+		if (o->damping < 0 && have_prev && it > ramp + 1) {
+			double num = 0, den = 0;
+			for (int64_t a = 0; a < n; a++)
+				if (m->kind[a] == TLED_FREE)
+					for (int i = 0; i < 3; i++) {
+						double du = dt * s->v[3 * a + i];
+						num += du * (s->f[3 * a + i] -
+							     s->fprev[3 * a + i]);
+						den += m->mass[a] * du * du;
+					}
+			/* a Rayleigh quotient never falls below omega_min^2, so
+			 * the running minimum approaches it from above; as the
+			 * slowest mode comes to dominate the increments */
+			if (den > 0 && num > 0 && num / den < lam)
+				lam = num / den;
+			if (s->lmax > 0 && lam < 1e-10 * s->lmax)
+				lam = 1e-10 * s->lmax;
+			if (it % 10 == 0)
+				c = 2 * sqrt(lam);
+		}
+		ops->cd_step(m, m->kind, s->f, s->u, s->v, dt, c, &ci);
+		{
+			double *t = s->fprev;
+			s->fprev = s->f;
+			s->f = t;
+			have_prev = 1;
+		}
+		if (ci.node_nan >= 0) {
+			double p[3];
+			node_mm(s, ci.node_nan, p);
+			return errf(err, errsize, "%s, iteration %d: NaN/Inf "
+				    "displacement at node %lld (near %.2f, %.2f, "
+				    "%.2f mm): numerical blow-up (time step %.4g s, "
+				    "critical %.4g s)", tag, it,
+				    (long long)ci.node_nan, p[0], p[1], p[2], dt,
+				    s->dt_crit);
+		}
+		double Etot = ci.ke + fi.W;
+		double Eref = E0 + (Wext > 0 ? Wext : 0) + Wfloor;
+		double umax = ci.vmax * dt; /* crude: increment size */
+		if (!isfinite(Etot) || Etot > blow * Eref || umax > L) {
+			double p[3] = { 0, 0, 0 };
+			if (ci.node_vmax >= 0)
+				node_mm(s, ci.node_vmax, p);
+			return errf(err, errsize, "%s, iteration %d: energy "
+				    "blow-up: kinetic + strain energy %.3g J is "
+				    "%.3g x the energy supplied (%.3g J); fastest "
+				    "node %lld near (%.2f, %.2f, %.2f) mm at %.3g "
+				    "m/s; time step %.4g s vs critical %.4g s",
+				    tag, it, Etot, Etot / Eref, Eref,
+				    (long long)ci.node_vmax, p[0], p[1], p[2],
+				    ci.vmax, dt, s->dt_crit);
+		}
+		if (o->contact && (it % 10 == 0))
+			s->contacts += tled_contact(s);
+		/* convergence (after the ramp) */
+		double om = sqrt(lam > 0 ? lam : 1e-300);
+		err_est = ci.vmax / om;
+		/* trust the estimate only once omega_min has settled: less than
+		 * 10% drop over the last 200 iterations (an overdamped start
+		 * moves slowly and would look converged) */
+		if (it % 100 == 0) {
+			lam_old = lam_mid;
+			lam_mid = lam;
+		}
+		int settled = o->damping >= 0 || (lam_old > 0 &&
+						   lam >= 0.9 * lam_old);
+		if (it > ramp + 1 && err_est < o->tol && settled)
+			nconv++;
+		else
+			nconv = 0;
+		if (o->progress && it % 500 == 0)
+			o->progress(o->hook_ctx, it, o->max_iter, err_est);
+		if (o->cancelled && it % 100 == 0 && o->cancelled(o->hook_ctx))
+			return errf(err, errsize, "%s: cancelled at iteration %d",
+				    tag, it), -2;
+		if (nconv >= 5)
+			break;
+	}
+	if (it > o->max_iter)
+		it = o->max_iter;
+	if (o->contact)
+		s->contacts += tled_contact(s);
+	/* final state: forces for the residual */
+	ops->forces(m, s->ipact, s->u, s->VP, s->f, &fi);
+	double res = 0;
+	for (int64_t a = 0; a < n; a++)
+		if (m->kind[a] == TLED_FREE)
+			for (int i = 0; i < 3; i++)
+				res = fmax(res, fabs(s->f[3 * a + i]));
+	st->iters = it;
+	st->converged = nconv >= 5;
+	st->ke = ci.ke;
+	st->W = fi.W;
+	st->res = res;
+	st->res_rel = Eh2 > 0 ? res / Eh2 : 0;
+	st->err_est = err_est;
+	st->jmin = fi.Jmin;
+	st->omega_min = sqrt(lam);
+	st->contacts = s->contacts;
+	return 0;
+}

@@ -1,0 +1,120 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * MTLED solver: critical time step, dynamic relaxation to equilibrium with
+ * prescribed (driven) and fixed nodes, contact with the brain boundary, and
+ * the watchdogs (NaN, inverted integration points, energy blow-up).
+ * Backend-neutral: the hot loops go through tled_ops_t (CPU default:
+ * tled_step.c), so a CUDA backend reuses this file.  SI units.
+ *
+ * Critical time step.  Central differences are stable for dt <= 2/omega_max,
+ * omega_max^2 = largest eigenvalue of M^-1 K (K the tangent stiffness at the
+ * current state).  We estimate it by Lanczos on M^-1/2 K M^-1/2 (matrix-free:
+ * K w by central differences of the internal forces), which converges fast
+ * to the extreme eigenvalues.  The wave-speed estimate h_min / c
+ * (c = sqrt((lambda + 2 mu)/rho)) is also computed and reported: for MLS
+ * supports it is not a bound (Joldes, Wittek & Miller 2012, "Stable time
+ * step estimates for mesh-free particle methods", IJNME 91:450), so the
+ * eigenvalue estimate is the default.
+ *
+ * Dynamic relaxation (Joldes, Wittek & Miller 2011, "Computation of
+ * intra-operative brain shift using dynamic relaxation", CMAME 198:3313):
+ * mass-proportional damping c = 2 omega_min, with omega_min^2 re-estimated
+ * during the iterations by the Rayleigh quotient of the last increment
+ * (du^T df / du^T M du); stop when the estimated distance to equilibrium
+ * max|v| / omega_min falls below tol.
+ */
+#ifndef TLED_SOLVE_H
+#define TLED_SOLVE_H
+
+#include "tled_step.h"
+
+enum tled_dt_policy {
+	TLED_DT_REFUSE = 0, /* dt above critical: error */
+	TLED_DT_REDUCE = 1, /* dt above critical: use dt_safety * critical */
+	TLED_DT_FORCE = 2,  /* use dt as given (tests of the watchdog only) */
+};
+enum tled_dt_estimate { TLED_DTE_EIGEN = 0, TLED_DTE_WAVE = 1 };
+
+/* Backend hooks (CPU defaults when NULL). */
+typedef struct tled_ops {
+	void (*forces)(const tled_model_t *m, const uint8_t *ipact,
+		       const double *u, double *VP, double *f,
+		       tled_force_info_t *info);
+	void (*cd_step)(const tled_model_t *m, const uint8_t *kind,
+			const double *f, double *u, double *v, double dt,
+			double c, tled_cd_info_t *info);
+} tled_ops_t;
+
+typedef struct tled_solver_opts {
+	double dt;          /* s; 0 = dt_safety * critical */
+	double dt_safety;   /* (0,1] */
+	int dt_policy;      /* tled_dt_policy */
+	int dt_estimate;    /* tled_dt_estimate */
+	double tol;         /* m: stop when the error estimate is below */
+	int max_iter;       /* per relax call */
+	int ramp_iter;      /* driven displacements ramped over this many */
+	double damping;     /* <0 adaptive 2 omega_min; >=0 fixed c, 1/s */
+	int contact;        /* 1: keep free/driven nodes inside the brain */
+	double blowup;      /* energy blow-up factor (default 100) */
+	int lanczos_iter;   /* max Lanczos steps (default 80) */
+	/* optional hooks */
+	int (*cancelled)(void *ctx);
+	void (*progress)(void *ctx, int iter, int max_iter, double err_m);
+	void *hook_ctx;
+	const tled_ops_t *ops;
+} tled_solver_opts_t;
+
+void tled_solver_opts_default(tled_solver_opts_t *o);
+
+typedef struct tled_solver {
+	tled_model_t *m;    /* kinds (m->kind) are read live */
+	double *u, *v, *f, *fprev, *VP, *ustart, *tmp, *tmp2, *s0;
+	uint8_t *ipact;
+	double lmax, lmin;  /* eigenvalue estimates of M^-1 K, 1/s^2 */
+	double dt_crit;     /* s, from the chosen estimate */
+	double dt_eigen;    /* s, 2/sqrt(lmax) */
+	int64_t nfree;
+	int64_t contacts;   /* projections in the last relax */
+} tled_solver_t;
+
+typedef struct tled_relax_stats {
+	int iters;
+	int converged;
+	double dt, dt_crit, dt_eigen, dt_wave; /* s */
+	double ke;          /* kinetic energy at the end, J */
+	double W;           /* strain energy, J */
+	double res;         /* max |f| over free nodes, N */
+	double res_rel;     /* res / (E_brain h_mean^2) */
+	double err_est;     /* estimated distance to equilibrium, m */
+	double jmin;        /* smallest det F over active ips */
+	double omega_min;   /* 1/s */
+	int64_t contacts;
+} tled_relax_stats_t;
+
+int tled_solver_init(tled_solver_t *s, tled_model_t *m, char *err,
+		     size_t errsize);
+void tled_solver_free(tled_solver_t *s);
+/* recompute active ips (those with a free node) after kinds change */
+void tled_solver_update_active(tled_solver_t *s);
+/* Lanczos estimate of the extreme eigenvalues of M^-1 K at the current u */
+int tled_solver_eigs(tled_solver_t *s, const tled_solver_opts_t *o,
+		     double *lmax, double *lmin);
+/* critical step and the step to use under the policy; 0 or -1 + err */
+int tled_solver_pick_dt(tled_solver_t *s, const tled_solver_opts_t *o,
+			double *dt, char *err, size_t errsize);
+/*
+ * Relax to equilibrium.  Driven nodes move from their current u to
+ * target[3a..] (m), ramped over o->ramp_iter iterations (target NULL: they
+ * stay).  `tag` names the run in error messages (e.g. "growth step 3").
+ * Returns 0 (also when not converged: see st->converged) or -1 with err
+ * naming iteration, node and cause (NaN, inverted ip, energy blow-up,
+ * cancelled: -2).
+ */
+int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
+	       const double *target, const char *tag, tled_relax_stats_t *st,
+	       char *err, size_t errsize);
+/* project nodes that left the brain back onto the boundary tangent plane of
+ * the nearest boundary node; returns the number projected */
+int64_t tled_contact(tled_solver_t *s);
+
+#endif

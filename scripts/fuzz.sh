@@ -1,0 +1,108 @@
+#!/bin/sh
+# `make fuzz`: build libFuzzer targets with clang (ASan + UBSan) for the
+# MessagePack decoder and the graph file parser, run each for a bounded time
+# and print how many inputs ran without a crash.
+#
+#   FUZZ_SECONDS=60     time per target (seconds)
+#   FUZZ_TARGETS="msgpack graph"
+#   CLANG=clang
+#
+# Corpora and crash artifacts live in build-fuzz/ (kept between runs, so
+# later runs start from what earlier ones found).  Exit status: 0 when every
+# target ran its time without a crash, 1 on a crash (the input is saved as
+# build-fuzz/artifacts/<target>-crash-*; replay it with
+# `build-fuzz/fuzz_<target> FILE`), 2 when clang/libFuzzer is missing.
+set -u
+CLANG=${CLANG:-clang}
+SECS=${FUZZ_SECONDS:-60}
+TARGETS=${FUZZ_TARGETS:-msgpack graph}
+B=build-fuzz
+cd "$(dirname "$0")/.." || exit 2
+
+if ! command -v "$CLANG" >/dev/null 2>&1; then
+    echo "fuzz: $CLANG not found (Debian: apt-get install clang)" >&2
+    exit 2
+fi
+printf 'int LLVMFuzzerTestOneInput(const char *d, unsigned long n)
+{ (void)d; (void)n; return 0; }\n' >"${TMPDIR:-/tmp}/armstg-fz-$$.c"
+if ! "$CLANG" -fsanitize=fuzzer "${TMPDIR:-/tmp}/armstg-fz-$$.c" \
+        -o "${TMPDIR:-/tmp}/armstg-fz-$$" 2>/dev/null; then
+    rm -f "${TMPDIR:-/tmp}/armstg-fz-$$.c"
+    echo "fuzz: $CLANG cannot build libFuzzer targets (-fsanitize=fuzzer)" >&2
+    exit 2
+fi
+rm -f "${TMPDIR:-/tmp}/armstg-fz-$$.c" "${TMPDIR:-/tmp}/armstg-fz-$$"
+
+HDF5_CFLAGS=$(pkg-config --cflags hdf5 2>/dev/null)
+HDF5_LIBS=$(pkg-config --libs hdf5 2>/dev/null)
+SAN="-fsanitize=address,undefined -fno-sanitize-recover=undefined"
+CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -fopenmp \
+ -Wall -Wno-unused-parameter -Iruntime/include -Iruntime -I/usr/include/nifti \
+ $HDF5_CFLAGS"
+LIBS="-lniftiio -lznz -lz $HDF5_LIBS -lmsgpackc -linih -lpng -ldl -lpthread -lm"
+
+mkdir -p "$B/obj" "$B/artifacts" "$B/corpus" || exit 2
+
+# the runtime, instrumented for coverage (fuzzer-no-link) and sanitizers
+objs=""
+for src in runtime/*.c; do
+    [ "$src" = runtime/main.c ] && continue
+    o="$B/obj/$(basename "$src" .c).o"
+    if [ ! -f "$o" ] || [ "$src" -nt "$o" ] || [ runtime/rt.h -nt "$o" ]; then
+        # shellcheck disable=SC2086
+        "$CLANG" $CFLAGS $SAN -fsanitize=fuzzer-no-link -c "$src" -o "$o" ||
+            exit 2
+    fi
+    objs="$objs $o"
+done
+
+status=0
+summary=""
+for t in $TARGETS; do
+    src="tests/fuzz/fuzz_$t.c"
+    if [ "$t" = graph ] && ! grep -q 'graph_parse_string' runtime/graph.c \
+            2>/dev/null; then
+        echo "fuzz: skipping graph: runtime/graph.c has no graph_parse_string"
+        continue
+    fi
+    bin="$B/fuzz_$t"
+    # shellcheck disable=SC2086
+    "$CLANG" $CFLAGS $SAN -fsanitize=fuzzer "$src" $objs -o "$bin" $LIBS ||
+        exit 2
+    corpus="$B/corpus/$t"
+    seeds="$B/seeds/$t"
+    mkdir -p "$corpus" "$seeds"
+    if [ "$t" = msgpack ]; then
+        # shellcheck disable=SC2086
+        "$CLANG" $CFLAGS $SAN tests/fuzz/mkseeds.c $objs -o "$B/mkseeds" \
+            $LIBS && "$B/mkseeds" "$seeds" || exit 2
+    else
+        for f in graphs/*.ini tests/graphs/*/*.ini tests/graphs/*.ini; do
+            [ -f "$f" ] && cp "$f" "$seeds/" 2>/dev/null
+        done
+    fi
+    log="$B/fuzz_$t.log"
+    echo "fuzz: $t for ${SECS}s ($bin)"
+    ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1} \
+    "$bin" -max_total_time="$SECS" -timeout=10 -rss_limit_mb=2048 \
+        -max_len=4096 -dict="tests/fuzz/$t.dict" -print_final_stats=1 \
+        -artifact_prefix="$B/artifacts/$t-" "$corpus" "$seeds" >"$log" 2>&1
+    rc=$?
+    runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" |
+           awk '{s += $1} END {print s + 0}')
+    secs=$(sed -n 's/^Done [0-9]* runs in \([0-9]*\) second.*/\1/p' "$log" |
+           tail -1)
+    cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1)
+    if [ "$rc" -ne 0 ]; then
+        status=1
+        line="fuzz_$t: CRASH after $runs executions (see $log, $B/artifacts/)"
+        grep -m 3 -E 'ERROR|SUMMARY|runtime error' "$log"
+    else
+        line="fuzz_$t: $runs executions in ${secs:-$SECS} s, no crash ($cov, corpus $(ls "$corpus" | wc -l) inputs)"
+    fi
+    echo "$line"
+    summary="$summary$line
+"
+done
+printf '%s' "$summary" >"$B/fuzz-summary.txt"
+exit $status
