@@ -415,7 +415,7 @@ int ps_write_h5(const char *path, const ps_t *p, char *err, size_t errsize)
 	if (aid < 0)
 		goto fail;
 	for (int a = 0; a < p->nattr; a++) {
-		char name[128];
+		char name[256];
 		name_escape(p->attr[a].name, name, sizeof name);
 		hsize_t da[2] = { (hsize_t)p->n, (hsize_t)p->attr[a].ncomp };
 		if (write_ds(aid, name, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, 2,
@@ -611,7 +611,7 @@ static int tab_write_h5(const char *path, const tab_t *t, char *err,
 	hsize_t nr = (hsize_t)t->nrows;
 	for (int c = 0; c < t->ncols; c++) {
 		const tab_col_t *col = &t->col[c];
-		char name[160];
+		char name[256];
 		name_escape(col->name, name, sizeof name);
 		if (col->type == TAB_NUM) {
 			if (write_ds(gid, name, H5T_IEEE_F64LE,

@@ -46,6 +46,7 @@
 
 enum { FORCE_SYMMETRIC, FORCE_THIRION };
 enum { UPD_DIFFEO, UPD_ADDITIVE };
+enum { NORM_HIST, NORM_MINMAX, NORM_NONE };
 enum { IN_FIXED, IN_MOVING, IN_FMASK, IN_MMASK, IN_INIT };
 enum { OUT_FIELD, OUT_WARPED, OUT_TABLE };
 
@@ -114,9 +115,11 @@ static const armstg_param_t demons_params[] = {
 	{ "diff_threshold", PT_DOUBLE, "0.001", 0, 1e30, "intensity",
 	  "no force where |fixed - warped| is below this (after "
 	  "normalisation)", NULL, OFF(diff_threshold), 0 },
-	{ "normalize", PT_BOOL, "true", 0, 1, "",
-	  "map each volume's intensity range to [0, 1] first", NULL,
-	  OFF(normalize), 0 },
+	{ "normalize", PT_ENUM, "histogram", 0, 0, "",
+	  "intensity matching first: histogram (moving quantiles mapped onto "
+	  "the fixed ones above each mean, as ITK's HistogramMatching, then "
+	  "the fixed range scaled to [0,1]), minmax (each range to [0,1]), "
+	  "none", "histogram|minmax|none", OFF(normalize), 0 },
 };
 
 #define FAIL(code, ...) st->host->fail(st, code, __VA_ARGS__)
@@ -189,6 +192,83 @@ static void rescale(fimg_t *f, float lo, float hi)
 	float s = 1.0f / (hi - lo);
 	for (int64_t e = 0; e < n; e++)
 		f->d[e] = (f->d[e] - lo) * s;
+}
+
+/*
+ * Quantiles q[0..nq-1] (levels 0..1) of the voxels of f above its mean
+ * intensity (background excluded, as ITK's HistogramMatchingImageFilter
+ * with ThresholdAtMeanIntensity), from a 4096-bin histogram.
+ */
+#define NQ 65
+#define NBIN 4096
+static void quantiles(const fimg_t *f, float lo, float hi, double *q)
+{
+	int64_t n = fgrid_nvox(&f->g), cnt = 0;
+	double mean = 0;
+	for (int64_t e = 0; e < n; e++)
+		mean += f->d[e];
+	mean /= (double)n;
+	int64_t *h = calloc(NBIN, sizeof *h);
+	double w = (hi - lo) / NBIN;
+	for (int64_t e = 0; e < n; e++) {
+		if (!(f->d[e] > mean))
+			continue;
+		int b = (int)((f->d[e] - lo) / w);
+		h[b < 0 ? 0 : b >= NBIN ? NBIN - 1 : b]++;
+		cnt++;
+	}
+	int64_t acc = 0;
+	int b = 0;
+	for (int k = 0; k < NQ; k++) {
+		double want = (double)cnt * k / (NQ - 1);
+		while (b < NBIN - 1 && acc + h[b] < want)
+			acc += h[b++];
+		/* linear inside the bin */
+		double frac = h[b] ? (want - acc) / (double)h[b] : 0;
+		if (frac < 0)
+			frac = 0;
+		if (frac > 1)
+			frac = 1;
+		q[k] = lo + (b + frac) * w;
+	}
+	q[0] = q[0] < mean ? mean : q[0];
+	free(h);
+}
+
+/* map moving intensities onto the fixed ones: piecewise linear between
+ * matching quantiles, the background (min) onto the fixed min */
+static void match_hist(fimg_t *m, float mlo, float mhi, float flo, float fhi,
+		       const fimg_t *fx)
+{
+	double qm[NQ + 1], qf[NQ + 1];
+	quantiles(m, mlo, mhi, qm + 1);
+	quantiles(fx, flo, fhi, qf + 1);
+	qm[0] = mlo;
+	qf[0] = flo;
+	int64_t n = fgrid_nvox(&m->g);
+	for (int64_t e = 0; e < n; e++) {
+		double v = m->d[e];
+		int k = 0;
+		/* last segment whose start is <= v (ties: the later one) */
+		int lo = 0, hi = NQ;
+		while (lo < hi) {
+			int mid = (lo + hi + 1) / 2;
+			if (qm[mid] <= v)
+				lo = mid;
+			else
+				hi = mid - 1;
+		}
+		k = lo;
+		double out;
+		if (k >= NQ) {
+			out = qf[NQ] + (v - qm[NQ]);
+		} else {
+			double d = qm[k + 1] - qm[k];
+			out = d > 0 ? qf[k] + (v - qm[k]) * (qf[k + 1] - qf[k]) / d
+				    : qf[k];
+		}
+		m->d[e] = (float)out;
+	}
 }
 
 static int64_t count_pos(const fimg_t *f)
@@ -477,7 +557,11 @@ static int demons_process(armstg_stage_t *st)
 			  v == 0 ? "all zero" : "constant", (double)v);
 		goto out;
 	}
-	if (p->normalize) {
+	if (p->normalize == NORM_HIST) {
+		match_hist(&M0, mlo, mhi, flo, fhi, &F0);
+		rescale(&F0, flo, fhi);
+		rescale(&M0, flo, fhi);
+	} else if (p->normalize == NORM_MINMAX) {
 		rescale(&F0, flo, fhi);
 		rescale(&M0, mlo, mhi);
 	}

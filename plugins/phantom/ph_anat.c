@@ -493,7 +493,7 @@ static const double tissue[PH_NMOD][6] = {
 	{ 0, 250, 600, 900, 240, 240 },   /* T1 */
 	{ 0, 270, 620, 910, 260, 260 },   /* T1c */
 	{ 0, 1000, 640, 430, 1000, 1000 },/* T2 */
-	{ 0, 110, 640, 470, 100, 100 },   /* FLAIR */
+	{ 0, 110, 660, 440, 100, 100 },   /* FLAIR */
 };
 static const double tumour[PH_NMOD][5] = {
 	/* -  nec  edema nonenh enh */

@@ -176,6 +176,11 @@ int ph_elastic_solve(ph_elastic_t *E, double *u)
 		rc = 0;
 		goto out;
 	}
+	/* each CG iteration has five parallel sections; below ~10^5 unknown
+	 * nodes their barriers cost more than the work (and stall badly on a
+	 * busy machine), so small systems are solved on one thread */
+	if (S.nfree < 100000)
+		S.nthreads = 1;
 	for (int64_t n = 0; n < nv; n++)
 		if (act[n]) {
 			S.actl[S.nact++] = n;

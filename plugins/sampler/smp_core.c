@@ -347,7 +347,8 @@ void smp_seed_cluster(const double c[3], int p, double sep, double *out)
 			       dz = out[3 * i + 2] - out[3 * j + 2];
 			dmin = fmin(dmin, sqrt(dx * dx + dy * dy + dz * dz));
 		}
-	double rad = sep / dmin;
+	/* a hair over sep so that rounding never puts a pair below it */
+	double rad = sep / dmin * (1 + 1e-9);
 	for (int i = 0; i < p; i++)
 		for (int a = 0; a < 3; a++)
 			out[3 * i + a] = c[a] + rad * out[3 * i + a];

@@ -213,7 +213,7 @@ static double half_cross(const sts_hist_t *h, int m, int dir, double level)
  * (the derivative filter's zero may sit a bin off the smoothed maximum, so
  * the top is found by climbing hs from b), at least minh high, whose
  * prominence (the drop to the lowest point before a higher maximum, or the
- * histogram's end, on the shallower side) is at least 20% of its height:
+ * histogram's end, on the shallower side) is at least 10% of its height:
  * noise wiggles on a flank or in a valley are not modes.  Returns the top
  * bin, or -1.
  */
@@ -243,7 +243,7 @@ static int mode_at(const sts_hist_t *h, int b, double minh)
 	if (c >= nb)
 		rmin = 0;
 	double base = lmin > rmin ? lmin : rmin;
-	return hs[top] - base >= 0.2 * hs[top] ? top : -1;
+	return hs[top] - base >= 0.1 * hs[top] ? top : -1;
 }
 
 /* first significant mode with its top above bin `after` (searching sign
@@ -370,7 +370,7 @@ int sts_hist_thresholds(const sts_hist_t *h, const sts_params_t *p,
 			/* a real mode: its valley is clearly below its peak
 			 * (not a wiggle on the main mode's flank) */
 			if (area < STS_TISSUE_FRAC * total ||
-			    hs[v0] > 0.8 * hs[nm])
+			    hs[v0] > 0.9 * hs[nm])
 				break;
 			mr = nm;
 		}

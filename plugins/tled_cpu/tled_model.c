@@ -310,7 +310,20 @@ static void eig3(const double A[9], double w[3], double V[9])
 /* ------------------------------------------------------------ MLS */
 
 /* Cubic spline weight (Belytschko, Lu & Gu 1994), support r <= 1. */
+double tled_weight_eps = 0; /* >0: near-interpolating singular weight */
+static double spline_weight(double r, double *dwdr);
 double tled_weight(double r, double *dwdr)
+{
+	double d, w = spline_weight(r, &d);
+	if (tled_weight_eps > 0) {
+		double q = r * r + tled_weight_eps * tled_weight_eps;
+		*dwdr = d / q - w * 2 * r / (q * q);
+		return w / q;
+	}
+	*dwdr = d;
+	return w;
+}
+static double spline_weight(double r, double *dwdr)
 {
 	if (r < 0.5) {
 		*dwdr = -8 * r + 12 * r * r;
