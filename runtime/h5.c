@@ -85,30 +85,6 @@ static int is_h5_name(const char *path)
 
 /* Same layout as msg.c's columns (created by tab_set_num/str), usable when
  * the table has no rows yet. */
-static tab_col_t *tab_new_col(tab_t *t, const char *name, int type)
-{
-	if (t->ncols >= TAB_MAX_COLS)
-		return NULL;
-	tab_col_t *col = &t->col[t->ncols];
-	memset(col, 0, sizeof *col);
-	snprintf(col->name, sizeof col->name, "%s", name);
-	col->type = type;
-	size_t cap = t->cap ? (size_t)t->cap : 1;
-	if (type == TAB_NUM) {
-		col->num = malloc(cap * sizeof(double));
-		if (!col->num)
-			return NULL;
-		for (size_t r = 0; r < cap; r++)
-			col->num[r] = NAN;
-	} else {
-		col->str = calloc(cap, sizeof(char *));
-		if (!col->str)
-			return NULL;
-	}
-	t->ncols++;
-	return col;
-}
-
 /* a table with nrows empty rows */
 static tab_t *tab_with_rows(int64_t nrows)
 {
@@ -784,7 +760,7 @@ static int tab_read_h5(const char *path, tab_t **out, char *err,
 				  "strings", path, name);
 			goto out;
 		}
-		tab_col_t *col = tab_new_col(t, name, type);
+		tab_col_t *col = tab_add_col(t, name, type);
 		if (!col) {
 			rc = ferr(err, errsize, ARMSTG_ENOMEM,
 				  "'%s': out of memory", path);
@@ -1084,7 +1060,7 @@ static int tab_read_tsv(const char *path, tab_t **out, char *err,
 		}
 		int type = numeric && (nonempty || nrows == 0) ? TAB_NUM
 							       : TAB_STR;
-		tab_col_t *col = tab_new_col(t, names[c], type);
+		tab_col_t *col = tab_add_col(t, names[c], type);
 		if (!col) {
 			rc = ferr(err, errsize, ARMSTG_ENOMEM,
 				  "'%s': out of memory", path);

@@ -272,12 +272,12 @@ const tab_col_t *tab_col(const tab_t *t, const char *name)
 	return NULL;
 }
 
-static tab_col_t *tab_col_get(tab_t *t, const char *name, int type)
+/* Append a column (no check for an existing name: callers decide). */
+tab_col_t *tab_add_col(tab_t *t, const char *name, int type)
 {
-	for (int c = 0; c < t->ncols; c++)
-		if (!strcmp(t->col[c].name, name))
-			return t->col[c].type == type ? &t->col[c] : NULL;
-	if (t->ncols >= TAB_MAX_COLS || !name_ok(name, sizeof t->col[0].name))
+	if (!t || t->ncols >= TAB_MAX_COLS ||
+	    !name_ok(name, sizeof t->col[0].name) ||
+	    (type != TAB_NUM && type != TAB_STR))
 		return NULL;
 	tab_col_t *col = &t->col[t->ncols];
 	memset(col, 0, sizeof *col);
@@ -297,6 +297,14 @@ static tab_col_t *tab_col_get(tab_t *t, const char *name, int type)
 	}
 	t->ncols++;
 	return col;
+}
+
+static tab_col_t *tab_col_get(tab_t *t, const char *name, int type)
+{
+	for (int c = 0; c < t->ncols; c++)
+		if (!strcmp(t->col[c].name, name))
+			return t->col[c].type == type ? &t->col[c] : NULL;
+	return tab_add_col(t, name, type);
 }
 
 int tab_set_num(tab_t *t, int64_t row, const char *name, double v)

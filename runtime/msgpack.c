@@ -663,30 +663,6 @@ static int unpack_pointset(dec_t *d, const msgpack_object *root,
 /* Create an empty column sized to the table's capacity.  The same layout
  * msg.c's tab_set_num/tab_set_str create, but usable when nrows == 0
  * (a table may have columns and no rows). */
-static tab_col_t *tab_new_col(tab_t *t, const char *name, int type)
-{
-	if (t->ncols >= TAB_MAX_COLS)
-		return NULL;
-	tab_col_t *col = &t->col[t->ncols];
-	memset(col, 0, sizeof *col);
-	snprintf(col->name, sizeof col->name, "%s", name);
-	col->type = type;
-	size_t cap = t->cap ? (size_t)t->cap : 1;
-	if (type == TAB_NUM) {
-		col->num = malloc(cap * sizeof(double));
-		if (!col->num)
-			return NULL;
-		for (size_t r = 0; r < cap; r++)
-			col->num[r] = NAN;
-	} else {
-		col->str = calloc(cap, sizeof(char *));
-		if (!col->str)
-			return NULL;
-	}
-	t->ncols++;
-	return col;
-}
-
 static int unpack_table(dec_t *d, const msgpack_object *root, msg_t **out)
 {
 	static const char *const keys[] = { "v", "type", "nrows", "columns" };
@@ -774,7 +750,7 @@ static int unpack_table(dec_t *d, const msgpack_object *root, msg_t **out)
 		if (tab_add_row(t) < 0)
 			goto nomem;
 	for (uint32_t c = 0; c < ncols; c++) {
-		tab_col_t *col = tab_new_col(t, names[c], types[c]);
+		tab_col_t *col = tab_add_col(t, names[c], types[c]);
 		if (!col)
 			goto nomem;
 		if (types[c] == TAB_NUM) {

@@ -21,6 +21,12 @@
  *     the stored quaternion (niftilib's qto_xyz is float, which would round
  *     it a second time).  xyz_units METER or MICRON are scaled to mm as
  *     ITK does.
+ *   - niftilib parses the header; the data is read with zlib directly
+ *     (read_raw) because niftilib 3.0.1 zero-fills truncated files, misses
+ *     corrupt gzip streams and replaces NaN/Inf floats by 0.  A short file,
+ *     a gzip error or a bad gzip CRC is an error; values are kept bit for
+ *     bit.  The raw header is checked first (niftilib turns a zero
+ *     dimension into 1).
  *   - vector images (dim[5] == 3): ITK/ANTs store intent NIFTI_INTENT_VECTOR
  *     displacement fields with vectors in ITK's physical LPS frame; they are
  *     negated in x and y into RAS.  NIFTI_INTENT_DISPVECT (1006) vectors are

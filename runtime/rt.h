@@ -28,6 +28,8 @@ int64_t tab_add_row(tab_t *t);
 int tab_set_num(tab_t *t, int64_t row, const char *col, double v);
 int tab_set_str(tab_t *t, int64_t row, const char *col, const char *s);
 const tab_col_t *tab_col(const tab_t *t, const char *name);
+/* append a column (even on a table with no rows); NULL when full/bad */
+tab_col_t *tab_add_col(tab_t *t, const char *name, int type);
 msg_t *msg_ref(const msg_t *m);
 void msg_unref(msg_t *m);
 void msg_freeze(msg_t *m);

@@ -200,6 +200,26 @@ static int h_out_path(armstg_stage_t *st, const char *path, char *tmp,
 	return 0;
 }
 
+/* Messages from the writers name the temporary file: show the final one. */
+static int fail_tmp(armstg_stage_t *st, int rc, const char *e, const char *tmp)
+{
+	rt_stage_t *s = of(st);
+	const char *final = s->nfiles ? s->files[s->nfiles - 1].final : tmp;
+	char buf[2048];
+	size_t o = 0, tl = strlen(tmp);
+	for (const char *p = e; *p && o + 1 < sizeof buf;) {
+		if (tl && !strncmp(p, tmp, tl)) {
+			o += (size_t)snprintf(buf + o, sizeof buf - o, "%s",
+					      final);
+			p += tl;
+		} else {
+			buf[o++] = *p++;
+		}
+	}
+	buf[o < sizeof buf ? o : sizeof buf - 1] = 0;
+	return h_fail(st, rc, "%s", buf);
+}
+
 static int h_vol_read(armstg_stage_t *st, const char *path, vol_t **out)
 {
 	char e[1024] = "";
@@ -218,7 +238,7 @@ static int h_vol_write(armstg_stage_t *st, const char *path, const vol_t *v)
 	rc = vol_write_nifti(tmp, v, e, sizeof e);
 	if (rc) {
 		unlink(tmp);
-		return h_fail(st, rc, "%s", e);
+		return fail_tmp(st, rc, e, tmp);
 	}
 	return 0;
 }
@@ -239,7 +259,7 @@ static int h_ps_write(armstg_stage_t *st, const char *path, const ps_t *p)
 	rc = ps_write_h5(tmp, p, e, sizeof e);
 	if (rc) {
 		unlink(tmp);
-		return h_fail(st, rc, "%s", e);
+		return fail_tmp(st, rc, e, tmp);
 	}
 	return 0;
 }
@@ -260,7 +280,7 @@ static int h_tab_write(armstg_stage_t *st, const char *path, const tab_t *t)
 	rc = tab_write_file(tmp, t, e, sizeof e);
 	if (rc) {
 		unlink(tmp);
-		return h_fail(st, rc, "%s", e);
+		return fail_tmp(st, rc, e, tmp);
 	}
 	return 0;
 }

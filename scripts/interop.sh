@@ -37,7 +37,8 @@ VENV="$BUILD/interop-venv"
     "$VENV/bin/pip" install -q antspyx nibabel numpy
 WORK=$(mktemp -d "${TMPDIR:-/tmp}/armstg-interop.XXXXXX")
 trap 'rm -rf "$WORK"' EXIT
-export ARMSTG_PLUGIN_PATH="$BUILD/plugins" OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
+export ARMSTG_PLUGIN_PATH="$BUILD/plugins" OMP_NUM_THREADS=${OMP_NUM_THREADS:-2} \
+    OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-passive}
 RUN="$BUILD/run_stage"
 
 "$VENV/bin/python" - "$DATA" "$WORK" "$RUN" <<'EOF'

@@ -18,4 +18,7 @@ fi
 bench/.venv/bin/python -c "import SimpleITK, nibabel, numpy" 2>/dev/null ||
     bench/.venv/bin/pip install -q SimpleITK numpy nibabel
 export ARMSTG_PLUGIN_PATH="$BUILD/plugins"
+# OpenMP threads sleep instead of spinning at barriers: on a shared,
+# oversubscribed machine spinning made 2 threads 3x slower than 1
+export OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-passive}
 exec bench/.venv/bin/python bench/demons/bench.py --runner "$BUILD/run_stage" "$@"

@@ -448,21 +448,58 @@ static int box_setup(box_t *b, const ls_mask_t *mk, const int32_t *lab,
 		return -1;
 	if (kd_build(&b->kd, b->surf, ns))
 		return -1;
-	/* exact signed distance at every box voxel; raster order with the
+	/* exact signed distance at the voxels within `margin` 6-steps of
+	 * the component (those the layers, the normals and the WENO band
+	 * need; farther ones get -margin*hmax); raster order with the
 	 * previous voxel's nearest point as the search bound */
+	uint8_t *near = malloc((size_t)b->nv);
+	uint8_t *nn2 = malloc((size_t)b->nv);
+	if (!near || !nn2) {
+		free(near);
+		free(nn2);
+		return -1;
+	}
+	memcpy(near, b->in, (size_t)b->nv);
+	for (int it = 0; it < margin; it++) {
+		memcpy(nn2, near, (size_t)b->nv);
+		for (int64_t v = 0; v < b->nv; v++) {
+			if (nn2[v])
+				continue;
+			int ijk[3];
+			box_ijk(b, v, ijk);
+			for (int f = 0; f < 6 && !near[v]; f++) {
+				int q[3] = { ijk[0] + NB6[f][0],
+					     ijk[1] + NB6[f][1],
+					     ijk[2] + NB6[f][2] };
+				if (q[0] < 0 || q[1] < 0 || q[2] < 0 ||
+				    q[0] >= b->n[0] || q[1] >= b->n[1] ||
+				    q[2] >= b->n[2])
+					continue;
+				if (nn2[bidx(b, q[0], q[1], q[2])])
+					near[v] = 1;
+			}
+		}
+	}
+	free(nn2);
+	double far = -margin * fmax(b->h[0], fmax(b->h[1], b->h[2]));
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
 	for (int e = 0; e < b->n[2]; e++) {
 		int64_t hint = -1;
 		for (int cc = 0; cc < b->n[1]; cc++)
 			for (int a = 0; a < b->n[0]; a++) {
+				int64_t v = bidx(b, a, cc, e), f;
+				if (!near[v]) {
+					b->d[v] = far;
+					continue;
+				}
 				double p[3];
 				box_world(b, a, cc, e, p);
-				int64_t v = bidx(b, a, cc, e), f;
 				double dd = surf_dist(b, p, hint, &f);
 				hint = f;
 				b->d[v] = b->in[v] ? dd : -dd;
 			}
 	}
+	free(near);
 	return 0;
 }
 

@@ -30,6 +30,7 @@ typedef struct png_priv {
 	const char *path;
 	int axis;
 	int index;
+	double offset_mm;
 	double lo_pct, hi_pct;
 	int contour;
 	double alpha;
@@ -48,6 +49,10 @@ static const armstg_param_t params[] = {
 	{ "index", PT_INT, "-1", -1, 65535, "voxels",
 	  "slice index along the voxel axis nearest to the slice normal "
 	  "(-1: the middle slice)", NULL, OFF(index), 0 },
+	{ "offset_mm", PT_DOUBLE, "0", -10000, 10000, "mm",
+	  "with index -1: distance of the slice from the middle one, along "
+	  "the world axis (towards superior, anterior or right)", NULL,
+	  OFF(offset_mm), 0 },
 	{ "lo_pct", PT_DOUBLE, "1", 0, 100, "%",
 	  "percentile of non-zero voxels shown black", NULL, OFF(lo_pct), 0 },
 	{ "hi_pct", PT_DOUBLE, "99", 0, 100, "%",
@@ -257,10 +262,18 @@ static int png_process(armstg_stage_t *st)
 	int dc = axis_along(v, wc, 1 << dn);
 	int dr = 3 - dn - dc;
 	const int dims[3] = { v->nx, v->ny, v->nz };
-	int sl = P->index < 0 ? dims[dn] / 2 : P->index;
-	if (sl >= dims[dn])
+	double spn = sqrt(v->affine[dn] * v->affine[dn] +
+			  v->affine[4 + dn] * v->affine[4 + dn] +
+			  v->affine[8 + dn] * v->affine[8 + dn]);
+	long sl = P->index;
+	if (sl < 0) {
+		double sgn = v->affine[wn * 4 + dn] < 0 ? -1 : 1;
+		sl = dims[dn] / 2 +
+		     (spn > 0 ? lround(sgn * P->offset_mm / spn) : 0);
+	}
+	if (sl < 0 || sl >= dims[dn])
 		return H->fail(st, ARMSTG_EINVAL,
-			       "slice index %d is outside 0..%d", sl,
+			       "slice index %ld is outside 0..%d", sl,
 			       dims[dn] - 1);
 	/* each display axis starts at its largest world coordinate (right,
 	 * anterior or superior): flip when the voxel axis points that way */
@@ -299,7 +312,7 @@ static int png_process(armstg_stage_t *st)
 			if (fc) vc = dims[dc] - 1 - vc;
 			if (fr) vr = dims[dr] - 1 - vr;
 			int id[3];
-			id[dn] = sl;
+			id[dn] = (int)sl;
 			id[dc] = vc;
 			id[dr] = vr;
 			int64_t e = vol_idx(v, id[0], id[1], id[2]);

@@ -119,6 +119,7 @@ typedef struct ctx {
 	int64_t next_cap;
 	int R0;              /* cell layers to search for radius spacing */
 	int (*off)[3];       /* cell offsets within reach of spacing */
+	int64_t *loff;       /* the same as linear cell-index offsets */
 	int noff;
 } ctx_t;
 
@@ -126,7 +127,13 @@ static inline int64_t vox_of(const ctx_t *c, const double x[3])
 {
 	double q[3];
 	aff_apply(c->inv, x, q);
-	int i = (int)lround(q[0]), j = (int)lround(q[1]), k = (int)lround(q[2]);
+	/* nearest voxel; floor(x + 0.5) inline (lround is a libm call) */
+	double fi = floor(q[0] + 0.5), fj = floor(q[1] + 0.5),
+	       fk = floor(q[2] + 0.5);
+	if (!(fi >= 0 && fj >= 0 && fk >= 0 && fi < c->in->nx &&
+	      fj < c->in->ny && fk < c->in->nz))
+		return -1;
+	int i = (int)fi, j = (int)fj, k = (int)fk;
 	if (i < 0 || j < 0 || k < 0 || i >= c->in->nx || j >= c->in->ny ||
 	    k >= c->in->nz)
 		return -1;
@@ -178,16 +185,16 @@ static int near_node(const ctx_t *c, const double x[3], double r)
 		return 1; /* outside the grid: treat as blocked */
 	double r2 = r * r;
 	const double *xyz = c->r->xyz;
-	if (r <= c->p->spacing * (1 + 1e-12)) {
+	if (r <= c->p->spacing * (1 + 1e-12) && ci[0] >= c->R0 &&
+	    ci[1] >= c->R0 && ci[2] >= c->R0 && ci[0] < c->gn[0] - c->R0 &&
+	    ci[1] < c->gn[1] - c->R0 && ci[2] < c->gn[2] - c->R0) {
+		/* fast path: precomputed linear offsets, nearest cells first,
+		 * no bounds checks (the point is R0 cells inside the grid) */
+		int64_t base = cell_idx(c, ci);
+		const int32_t *head = c->head, *next = c->next;
 		for (int o = 0; o < c->noff; o++) {
-			int q[3] = { ci[0] + c->off[o][0], ci[1] + c->off[o][1],
-				     ci[2] + c->off[o][2] };
-			if (q[0] < 0 || q[1] < 0 || q[2] < 0 ||
-			    q[0] >= c->gn[0] || q[1] >= c->gn[1] ||
-			    q[2] >= c->gn[2])
-				continue;
-			for (int32_t n = c->head[cell_idx(c, q)]; n >= 0;
-			     n = c->next[n]) {
+			for (int32_t n = head[base + c->loff[o]]; n >= 0;
+			     n = next[n]) {
 				const double *y = xyz + 3 * (int64_t)n;
 				double dx = y[0] - x[0], dy = y[1] - x[1],
 				       dz = y[2] - x[2];
@@ -408,15 +415,17 @@ static int bridson(ctx_t *c, int32_t **active, int64_t *nact, int64_t *acap)
 							: c->r->spacing[id];
 		int found = 0;
 		for (int t = 0; t < p->attempts; t++) {
-			/* uniform in the shell r..2r (by volume) */
-			double u = rng_u(&c->rng), v = rng_u(&c->rng),
-			       w = rng_u(&c->rng);
-			double z = 2 * u - 1, ph = 2 * PI * v;
-			double rr = sqrt(fmax(0, 1 - z * z));
-			double rad = r * cbrt(1 + 7 * w);
-			double y[3] = { x[0] + rad * rr * cos(ph),
-					x[1] + rad * rr * sin(ph),
-					x[2] + rad * z };
+			/* uniform in the shell r..2r (by volume): rejection
+			 * from the cube [-2r, 2r]^3 (acceptance 46%; cheaper
+			 * than sincos + cbrt) */
+			double y[3], q2;
+			do {
+				for (int a = 0; a < 3; a++)
+					y[a] = (4 * rng_u(&c->rng) - 2) * r;
+				q2 = y[0] * y[0] + y[1] * y[1] + y[2] * y[2];
+			} while (q2 < r * r || q2 > 4 * r * r);
+			for (int a = 0; a < 3; a++)
+				y[a] += x[a];
 			if (!in_domain(c, y))
 				continue;
 			double sy = spacing_at(c, y);
@@ -937,6 +946,9 @@ int smp_run(const smp_input_t *in, const smp_params_t *p, smp_result_t *r)
 				c.noff++;
 			}
 	/* nearest cells first: conflicts are found sooner */
+	c.loff = malloc((size_t)(c.noff ? c.noff : 1) * sizeof *c.loff);
+	if (!c.loff)
+		goto nomem;
 	for (int i = 1; i < c.noff; i++) {
 		int t[3] = { c.off[i][0], c.off[i][1], c.off[i][2] };
 		int key = t[0] * t[0] + t[1] * t[1] + t[2] * t[2], j = i - 1;
@@ -949,6 +961,9 @@ int smp_run(const smp_input_t *in, const smp_params_t *p, smp_result_t *r)
 		}
 		memcpy(c.off[j + 1], t, sizeof t);
 	}
+	for (int o = 0; o < c.noff; o++)
+		c.loff[o] = ((int64_t)c.off[o][2] * c.gn[1] + c.off[o][1]) *
+				    c.gn[0] + c.off[o][0];
 
 	/* 1. seeds, 2. tumour boundary, 3. brain boundary, 4. fill */
 	if (seed_nodes(&c))
@@ -1006,6 +1021,7 @@ out:
 	free(c.head);
 	free(c.next);
 	free(c.off);
+	free(c.loff);
 	free(tum_in);
 	free(tum_out);
 	free(notdom);

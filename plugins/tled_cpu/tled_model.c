@@ -1148,7 +1148,28 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		}
 
 	/* ---- integration-constraint correction ---- */
-	if (correct_gradients(m, w, P, Mi, con, ent_ip, err, errsize))
+	/* only for nodes whose supports stay clear of the domain boundary:
+	 * there sum_ip V dN_a must vanish (the shape function vanishes on the
+	 * boundary); near it the true value is the boundary integral of N_a n,
+	 * which forcing to 0 would distort badly */
+	if (!getenv("CORRALL")) {
+		uint8_t *near = calloc((size_t)n, 1);
+		if (!near)
+			goto oom;
+		for (int64_t p = 0; p < nip; p++) {
+			int touch = 0;
+			for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++)
+				touch |= !con[m->ipnode[e]];
+			if (touch)
+				for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++)
+					near[m->ipnode[e]] = 1;
+		}
+		for (int64_t a = 0; a < n; a++)
+			if (near[a])
+				con[a] = 0;
+		free(near);
+	}
+	if (!getenv("NOCORR") && correct_gradients(m, w, P, Mi, con, ent_ip, err, errsize))
 		goto fail;
 
 	/* wave-speed time step estimate: h_min / c_max */

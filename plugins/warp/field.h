@@ -157,7 +157,10 @@ int fimg_exp(const fimg_t *v, fimg_t *out, int *nsteps, int nthreads);
  *     w_{k+1}(x) = -u(x + w_k(x)),  w_0 = -u,
  * out's grid may differ from u's.  Stops when the max residual
  * |w(x) + u(x + w(x))| (mm) is below tol_mm or after max_iter.  Reports
- * the residual over out's voxels whose x + w(x) falls inside u's grid.
+ * the residual of the returned w over all of out's voxels (u extended
+ * beyond its grid by edge clamping).  Converges when u is contracting
+ * (|grad u| < 1 in the region crossed); a large residual flags a field
+ * that folds or is too large to invert this way.
  */
 typedef struct field_inv_stats {
 	int iterations;

@@ -375,6 +375,11 @@ static void expect_err(const char *const *params, const vol_t *f,
 static void test_bad_input(void **state)
 {
 	fixture_t *fx = *state;
+	char derr[512] = "";
+	int drc = plugin_check_desc(TU_PLUGIN(), derr, sizeof derr);
+	if (drc)
+		print_message("descriptor: %s\n", derr);
+	assert_int_equal(drc, 0);
 	const char *p[] = { "iterations=2", NULL };
 	vol_t *zero = vol_new(FX, FY, FZ, 1, DT_F32, fx->fixed->affine);
 	expect_err(p, zero, fx->moving, NULL, NULL, "fixed volume is all zero");

