@@ -121,11 +121,15 @@ for fld in ("fieldA", "fieldB"):
     dint = np.abs(a - q)[inside] / rng
     ok_pos = dpos.max() < 0.1
     ok_int = dint.max() < 0.01
+    # guard against a vacuous pass (both empty): the warped T1 has content,
+    # and the field really moved it (differs from the unwarped resampling)
+    t1mean = float(a[inside].mean())
+    ok_int &= t1mean > 0.05 * rng and inside.sum() > 0.5 * bm.size
     print("%s: max |u| %.2f mm; %d voxels inside both; position difference "
-          "max %.2e mm mean %.2e mm [%s]; T1 difference max %.3f%% mean %.4f%% "
-          "of range [%s]; outside in exactly one tool: %d voxels"
+          "max %.2e mm mean %.2e mm [%s]; T1 (mean %.1f) difference max %.2e%% "
+          "mean %.2e%% of range [%s]; outside in exactly one tool: %d voxels"
           % (fld, umax, inside.sum(), dpos.max(), dpos.mean(),
-             "ok" if ok_pos else "FAIL", 100 * dint.max(), 100 * dint.mean(),
+             "ok" if ok_pos else "FAIL", t1mean, 100 * dint.max(), 100 * dint.mean(),
              "ok" if ok_int else "FAIL",
              int(((res["coord_x"][0] > 0) != (res["coord_x"][1] > 0)).sum())))
     fail |= not (ok_pos and ok_int)

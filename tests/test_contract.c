@@ -377,6 +377,9 @@ int contract_run(const char *so, const char *hints, char *report,
 	report[0] = 0;
 	for (int c = 0; c < NCHECKS; c++) {
 		int fd[2];
+		char errpath[64];
+		snprintf(errpath, sizeof errpath, "/tmp/armstg-contract-%d.err",
+			 (int)getpid());
 		if (pipe(fd))
 			return -1;
 		fflush(NULL);
@@ -390,11 +393,15 @@ int contract_run(const char *so, const char *hints, char *report,
 			for (size_t k = 0; k < sizeof sigs / sizeof *sigs; k++)
 				signal(sigs[k], SIG_DFL);
 			alarm(CHECK_TIMEOUT_S);
-			/* keep the child's stderr quiet: plugins log errors
-			 * on purpose here */
-			int devnull = open("/dev/null", O_WRONLY);
-			if (devnull >= 0 && !getenv("CONTRACT_VERBOSE"))
-				dup2(devnull, 2);
+			/* the child's stderr goes to a file: plugins log
+			 * errors on purpose here, and a sanitizer's report
+			 * tells the parent what crashed */
+			if (!getenv("CONTRACT_VERBOSE")) {
+				int efd = open(errpath, O_WRONLY | O_CREAT |
+					       O_TRUNC, 0600);
+				if (efd >= 0)
+					dup2(efd, 2);
+			}
 			int bad = child_check(so, hints, c);
 			if (bad && write(fd[1], child_msg, strlen(child_msg))) {
 			}
@@ -420,10 +427,26 @@ int contract_run(const char *so, const char *hints, char *report,
 					 : "crashed", WTERMSIG(status));
 			why = buf;
 		} else if (WEXITSTATUS(status)) {
-			snprintf(buf, sizeof buf, "%s",
-				 msg[0] ? msg : "failed (sanitizer report?)");
+			/* no message of ours: a sanitizer stopped the child */
+			char line[512], san[512] = "";
+			FILE *ef = fopen(errpath, "r");
+			while (ef && fgets(line, sizeof line, ef))
+				if (!san[0] && (strstr(line, "ERROR: Address") ||
+						strstr(line, "ERROR: Leak") ||
+						strstr(line, "runtime error:")))
+					snprintf(san, sizeof san, "%s", line);
+			if (ef)
+				fclose(ef);
+			san[strcspn(san, "\n")] = 0;
+			if (msg[0])
+				snprintf(buf, sizeof buf, "%s", msg);
+			else
+				snprintf(buf, sizeof buf, "crashed (%s)",
+					 san[0] ? san : "exit status without "
+					 "a message");
 			why = buf;
 		}
+		unlink(errpath);
 		if (why) {
 			fails++;
 			o += (size_t)snprintf(report + o, o < reportsize

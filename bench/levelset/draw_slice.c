@@ -5,7 +5,7 @@
  * nodes drawn on it.  The tumour mask is LPS, the atlas LAS: everything
  * goes through world coordinates.  Build and run with bench/levelset/run.sh.
  *
- *   draw_slice OUT.png [layer_spacing_mm] [node_spacing_mm]
+ *   draw_slice OUT.png [layer_spacing_mm] [node_spacing_mm] [exact|weno]
  *
  * Colours: layers from yellow (layer 0, the tumour boundary) to red
  * (deepest), seeds white squares; nodes: green tissue, blue brain
@@ -87,6 +87,8 @@ int main(int argc, char **argv)
 	const char *out = argc > 1 ? argv[1] : "slice.png";
 	const char *lsp = argc > 2 ? argv[2] : "3";
 	const char *nsp = argc > 3 ? argv[3] : "4";
+	char sch[64];
+	snprintf(sch, sizeof sch, "scheme=%s", argc > 4 ? argv[4] : "exact");
 	if (!tu_data_dir()) {
 		fprintf(stderr, "../shared/data is absent\n");
 		return 77;
@@ -108,7 +110,7 @@ int main(int argc, char **argv)
 	char a1[64], a2[64];
 	snprintf(a1, sizeof a1, "spacing=%s", lsp);
 	snprintf(a2, sizeof a2, "spacing=%s", nsp);
-	const char *pl[] = { a1, "min_voxels=10", "seed_spacing=4", NULL };
+	const char *pl[] = { a1, "min_voxels=10", "seed_spacing=4", sch, NULL };
 	const msg_t *in1[1] = { &tum->base };
 	msg_t *o1[2] = { 0 };
 	double t0 = now();
@@ -128,8 +130,9 @@ int main(int argc, char **argv)
 	}
 	double t_smp = now() - t0;
 	ps_t *nodes = (ps_t *)o2[0];
-	printf("levelset (exact, spacing %s mm) %.2f s; sampler (poisson, %s "
-	       "mm, with tumour and seeds) %.2f s\n", lsp, t_ls, nsp, t_smp);
+	printf("levelset (%s, spacing %s mm) %.2f s; sampler (poisson, %s "
+	       "mm, with tumour and seeds) %.2f s\n", sch, lsp, t_ls, nsp,
+	       t_smp);
 	/* slice through the deepest seed, in the atlas's voxel grid */
 	const ps_attr_t *dep = ps_attr(se, "depth");
 	int64_t best = 0;

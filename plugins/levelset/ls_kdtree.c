@@ -43,8 +43,12 @@ static void build_rec(kdtree_t *t, int64_t lo, int64_t hi)
 	/* explicit stack instead of recursion depth worries: depth is
 	 * log2(n) anyway, recursion is fine */
 	if (hi - lo <= 1) {
-		if (hi - lo == 1)
+		if (hi - lo == 1) {
 			t->axis[lo] = 0;
+			for (int c = 0; c < 3; c++)
+				t->box[6 * lo + c] = t->box[6 * lo + 3 + c] =
+					t->xyz[3 * t->idx[lo] + c];
+		}
 		return;
 	}
 	double mn[3] = { INFINITY, INFINITY, INFINITY },
@@ -64,6 +68,10 @@ static void build_rec(kdtree_t *t, int64_t lo, int64_t hi)
 	int64_t mid = lo + (hi - lo) / 2;
 	select_k(t->xyz, t->idx, lo, hi, mid, ax);
 	t->axis[mid] = (int8_t)ax;
+	for (int c = 0; c < 3; c++) {
+		t->box[6 * mid + c] = mn[c];
+		t->box[6 * mid + 3 + c] = mx[c];
+	}
 	build_rec(t, lo, mid);
 	build_rec(t, mid + 1, hi);
 }
@@ -74,7 +82,8 @@ int kd_build(kdtree_t *t, const double *xyz, int64_t n)
 	t->xyz = xyz;
 	t->idx = malloc((size_t)(n > 0 ? n : 1) * sizeof *t->idx);
 	t->axis = malloc((size_t)(n > 0 ? n : 1));
-	if (!t->idx || !t->axis) {
+	t->box = malloc((size_t)(n > 0 ? n : 1) * 6 * sizeof *t->box);
+	if (!t->idx || !t->axis || !t->box) {
 		kd_free(t);
 		return -1;
 	}
@@ -88,9 +97,23 @@ void kd_free(kdtree_t *t)
 {
 	free(t->idx);
 	free(t->axis);
+	free(t->box);
 	t->idx = NULL;
 	t->axis = NULL;
+	t->box = NULL;
 	t->n = 0;
+}
+
+/* squared distance from q to the box (0 inside) */
+static inline double box_d2(const double *b, const double q[3])
+{
+	double s = 0;
+	for (int c = 0; c < 3; c++) {
+		double d = q[c] < b[c] ? b[c] - q[c]
+			 : q[c] > b[3 + c] ? q[c] - b[3 + c] : 0;
+		s += d * d;
+	}
+	return s;
 }
 
 static void nn_rec(const kdtree_t *t, int64_t lo, int64_t hi,
@@ -98,6 +121,10 @@ static void nn_rec(const kdtree_t *t, int64_t lo, int64_t hi,
 {
 	while (hi > lo) {
 		int64_t mid = lo + (hi - lo) / 2;
+		/* prune by the subtree's bounding box, tighter than the
+		 * splitting plane alone (matters for far queries) */
+		if (box_d2(t->box + 6 * mid, q) >= *best)
+			return;
 		const double *p = t->xyz + 3 * t->idx[mid];
 		double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
 		double d2 = dx * dx + dy * dy + dz * dz;
@@ -116,8 +143,6 @@ static void nn_rec(const kdtree_t *t, int64_t lo, int64_t hi,
 			nlo = mid + 1, nhi = hi, flo = lo, fhi = mid;
 		}
 		nn_rec(t, nlo, nhi, q, best, bi);
-		if (diff * diff >= *best)
-			return;
 		lo = flo;
 		hi = fhi;
 	}

@@ -15,6 +15,8 @@ typedef struct kdtree {
 	const double *xyz;   /* n*3, borrowed: must outlive the tree */
 	int64_t *idx;        /* permutation: implicit balanced tree */
 	int8_t *axis;        /* split axis per node (position in idx) */
+	double *box;         /* per node: bounding box of its subtree,
+	                        min xyz then max xyz (6 doubles) */
 } kdtree_t;
 
 /* Build over n points (n may be 0).  0 or -1 on out-of-memory. */

@@ -52,6 +52,7 @@ void tled_model_opts_default(tled_model_opts_t *o)
 	o->support_dilation = 1.2;
 	o->ip_factor = 1.0;
 	o->merge_tol = 1e-3 * TLED_MM;
+	o->corr = TLED_CORR_ALL;
 	/* thesis Table 3.1 */
 	tled_material_set(&o->mat[MAT_BRAIN], 3000, 0.49, 1000);
 	tled_material_set(&o->mat[MAT_CSF], 10, 0.1, 1000);
@@ -310,20 +311,7 @@ static void eig3(const double A[9], double w[3], double V[9])
 /* ------------------------------------------------------------ MLS */
 
 /* Cubic spline weight (Belytschko, Lu & Gu 1994), support r <= 1. */
-double tled_weight_eps = 0; /* >0: near-interpolating singular weight */
-static double spline_weight(double r, double *dwdr);
 double tled_weight(double r, double *dwdr)
-{
-	double d, w = spline_weight(r, &d);
-	if (tled_weight_eps > 0) {
-		double q = r * r + tled_weight_eps * tled_weight_eps;
-		*dwdr = d / q - w * 2 * r / (q * q);
-		return w / q;
-	}
-	*dwdr = d;
-	return w;
-}
-static double spline_weight(double r, double *dwdr)
 {
 	if (r < 0.5) {
 		*dwdr = -8 * r + 12 * r * r;
@@ -1152,7 +1140,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 	 * there sum_ip V dN_a must vanish (the shape function vanishes on the
 	 * boundary); near it the true value is the boundary integral of N_a n,
 	 * which forcing to 0 would distort badly */
-	if (!getenv("CORRALL")) {
+	if (o->corr == TLED_CORR_INTERIOR) {
 		uint8_t *near = calloc((size_t)n, 1);
 		if (!near)
 			goto oom;
@@ -1169,7 +1157,8 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 				con[a] = 0;
 		free(near);
 	}
-	if (!getenv("NOCORR") && correct_gradients(m, w, P, Mi, con, ent_ip, err, errsize))
+	if (o->corr != TLED_CORR_NONE &&
+	    correct_gradients(m, w, P, Mi, con, ent_ip, err, errsize))
 		goto fail;
 
 	/* wave-speed time step estimate: h_min / c_max */

@@ -52,6 +52,15 @@ enum tled_label {
 	TL_SEED = 5,
 };
 
+/* Which nodes get the integration-constraint correction (sum_ip V dN_a = 0).
+ * STATUS (see bench/tled/results.md): ALL passes the linear patch test to
+ * 1e-9 but distorts the gradients of free nodes whose shape functions reach
+ * the essential boundary (cavity test 70% off); INTERIOR / NONE leave the
+ * essential-boundary error of non-interpolating MLS (patch test 65% off).
+ * The fix planned: collocate the boundary conditions on the approximation
+ * (u^h(X_b) = u_b) with multipliers and target b_a = sum_b N_a(X_b) A_b n_b. */
+enum tled_corr { TLED_CORR_NONE = 0, TLED_CORR_INTERIOR = 1, TLED_CORR_ALL = 2 };
+
 enum tled_mat_id { MAT_BRAIN = 0, MAT_CSF = 1, MAT_TUMOUR = 2, MAT_N = 3 };
 
 typedef struct tled_material {
@@ -72,6 +81,7 @@ typedef struct tled_model_opts {
 	double support_dilation;/* weight radius = dilation * distance to K-th */
 	double ip_factor;       /* ip grid spacing / mean node spacing */
 	double merge_tol;       /* m: nodes closer than this are merged */
+	int corr;               /* tled_corr: integration-constraint correction */
 	tled_material_t mat[MAT_N];
 	int nthreads;           /* OpenMP threads (<=0: runtime default) */
 	/* Domain test for ip candidates (reference coordinates, m).  NULL: the

@@ -1,0 +1,319 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * tled_cpu core numerics (model + hot loops + solver), on synthetic clouds.
+ * Every test asserts numbers.  Run: build/tests/tled_cpu_test_core
+ */
+#include "testutil.h"
+
+#include <math.h>
+
+#include "../tled_solve.h"
+#include "tled_synth.h"
+
+static double g_L; /* cube edge, m */
+static int in_cube(const double x[3], void *ctx)
+{
+	(void)ctx;
+	for (int i = 0; i < 3; i++)
+		if (x[i] < 0 || x[i] > g_L)
+			return 0;
+	return 1;
+}
+
+/* cube cloud in metres */
+static double *cube_m(synth_cloud_t *c, double Lmm, double hmm, double jit)
+{
+	synth_cube(c, Lmm, hmm, jit, 7);
+	double *X = malloc((size_t)(3 * c->n) * sizeof *X);
+	for (int64_t i = 0; i < 3 * c->n; i++)
+		X[i] = c->x[i] * TLED_MM;
+	g_L = Lmm * TLED_MM;
+	return X;
+}
+
+/* S = 2 dW/dC (checked by central differences of W along F), S(I) = 0, and
+ * the small-strain limit S -> lambda tr(e) I + 2 mu e */
+static void test_neohooke(void **state)
+{
+	(void)state;
+	tled_material_t mt;
+	assert_int_equal(tled_material_set(&mt, 3000, 0.49, 1000), 0);
+	assert_true(fabs(mt.mu - 3000 / 2.98) < 1e-9);
+	assert_true(fabs(mt.kappa - 3000 / (3 * 0.02)) < 1e-6);
+	double F[9] = { 1.1, 0.05, -0.02, 0.03, 0.95, 0.04, -0.01, 0.02, 1.05 };
+	double S[9], W;
+	tled_neohooke(F, mt.mu, mt.kappa, S, &W);
+	/* dW/dF = F S (1st PK); compare with central differences */
+	for (int i = 0; i < 3; i++)
+		for (int j = 0; j < 3; j++) {
+			double Fp[9], Fm[9], Sx[9], Wp, Wm, h = 1e-6;
+			memcpy(Fp, F, sizeof Fp);
+			memcpy(Fm, F, sizeof Fm);
+			Fp[3 * i + j] += h;
+			Fm[3 * i + j] -= h;
+			tled_neohooke(Fp, mt.mu, mt.kappa, Sx, &Wp);
+			tled_neohooke(Fm, mt.mu, mt.kappa, Sx, &Wm);
+			double P = 0;
+			for (int k = 0; k < 3; k++)
+				P += F[3 * i + k] * S[3 * k + j];
+			double fd = (Wp - Wm) / (2 * h);
+			assert_true(fabs(P - fd) <= 1e-6 * (fabs(fd) + mt.mu));
+		}
+	double I[9] = { 1, 0, 0, 0, 1, 0, 0, 0, 1 };
+	tled_neohooke(I, mt.mu, mt.kappa, S, &W);
+	for (int i = 0; i < 9; i++)
+		assert_true(fabs(S[i]) < 1e-9);
+	assert_true(fabs(W) < 1e-12);
+	double e = 1e-6, Fe[9] = { 1 + e, 0, 0, 0, 1, 0.5 * e, 0, 0.5 * e, 1 };
+	tled_neohooke(Fe, mt.mu, mt.kappa, S, &W);
+	assert_true(fabs(S[0] - (mt.lambda + 2 * mt.mu) * e) <
+		    1e-4 * (mt.lambda + 2 * mt.mu) * e);
+	assert_true(fabs(S[4] - mt.lambda * e) < 1e-3 * mt.lambda * e);
+	assert_true(fabs(S[5] - mt.mu * e) < 1e-3 * mt.mu * e);
+	/* inverted: J <= 0 reported, no NaN */
+	double Fi[9] = { -1, 0, 0, 0, 1, 0, 0, 0, 1 };
+	double J = tled_neohooke(Fi, mt.mu, mt.kappa, S, &W);
+	assert_true(J <= 0);
+	assert_true(isfinite(S[0]) && isfinite(W));
+}
+
+/* MLS: partition of unity and linear reproduction of values and gradients */
+static void test_mls_linear(void **state)
+{
+	(void)state;
+	uint64_t s = 99;
+	double X[3 * 30];
+	int64_t ids[30];
+	for (int i = 0; i < 30; i++) {
+		ids[i] = i;
+		for (int c = 0; c < 3; c++)
+			X[3 * i + c] = 0.01 * synth_rand(&s);
+	}
+	double x[3] = { 0.005, 0.004, 0.006 }, N[30], dN[90], w[30];
+	assert_int_equal(tled_mls(X, ids, 30, x, 0.02, N, dN, w), 0);
+	double s0 = 0, s1[3] = { 0 }, g0[3] = { 0 }, g1[9] = { 0 };
+	for (int i = 0; i < 30; i++) {
+		s0 += N[i];
+		for (int c = 0; c < 3; c++) {
+			s1[c] += N[i] * X[3 * i + c];
+			g0[c] += dN[3 * i + c];
+			for (int d = 0; d < 3; d++)
+				g1[3 * c + d] += X[3 * i + c] * dN[3 * i + d];
+		}
+	}
+	assert_true(fabs(s0 - 1) < 1e-12);
+	for (int c = 0; c < 3; c++) {
+		assert_true(fabs(s1[c] - x[c]) < 1e-14);
+		assert_true(fabs(g0[c]) < 1e-9);
+		for (int d = 0; d < 3; d++)
+			assert_true(fabs(g1[3 * c + d] - (c == d)) < 1e-10);
+	}
+	/* coplanar support: refused, not NaN */
+	for (int i = 0; i < 30; i++)
+		X[3 * i + 2] = 0;
+	assert_int_equal(tled_mls(X, ids, 30, x, 0.02, N, dN, w), -1);
+}
+
+/* Patch test: linear displacement (1% strain, non-symmetric gradient)
+ * prescribed on the faces of a jittered cube, reproduced inside to 1e-6 */
+static void test_patch(void **state)
+{
+	(void)state;
+	synth_cloud_t c = { 0 };
+	double *X = cube_m(&c, 20, 2.5, 0.3);
+	tled_model_opts_t mo;
+	tled_model_opts_default(&mo);
+	mo.inside = in_cube;
+	mo.nthreads = 2;
+	tled_model_t m;
+	char err[512];
+	assert_int_equal(tled_model_build(&m, X, c.label, c.n, NULL, NULL, &mo,
+					  err, sizeof err), 0);
+	assert_true(m.corr_rel < 1e-10);
+	tled_solver_t s;
+	assert_int_equal(tled_solver_init(&s, &m, err, sizeof err), 0);
+	const double A[9] = { 0.01, 0.02, -0.005, 0.003, -0.01, 0.004,
+			      0.006, 0.002, 0.008 };
+	double *tgt = calloc((size_t)(3 * m.n), sizeof *tgt);
+	for (int64_t a = 0; a < m.n; a++)
+		if (m.label[a] == TL_BOUNDARY) {
+			m.kind[a] = TLED_DRIVEN;
+			for (int i = 0; i < 3; i++)
+				for (int j = 0; j < 3; j++)
+					tgt[3 * a + i] += A[3 * i + j] * m.X[3 * a + j];
+		}
+	tled_solver_opts_t so;
+	tled_solver_opts_default(&so);
+	so.tol = 1e-12;
+	so.max_iter = 20000;
+	so.contact = 0;
+	tled_relax_stats_t st;
+	int rc = tled_relax(&s, &so, tgt, "patch test", &st, err, sizeof err);
+	if (rc)
+		print_message("%s\n", err);
+	assert_int_equal(rc, 0);
+	assert_true(st.converged);
+	double emax = 0, umax = 0;
+	for (int64_t a = 0; a < m.n; a++)
+		for (int i = 0; i < 3; i++) {
+			double v = 0;
+			for (int j = 0; j < 3; j++)
+				v += A[3 * i + j] * m.X[3 * a + j];
+			emax = fmax(emax, fabs(s.u[3 * a + i] - v));
+			umax = fmax(umax, fabs(v));
+		}
+	print_message("patch: %lld nodes, %lld ips, %d iterations, max error "
+		      "%.3g relative\n", (long long)m.n, (long long)m.nip,
+		      st.iters, emax / umax);
+	assert_true(emax / umax < 1e-6);
+	free(tgt);
+	tled_solver_free(&s);
+	tled_model_free(&m);
+	free(X);
+	synth_free(&c);
+}
+
+/* small model: faces fixed, a random initial displacement inside */
+static void small_model(tled_model_t *m, tled_solver_t *s, double nu)
+{
+	synth_cloud_t c = { 0 };
+	double *X = cube_m(&c, 12, 3, 0.25);
+	tled_model_opts_t mo;
+	tled_model_opts_default(&mo);
+	mo.inside = in_cube;
+	mo.support_k = 16;
+	mo.nthreads = 1;
+	tled_material_set(&mo.mat[MAT_BRAIN], 3000, nu, 1000);
+	char err[512];
+	assert_int_equal(tled_model_build(m, X, c.label, c.n, NULL, NULL, &mo,
+					  err, sizeof err), 0);
+	assert_int_equal(tled_solver_init(s, m, err, sizeof err), 0);
+	uint64_t r = 5;
+	for (int64_t a = 0; a < m->n; a++)
+		if (m->kind[a] == TLED_FREE)
+			for (int i = 0; i < 3; i++)
+				s->u[3 * a + i] = 1e-5 * (synth_rand(&r) - 0.5);
+	free(X);
+	synth_free(&c);
+}
+
+/* critical time step: 0.9x stable over 50k undamped steps (energy bounded),
+ * 1.1x caught by the watchdog with a message naming step, node, cause */
+static void test_dt_critical(void **state)
+{
+	(void)state;
+	for (int k = 0; k < 2; k++) {
+		double nu = k ? 0.499 : 0.49;
+		tled_model_t m;
+		tled_solver_t s;
+		small_model(&m, &s, nu);
+		double *u0 = malloc((size_t)(3 * m.n) * sizeof *u0);
+		memcpy(u0, s.u, (size_t)(3 * m.n) * sizeof *u0);
+		tled_solver_opts_t so;
+		tled_solver_opts_default(&so);
+		so.contact = 0;
+		double dt;
+		char err[512];
+		tled_solver_update_active(&s);
+		assert_int_equal(tled_solver_pick_dt(&s, &so, &dt, err, sizeof err),
+				 0);
+		double crit = s.dt_eigen;
+		print_message("nu %.3f: dt critical (eigen) %.4g s, wave-speed "
+			      "h_min/c %.4g s\n", nu, crit, m.dt_wave);
+		assert_true(crit > 0 && isfinite(crit));
+		so.dt_policy = TLED_DT_FORCE;
+		so.damping = 0;
+		so.tol = 0;
+		so.max_iter = 50000;
+		so.dt = 0.9 * crit;
+		tled_relax_stats_t st;
+		tled_force_info_t fi;
+		tled_forces_c(&m, NULL, s.u, s.VP, s.f, &fi);
+		double E0 = fi.W;
+		int rc = tled_relax(&s, &so, NULL, "stable run", &st, err,
+				    sizeof err);
+		if (rc)
+			print_message("%s\n", err);
+		assert_int_equal(rc, 0);
+		assert_int_equal(st.iters, 50000);
+		assert_true(st.ke + st.W < 3 * E0);
+		for (int64_t i = 0; i < 3 * m.n; i++)
+			assert_true(isfinite(s.u[i]));
+		/* 1.1x: blow-up detected */
+		memcpy(s.u, u0, (size_t)(3 * m.n) * sizeof *u0);
+		so.dt = 1.1 * crit;
+		rc = tled_relax(&s, &so, NULL, "unstable run", &st, err,
+				sizeof err);
+		print_message("1.1x: %s\n", err);
+		assert_int_equal(rc, -1);
+		assert_non_null(strstr(err, "unstable run, iteration"));
+		assert_true(strstr(err, "blow-up") || strstr(err, "NaN"));
+		assert_non_null(strstr(err, "node"));
+		/* policies: refuse names both steps; reduce uses safety*crit */
+		memcpy(s.u, u0, (size_t)(3 * m.n) * sizeof *u0);
+		so.dt_policy = TLED_DT_REFUSE;
+		rc = tled_relax(&s, &so, NULL, "refused", &st, err, sizeof err);
+		assert_int_equal(rc, -1);
+		assert_non_null(strstr(err, "above the critical time step"));
+		so.dt_policy = TLED_DT_REDUCE;
+		so.max_iter = 10;
+		rc = tled_relax(&s, &so, NULL, "reduced", &st, err, sizeof err);
+		assert_int_equal(rc, 0);
+		assert_true(fabs(st.dt - so.dt_safety * st.dt_crit) <
+			    1e-12 * st.dt);
+		free(u0);
+		tled_solver_free(&s);
+		tled_model_free(&m);
+	}
+}
+
+/* coincident nodes and seeds at one point: merged, never NaN */
+static void test_coincident(void **state)
+{
+	(void)state;
+	synth_cloud_t c = { 0 };
+	synth_cube(&c, 15, 3, 0.2, 3);
+	int64_t n0 = c.n;
+	/* duplicate 10 nodes exactly, and 4 seeds at one interior point */
+	for (int i = 0; i < 10; i++)
+		synth_push(&c, c.x[3 * (5 * i + 40)], c.x[3 * (5 * i + 40) + 1],
+			   c.x[3 * (5 * i + 40) + 2], 0);
+	for (int i = 0; i < 4; i++)
+		synth_push(&c, 7.6, 7.4, 7.5, TL_SEED);
+	double *X = malloc((size_t)(3 * c.n) * sizeof *X);
+	for (int64_t i = 0; i < 3 * c.n; i++)
+		X[i] = c.x[i] * TLED_MM;
+	g_L = 15 * TLED_MM;
+	tled_model_opts_t mo;
+	tled_model_opts_default(&mo);
+	mo.inside = in_cube;
+	tled_model_t m;
+	char err[512];
+	assert_int_equal(tled_model_build(&m, X, c.label, c.n, NULL, NULL, &mo,
+					  err, sizeof err), 0);
+	assert_int_equal(m.n_merged, 13);
+	assert_int_equal(m.n, n0 + 1);
+	/* the 4 seeds map to one node labelled seed */
+	int64_t r = m.rep[c.n - 1];
+	for (int i = 2; i <= 4; i++)
+		assert_int_equal(m.rep[c.n - i], r);
+	assert_int_equal(m.label[r], TL_SEED);
+	assert_true(m.h_min > 0);
+	for (int64_t e = 0; e < 3 * m.ipptr[m.nip]; e++)
+		assert_true(isfinite(m.dN[e]));
+	tled_model_free(&m);
+	free(X);
+	synth_free(&c);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_neohooke),
+		cmocka_unit_test(test_mls_linear),
+		cmocka_unit_test(test_patch),
+		cmocka_unit_test(test_dt_critical),
+		cmocka_unit_test(test_coincident),
+	};
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}
