@@ -795,8 +795,8 @@ static int search_scale(gen_t *g)
 	if (m_hi < want) {
 		rc = g->st->host->fail(
 			g->st, ARMSTG_EINVAL,
-			"mass_effect %.3g mm is out of reach: the ventricles move "
-			"at most %.3g mm before the tumour would have to grow "
+			"mass_effect %.2f mm is out of reach: the ventricles move "
+			"at most %.2f mm before the tumour would have to grow "
 			"from less than 15%% of its radius; place the tumour "
 			"nearer the ventricles (location, shift_*), enlarge it, "
 			"or lower mass_effect", want, m_hi);

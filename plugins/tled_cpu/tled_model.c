@@ -595,6 +595,28 @@ void tled_model_grad(const tled_model_t *m, const double *u, double *H)
 	}
 }
 
+int tled_model_interp(const tled_model_t *m, const tled_grid_t *ng, int K,
+		      double dil, const double x[3], const double *u,
+		      double out[3])
+{
+	int64_t ids[256];
+	double d2[256], N[256], dN[3 * 256], w[256];
+	out[0] = out[1] = out[2] = 0;
+	if (K > 256)
+		K = 256;
+	if (K > m->n)
+		K = (int)m->n;
+	int k = tled_grid_knn(ng, x, K, -1, ids, d2);
+	if (k < 4)
+		return -1;
+	if (tled_mls(m->X, ids, k, x, dil * sqrt(d2[k - 1]), N, dN, w))
+		return -1;
+	for (int i = 0; i < k; i++)
+		for (int c = 0; c < 3; c++)
+			out[c] += N[i] * u[3 * ids[i] + c];
+	return 0;
+}
+
 /* ------------------------------------------------- consistency correction */
 
 /*

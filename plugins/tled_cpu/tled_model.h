@@ -192,6 +192,16 @@ void tled_model_gradsum(const tled_model_t *m, double *g);
 double tled_boundary_side(const tled_model_t *m, const double y[3],
 			  int64_t *bid);
 
+/* Approximated displacement u^h(x) = sum_a N_a(x) u_a (u: 3n nodal
+ * parameters, m) at a reference point x (m).  Support as at the ips: the
+ * K nearest nodes of the grid ng (built over m->X), weight radius
+ * dil * distance to the K-th.  MLS does not interpolate, so at a node
+ * u^h(X_a) != u_a in general: outputs must use this.  Returns 0, or -1 when
+ * the support is singular (out left at 0). */
+int tled_model_interp(const tled_model_t *m, const tled_grid_t *ng, int K,
+		      double dil, const double x[3], const double *u,
+		      double out[3]);
+
 /* Displacement gradient at every ip from nodal u (3n, m): H (9 per ip,
  * row-major dU_i/dX_j).  Used by tests and diagnostics. */
 void tled_model_grad(const tled_model_t *m, const double *u, double *H);

@@ -54,6 +54,7 @@ void tled_solver_free(tled_solver_t *s)
 	free(s->tmp2);
 	free(s->s0);
 	free(s->ipact);
+	free(s->ipoff);
 	memset(s, 0, sizeof *s);
 }
 
@@ -73,7 +74,8 @@ int tled_solver_init(tled_solver_t *s, tled_model_t *m, char *err,
 	s->s0 = calloc((size_t)m->n, sizeof(double));
 	s->VP = calloc((size_t)(9 * m->nip), sizeof(double));
 	s->ipact = calloc((size_t)m->nip, 1);
-	if (!s->u || !s->v || !s->f || !s->fprev || !s->ustart || !s->tmp ||
+	s->ipoff = calloc((size_t)m->nip, 1);
+	if (!s->ipoff || !s->u || !s->v || !s->f || !s->fprev || !s->ustart || !s->tmp ||
 	    !s->tmp2 || !s->s0 || !s->VP || !s->ipact) {
 		tled_solver_free(s);
 		return errf(err, errsize, "out of memory (solver, %lld nodes)",
@@ -99,6 +101,10 @@ void tled_solver_update_active(tled_solver_t *s)
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
 	for (int64_t p = 0; p < m->nip; p++) {
 		uint8_t act = 0;
+		if (s->ipoff[p]) {
+			s->ipact[p] = 0;
+			continue;
+		}
 		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1] && !act; e++)
 			act = m->kind[m->ipnode[e]] == TLED_FREE;
 		s->ipact[p] = act;

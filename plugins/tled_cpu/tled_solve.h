@@ -70,6 +70,8 @@ typedef struct tled_solver {
 	tled_model_t *m;    /* kinds (m->kind) are read live */
 	double *u, *v, *f, *fprev, *VP, *ustart, *tmp, *tmp2, *s0;
 	uint8_t *ipact;
+	uint8_t *ipoff;     /* nip: 1 = integration point switched off (inside
+	                       the grown tumour: a cavity carries no stress) */
 	double lmax, lmin;  /* eigenvalue estimates of M^-1 K, 1/s^2 */
 	double dt_crit;     /* s, from the chosen estimate */
 	double dt_eigen;    /* s, 2/sqrt(lmax) */
@@ -94,7 +96,8 @@ typedef struct tled_relax_stats {
 int tled_solver_init(tled_solver_t *s, tled_model_t *m, char *err,
 		     size_t errsize);
 void tled_solver_free(tled_solver_t *s);
-/* recompute active ips (those with a free node) after kinds change */
+/* recompute active ips (those with a free node and not switched off in
+ * ipoff) after kinds change */
 void tled_solver_update_active(tled_solver_t *s);
 /* Lanczos estimate of the extreme eigenvalues of M^-1 K at the current u */
 int tled_solver_eigs(tled_solver_t *s, const tled_solver_opts_t *o,

@@ -1,0 +1,934 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * tled_cpu: grow the tumour inside the atlas with mesh-free Total Lagrangian
+ * Explicit Dynamics (DESIGN.md section 6; thesis sections 3.5-3.6).  The
+ * numerics live in tled_model.c (setup), tled_step.c (hot loops) and
+ * tled_solve.c (time step, dynamic relaxation, contact, watchdogs); this
+ * file is the port adapter and the growth replay.
+ *
+ * Units: ports in mm (RAS world), the model in SI (m, kg, s, Pa).
+ *
+ * in   nodes     pointset from the sampler: labels 0 tissue, 1 brain
+ *                boundary (fixed), 2 ventricles/sulci, 3 tumour, 4 tumour
+ *                boundary, 5 seed.  Labels 3 and 4 mark atlas tissue that
+ *                lies where the tumour will be: it is tissue at the start and
+ *                is pushed away or swept by the growth.
+ *      contours  pointset from levelset: label = tumour component, attribute
+ *                layer (0 = tumour boundary, increasing inward), parent (x3,
+ *                mm: the point's position on the previous, outer layer),
+ *                normal (x3, outward; optional: estimated when absent)
+ *      labels    optional tissue label volume (atlas labels): materials per
+ *                integration point; the values listed in csf_labels are
+ *                ventricles/sulci, every other value brain parenchyma.
+ *                Without it the material of an integration point is that of
+ *                its nearest node (label 2: CSF, else parenchyma).
+ * out  nodes     the input nodes (same order, input attributes kept) with
+ *                attribute u (x3, mm: the displacement, reference -> grown)
+ *                and the final labels (below)
+ *      tumour    the tumour nodes (those driven by the growth or swept by
+ *                it) at their final, deformed positions (mm); label 3
+ *                tumour, 4 tumour boundary (within half a node spacing of
+ *                the final tumour surface), 5 seed; attributes u (x3, mm),
+ *                ref (x3, reference position, mm), step (growth step at
+ *                which the node joined the tumour), component
+ *      stats     one row per growth step: step, layer, iterations,
+ *                converged, dt_s, dt_crit_s, kinetic_energy_J,
+ *                strain_energy_J, residual_N, err_est_mm, jmin, driven,
+ *                swept, contacts, wall_s
+ *
+ * Growth replay (thesis section 3.6, in 3-D).  Layers are replayed from the
+ * innermost to layer 0.  At the innermost layer of a component the tumour
+ * is created: the seed nodes of the component (label 5, assigned to the
+ * component of their nearest contour point) and every movable node inside
+ * that layer become tumour nodes (driven, TLED_DRIVEN).  At every later
+ * layer l each tumour node is displaced by the level set's layer-to-layer
+ * map, evaluated at its current position: the inverse-distance weighted
+ * mean of (parent - position) over the 8 nearest points of the previous
+ * (inner) layer of its component.  Dynamic relaxation then brings the free
+ * nodes to equilibrium with the brain boundary fixed and contact keeping
+ * nodes inside the brain.  Afterwards (relabelling rule) every free node
+ * whose current position lies inside layer l (signed distance to the
+ * nearest layer point along its outward normal below -sweep_margin * mean
+ * node spacing) is swept into the tumour: relabelled tumour, driven from
+ * then on.  Integration points whose current position lies inside the
+ * tumour (by more than half an integration cell) are switched off: the
+ * tumour acts as a cavity with a prescribed boundary, so swept tissue
+ * carries no stress.
+ */
+#include <math.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "armstg/plugin.h"
+#include "armstg/volmath.h"
+#include "tled_solve.h"
+
+typedef struct priv {
+	double e_brain, nu_brain, e_tumour, nu_tumour, e_csf, nu_csf;
+	double density;
+	int support_k;
+	double support_dilation;
+	double ip_spacing;
+	double dt;
+	double dt_safety;
+	int dt_policy;
+	int dt_estimate;
+	double damping;
+	int ramp_iter;
+	int max_iter;
+	double tol;
+	int contact;
+	int corr;
+	double merge_tol;
+	double sweep_margin;
+	const char *csf_labels;
+} priv_t;
+
+static const armstg_param_t params[] = {
+	{ "e_brain", PT_DOUBLE, "3000", 1e-3, 1e9, "Pa",
+	  "Young's modulus of brain parenchyma (thesis Table 3.1: 3000 Pa)",
+	  NULL, offsetof(priv_t, e_brain), 0 },
+	{ "nu_brain", PT_DOUBLE, "0.49", 0, 0.4999, "",
+	  "Poisson's ratio of brain parenchyma (thesis Table 3.1: 0.49)", NULL,
+	  offsetof(priv_t, nu_brain), 0 },
+	{ "e_tumour", PT_DOUBLE, "3000", 1e-3, 1e9, "Pa",
+	  "Young's modulus of tumour tissue (thesis Table 3.1: 3000 Pa)", NULL,
+	  offsetof(priv_t, e_tumour), 0 },
+	{ "nu_tumour", PT_DOUBLE, "0.49", 0, 0.4999, "",
+	  "Poisson's ratio of tumour tissue (thesis Table 3.1: 0.49)", NULL,
+	  offsetof(priv_t, nu_tumour), 0 },
+	{ "e_csf", PT_DOUBLE, "10", 1e-3, 1e9, "Pa",
+	  "Young's modulus of ventricles and sulci (thesis Table 3.1: 10 Pa)",
+	  NULL, offsetof(priv_t, e_csf), 0 },
+	{ "nu_csf", PT_DOUBLE, "0.1", 0, 0.4999, "",
+	  "Poisson's ratio of ventricles and sulci (thesis Table 3.1: 0.1)",
+	  NULL, offsetof(priv_t, nu_csf), 0 },
+	{ "density", PT_DOUBLE, "1000", 1e-3, 1e6, "kg/m^3",
+	  "mass density of every tissue (only the time step and the damping "
+	  "depend on it at equilibrium)", NULL, offsetof(priv_t, density), 0 },
+	{ "support_k", PT_INT, "20", 5, 256, "nodes",
+	  "support domain: the K nearest nodes of each integration point",
+	  NULL, offsetof(priv_t, support_k), 0 },
+	{ "support_dilation", PT_DOUBLE, "1.2", 1.01, 4, "",
+	  "MLS weight radius = this x distance to the K-th support node", NULL,
+	  offsetof(priv_t, support_dilation), 0 },
+	{ "ip_spacing", PT_DOUBLE, "0", 0, 100, "mm",
+	  "background integration grid spacing (0: the mean node spacing)",
+	  NULL, offsetof(priv_t, ip_spacing), 0 },
+	{ "dt", PT_DOUBLE, "0", 0, 10, "s",
+	  "explicit time step (0: dt_safety x the critical time step)", NULL,
+	  offsetof(priv_t, dt), 0 },
+	{ "dt_safety", PT_DOUBLE, "0.8", 0.01, 1, "",
+	  "fraction of the critical time step used (auto dt, or reduce)", NULL,
+	  offsetof(priv_t, dt_safety), 0 },
+	{ "dt_policy", PT_ENUM, "refuse", 0, 0, "",
+	  "a dt above the critical time step is refused (error) or reduced to "
+	  "dt_safety x critical", "refuse|reduce",
+	  offsetof(priv_t, dt_policy), 0 },
+	{ "dt_estimate", PT_ENUM, "eigen", 0, 0, "",
+	  "critical time step from the largest eigenvalue of M^-1 K (Lanczos) "
+	  "or from the wave speed h_min/c", "eigen|wave",
+	  offsetof(priv_t, dt_estimate), 0 },
+	{ "damping", PT_DOUBLE, "-1", -1, 1e9, "1/s",
+	  "dynamic relaxation mass damping (-1: adaptive, 2 omega_min)", NULL,
+	  offsetof(priv_t, damping), 0 },
+	{ "ramp_iter", PT_INT, "100", 1, 1000000, "iterations",
+	  "iterations over which each growth step's displacement is ramped",
+	  NULL, offsetof(priv_t, ramp_iter), 0 },
+	{ "max_iter", PT_INT, "10000", 10, 10000000, "iterations",
+	  "most dynamic-relaxation iterations per growth step", NULL,
+	  offsetof(priv_t, max_iter), 0 },
+	{ "tol", PT_DOUBLE, "0.001", 1e-9, 100, "mm",
+	  "equilibrium tolerance: estimated distance to equilibrium", NULL,
+	  offsetof(priv_t, tol), 0 },
+	{ "contact", PT_BOOL, "true", 0, 1, "",
+	  "keep nodes inside the brain boundary (projection on the boundary)",
+	  NULL, offsetof(priv_t, contact), 0 },
+	{ "corr", PT_ENUM, "all", 0, 0, "",
+	  "integration-constraint correction of the shape-function "
+	  "derivatives (sum V dN = 0): all movable nodes, interior ones, none",
+	  "all|interior|none", offsetof(priv_t, corr), 0 },
+	{ "merge_tol", PT_DOUBLE, "0.001", 0, 10, "mm",
+	  "nodes closer than this are merged (highest-priority label wins)",
+	  NULL, offsetof(priv_t, merge_tol), 0 },
+	{ "sweep_margin", PT_DOUBLE, "0.25", 0, 5, "node spacings",
+	  "a free node deeper than this inside the current tumour contour is "
+	  "swept (relabelled tumour)", NULL, offsetof(priv_t, sweep_margin), 0 },
+	{ "csf_labels", PT_STRING, "1,4,5", 0, 0, "",
+	  "values of the labels volume that are ventricles or sulci "
+	  "(comma-separated)", NULL, offsetof(priv_t, csf_labels), 0 },
+};
+
+static const armstg_port_t inputs[] = {
+	{ "nodes", MSG_POINTSET, 0,
+	  "sampler nodes (mm): labels 0 tissue, 1 brain boundary, 2 CSF, 3 "
+	  "tumour, 4 tumour boundary, 5 seed" },
+	{ "contours", MSG_POINTSET, 0,
+	  "levelset layers (mm): label = component, attrs layer, parent(3), "
+	  "normal(3) optional" },
+	{ "labels", MSG_VOLUME, 1,
+	  "tissue labels for the materials (csf_labels are ventricles/sulci)" },
+};
+
+static const armstg_port_t outputs[] = {
+	{ "nodes", MSG_POINTSET, 0,
+	  "input nodes with attr u(3) displacement in mm and final labels" },
+	{ "tumour", MSG_POINTSET, 0,
+	  "tumour nodes at grown positions (mm): label 3/4/5, attrs u(3), "
+	  "ref(3), step, component" },
+	{ "stats", MSG_TABLE, 0,
+	  "per growth step: iterations, time step, energies, residual, wall "
+	  "time" },
+};
+
+/* ------------------------------------------------------------ helpers */
+
+typedef struct matctx {
+	const vol_t *lab;   /* labels volume or NULL */
+	double inv[16];     /* world mm -> voxel */
+	int ncsf;
+	long csf[64];
+	const tled_grid_t *ng; /* input nodes (m), when no volume */
+	const int32_t *nlab;
+} matctx_t;
+
+static int mat_of(const double x[3], void *ctx)
+{
+	const matctx_t *mc = ctx;
+	if (mc->lab) {
+		double w[3] = { x[0] / TLED_MM, x[1] / TLED_MM, x[2] / TLED_MM };
+		double v[3];
+		aff_apply(mc->inv, w, v);
+		int i = (int)lround(v[0]), j = (int)lround(v[1]),
+		    k = (int)lround(v[2]);
+		if (i < 0 || j < 0 || k < 0 || i >= mc->lab->nx ||
+		    j >= mc->lab->ny || k >= mc->lab->nz)
+			return MAT_BRAIN;
+		long val = lround(vol_get(mc->lab, vol_idx(mc->lab, i, j, k)));
+		for (int c = 0; c < mc->ncsf; c++)
+			if (mc->csf[c] == val)
+				return MAT_CSF;
+		return MAT_BRAIN;
+	}
+	int64_t id;
+	double d2;
+	if (tled_grid_knn(mc->ng, x, 1, -1, &id, &d2) < 1)
+		return MAT_BRAIN;
+	return mc->nlab[id] == TL_CSF ? MAT_CSF : MAT_BRAIN;
+}
+
+static int parse_list(const char *s, long *out, int max)
+{
+	int n = 0;
+	if (!s)
+		return 0;
+	while (*s) {
+		while (*s == ' ' || *s == ',')
+			s++;
+		if (!*s)
+			break;
+		char *e;
+		long v = strtol(s, &e, 10);
+		if (e == s)
+			return -1;
+		if (n < max)
+			out[n++] = v;
+		s = e;
+		while (*s == ' ')
+			s++;
+		if (*s && *s != ',')
+			return -1;
+	}
+	return n;
+}
+
+static double now_s(void)
+{
+	struct timespec t;
+	clock_gettime(CLOCK_MONOTONIC, &t);
+	return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* one layer of one component: points (m), outward normals, map */
+typedef struct layer {
+	int comp, layer;
+	int64_t n;
+	double *x;    /* 3n, m */
+	double *nrm;  /* 3n, unit outward */
+	double *d;    /* 3n, parent - x, m */
+	tled_grid_t g;
+	int built;
+} layer_t;
+
+static void layer_free(layer_t *L)
+{
+	free(L->x);
+	free(L->nrm);
+	free(L->d);
+	tled_grid_free(&L->g);
+}
+
+/* signed distance of y (m) to the layer surface: > 0 outside */
+static double layer_side(const layer_t *L, const double y[3], double h)
+{
+	int64_t id;
+	double d2;
+	if (tled_grid_knn(&L->g, y, 1, -1, &id, &d2) < 1)
+		return INFINITY;
+	const double *q = L->x + 3 * id, *nn = L->nrm + 3 * id;
+	double nl = nn[0] * nn[0] + nn[1] * nn[1] + nn[2] * nn[2];
+	if (!(nl > 0.25))
+		/* collapsed layer (a point or a curve): a ball of h/2 */
+		return sqrt(d2) - 0.5 * h;
+	return (y[0] - q[0]) * nn[0] + (y[1] - q[1]) * nn[1] +
+	       (y[2] - q[2]) * nn[2];
+}
+
+/* layer-to-layer map at y: IDW of (parent - x) over the 8 nearest points */
+static void layer_map(const layer_t *L, const double y[3], double h,
+		      double out[3])
+{
+	int64_t ids[8];
+	double d2[8];
+	int k = tled_grid_knn(&L->g, y, 8, -1, ids, d2);
+	double ws = 0;
+	out[0] = out[1] = out[2] = 0;
+	for (int i = 0; i < k; i++) {
+		double w = 1 / (d2[i] + 0.01 * h * h);
+		ws += w;
+		for (int c = 0; c < 3; c++)
+			out[c] += w * L->d[3 * ids[i] + c];
+	}
+	if (ws > 0)
+		for (int c = 0; c < 3; c++)
+			out[c] /= ws;
+}
+
+typedef struct hook {
+	armstg_stage_t *st;
+	int step, nsteps;
+} hook_t;
+
+static int on_cancelled(void *ctx)
+{
+	hook_t *h = ctx;
+	return h->st->host->cancelled(h->st);
+}
+
+static void on_progress(void *ctx, int iter, int max_iter, double err_m)
+{
+	hook_t *h = ctx;
+	double f = h->nsteps > 0 ? (h->step + (double)iter / max_iter) /
+					   h->nsteps
+				 : -1;
+	h->st->host->progress(h->st, f, "growth step %d/%d iteration %d "
+			      "error %.3g mm", h->step + 1, h->nsteps, iter,
+			      err_m / TLED_MM);
+}
+
+static const ps_attr_t *find_attr(const ps_t *p, const char *name)
+{
+	for (int i = 0; i < p->nattr; i++)
+		if (!strcmp(p->attr[i].name, name))
+			return &p->attr[i];
+	return NULL;
+}
+
+static int cmp_layer(const void *a, const void *b)
+{
+	const layer_t *x = a, *y = b;
+	if (x->comp != y->comp)
+		return x->comp < y->comp ? -1 : 1;
+	return (x->layer > y->layer) - (x->layer < y->layer);
+}
+
+/* ------------------------------------------------------------ process */
+
+static int tled_process(armstg_stage_t *st)
+{
+	const armstg_host_t *H = st->host;
+	priv_t *pv = st->priv;
+	const ps_t *pn = (const ps_t *)st->in[0];
+	const ps_t *pc = (const ps_t *)st->in[1];
+	const vol_t *lv = (const vol_t *)st->in[2];
+	char err[1024] = "";
+	int rc = 0;
+	double t0 = now_s();
+
+	if (!pn || pn->base.type != MSG_POINTSET)
+		return H->fail(st, ARMSTG_EINVAL, "input 'nodes' is not a "
+			       "point set");
+	if (!pc || pc->base.type != MSG_POINTSET)
+		return H->fail(st, ARMSTG_EINVAL, "input 'contours' is not a "
+			       "point set");
+	if (pn->n < 5)
+		return H->fail(st, ARMSTG_EINVAL, "input 'nodes' has %lld "
+			       "points: the model needs at least 5 (is the "
+			       "sampler output connected?)", (long long)pn->n);
+	if (pc->n < 1)
+		return H->fail(st, ARMSTG_EINVAL, "input 'contours' is empty: "
+			       "no tumour layers to grow (levelset output "
+			       "expected)");
+	const ps_attr_t *alay = find_attr(pc, "layer");
+	const ps_attr_t *apar = find_attr(pc, "parent");
+	const ps_attr_t *anrm = find_attr(pc, "normal");
+	if (!alay || alay->ncomp != 1)
+		return H->fail(st, ARMSTG_EINVAL, "input 'contours' lacks the "
+			       "attribute 'layer' (1 component)");
+	if (!apar || apar->ncomp != 3)
+		return H->fail(st, ARMSTG_EINVAL, "input 'contours' lacks the "
+			       "attribute 'parent' (3 components)");
+	if (anrm && anrm->ncomp != 3)
+		anrm = NULL;
+	for (int64_t i = 0; i < 3 * pn->n; i++)
+		if (!isfinite(pn->xyz[i]))
+			return H->fail(st, ARMSTG_EINVAL, "node %lld has a "
+				       "non-finite coordinate", (long long)(i / 3));
+	for (int64_t i = 0; i < pc->n; i++) {
+		double l = alay->data[i];
+		if (!isfinite(l) || l < 0 || l > 1e6 || fabs(l - lround(l)) > 1e-6)
+			return H->fail(st, ARMSTG_EINVAL, "contour point %lld: "
+				       "layer %g is not a non-negative integer",
+				       (long long)i, l);
+		for (int c = 0; c < 3; c++)
+			if (!isfinite(pc->xyz[3 * i + c]) ||
+			    !isfinite(apar->data[3 * i + c]))
+				return H->fail(st, ARMSTG_EINVAL, "contour point "
+					       "%lld has a non-finite position "
+					       "or parent", (long long)i);
+	}
+	if (lv && lv->nc != 1)
+		return H->fail(st, ARMSTG_EINVAL, "input 'labels' must be a "
+			       "scalar label volume, got %d components", lv->nc);
+
+	/* ---- model ---- */
+	int64_t nin = pn->n;
+	double *Xin = malloc((size_t)(3 * nin) * sizeof *Xin);
+	tled_model_t m;
+	tled_solver_t s;
+	tled_grid_t ing = { 0 }, ng = { 0 }, cg = { 0 };
+	memset(&m, 0, sizeof m);
+	memset(&s, 0, sizeof s);
+	layer_t *L = NULL;
+	int nl = 0;
+	double *tgt = NULL, *cx = NULL;
+	int32_t *dcomp = NULL, *dstep = NULL, *seedc = NULL;
+	double *uh = NULL;
+	tab_t *tab = NULL;
+	ps_t *on = NULL, *ot = NULL;
+	if (!Xin)
+		return H->fail(st, ARMSTG_ENOMEM, "out of memory (%lld nodes)",
+			       (long long)nin);
+	for (int64_t i = 0; i < 3 * nin; i++)
+		Xin[i] = pn->xyz[i] * TLED_MM;
+
+	matctx_t mc;
+	memset(&mc, 0, sizeof mc);
+	if (lv) {
+		mc.lab = lv;
+		if (aff_invert(lv->affine, mc.inv)) {
+			rc = H->fail(st, ARMSTG_EINVAL, "input 'labels' has a "
+				     "singular affine");
+			goto out;
+		}
+		mc.ncsf = parse_list(pv->csf_labels, mc.csf, 64);
+		if (mc.ncsf < 0) {
+			rc = H->fail(st, ARMSTG_EINVAL, "csf_labels '%s' is not "
+				     "a comma-separated list of integers",
+				     pv->csf_labels);
+			goto out;
+		}
+	} else {
+		double lo[3] = { INFINITY, INFINITY, INFINITY },
+		       hi[3] = { -INFINITY, -INFINITY, -INFINITY };
+		for (int64_t i = 0; i < nin; i++)
+			for (int c = 0; c < 3; c++) {
+				lo[c] = fmin(lo[c], Xin[3 * i + c]);
+				hi[c] = fmax(hi[c], Xin[3 * i + c]);
+			}
+		double vol = 1;
+		for (int c = 0; c < 3; c++)
+			vol *= fmax(hi[c] - lo[c], 1e-6);
+		if (tled_grid_build(&ing, Xin, nin, cbrt(vol / (double)nin))) {
+			rc = H->fail(st, ARMSTG_ENOMEM, "out of memory (node "
+				     "grid)");
+			goto out;
+		}
+		mc.ng = &ing;
+		mc.nlab = pn->label;
+	}
+
+	tled_model_opts_t mo;
+	tled_model_opts_default(&mo);
+	mo.support_k = pv->support_k;
+	mo.support_dilation = pv->support_dilation;
+	mo.merge_tol = pv->merge_tol * TLED_MM;
+	mo.corr = pv->corr == 0 ? TLED_CORR_ALL
+		  : pv->corr == 1 ? TLED_CORR_INTERIOR
+				  : TLED_CORR_NONE;
+	mo.nthreads = H->threads(st);
+	mo.material = mat_of;
+	mo.material_ctx = &mc;
+	if (tled_material_set(&mo.mat[MAT_BRAIN], pv->e_brain, pv->nu_brain,
+			      pv->density) ||
+	    tled_material_set(&mo.mat[MAT_CSF], pv->e_csf, pv->nu_csf,
+			      pv->density) ||
+	    tled_material_set(&mo.mat[MAT_TUMOUR], pv->e_tumour, pv->nu_tumour,
+			      pv->density)) {
+		rc = H->fail(st, ARMSTG_EINVAL, "invalid material parameters");
+		goto out;
+	}
+	if (pv->ip_spacing > 0) {
+		/* ip_factor is relative to the mean node spacing, which the
+		 * model computes: a rough pre-estimate from the bounding box
+		 * is refined below by rebuilding when far off */
+		mo.ip_factor = 1.0;
+	}
+	H->progress(st, 0, "building the model: %lld nodes", (long long)nin);
+	if (tled_model_build(&m, Xin, pn->label, nin, NULL, NULL, &mo, err,
+			     sizeof err)) {
+		rc = H->fail(st, ARMSTG_EINVAL, "model: %s", err);
+		goto out;
+	}
+	if (pv->ip_spacing > 0 &&
+	    fabs(pv->ip_spacing * TLED_MM - m.ip_h) > 1e-9 * m.ip_h) {
+		mo.ip_factor = pv->ip_spacing * TLED_MM / m.h_mean;
+		tled_model_free(&m);
+		if (tled_model_build(&m, Xin, pn->label, nin, NULL, NULL, &mo,
+				     err, sizeof err)) {
+			rc = H->fail(st, ARMSTG_EINVAL, "model: %s", err);
+			goto out;
+		}
+	}
+	H->log(st, LOG_INFO, "model: %lld nodes (%lld merged), %lld "
+	       "integration points, mean spacing %.2f mm, min %.3f mm",
+	       (long long)m.n, (long long)m.n_merged, (long long)m.nip,
+	       m.h_mean / TLED_MM, m.h_min / TLED_MM);
+	/* input tumour labels are atlas tissue at the start */
+	for (int64_t a = 0; a < m.n; a++)
+		if (m.label[a] == TL_TUMOUR || m.label[a] == TL_TUMOUR_BND)
+			m.label[a] = TL_TISSUE;
+	if (tled_solver_init(&s, &m, err, sizeof err)) {
+		rc = H->fail(st, ARMSTG_ENOMEM, "solver: %s", err);
+		goto out;
+	}
+	if (tled_grid_build(&ng, m.X, m.n, m.h_mean)) {
+		rc = H->fail(st, ARMSTG_ENOMEM, "out of memory (node grid)");
+		goto out;
+	}
+
+	/* ---- contour layers per (component, layer) ---- */
+	{
+		int cap = 0;
+		for (int64_t i = 0; i < pc->n; i++) {
+			int c = pc->label[i], l = (int)lround(alay->data[i]);
+			int j;
+			for (j = 0; j < nl; j++)
+				if (L[j].comp == c && L[j].layer == l)
+					break;
+			if (j == nl) {
+				if (nl == cap) {
+					cap = cap ? 2 * cap : 64;
+					layer_t *t = realloc(L, (size_t)cap * sizeof *L);
+					if (!t)
+						goto oom;
+					L = t;
+				}
+				memset(&L[nl], 0, sizeof L[nl]);
+				L[nl].comp = c;
+				L[nl].layer = l;
+				nl++;
+			}
+			L[j].n++;
+		}
+		qsort(L, (size_t)nl, sizeof *L, cmp_layer);
+		for (int j = 0; j < nl; j++) {
+			L[j].x = malloc((size_t)(3 * L[j].n) * sizeof(double));
+			L[j].nrm = malloc((size_t)(3 * L[j].n) * sizeof(double));
+			L[j].d = malloc((size_t)(3 * L[j].n) * sizeof(double));
+			if (!L[j].x || !L[j].nrm || !L[j].d)
+				goto oom;
+			L[j].n = 0;
+		}
+		for (int64_t i = 0; i < pc->n; i++) {
+			int c = pc->label[i], l = (int)lround(alay->data[i]);
+			int j;
+			for (j = 0; j < nl; j++)
+				if (L[j].comp == c && L[j].layer == l)
+					break;
+			int64_t q = L[j].n++;
+			for (int d = 0; d < 3; d++) {
+				L[j].x[3 * q + d] = pc->xyz[3 * i + d] * TLED_MM;
+				L[j].d[3 * q + d] = (apar->data[3 * i + d] -
+						     pc->xyz[3 * i + d]) * TLED_MM;
+				L[j].nrm[3 * q + d] = anrm ? anrm->data[3 * i + d]
+							   : 0;
+			}
+		}
+		for (int j = 0; j < nl; j++) {
+			/* normals absent: from the layer's centroid */
+			if (!anrm && L[j].n >= 4) {
+				double cen[3] = { 0, 0, 0 };
+				for (int64_t q = 0; q < L[j].n; q++)
+					for (int d = 0; d < 3; d++)
+						cen[d] += L[j].x[3 * q + d] / L[j].n;
+				for (int64_t q = 0; q < L[j].n; q++) {
+					double v[3], nn = 0;
+					for (int d = 0; d < 3; d++) {
+						v[d] = L[j].x[3 * q + d] - cen[d];
+						nn += v[d] * v[d];
+					}
+					nn = sqrt(nn);
+					for (int d = 0; d < 3; d++)
+						L[j].nrm[3 * q + d] =
+							nn > 0 ? v[d] / nn : 0;
+				}
+			}
+			if (tled_grid_build(&L[j].g, L[j].x, L[j].n, m.h_mean))
+				goto oom;
+			L[j].built = 1;
+		}
+	}
+	int lmax = 0;
+	for (int j = 0; j < nl; j++)
+		if (L[j].layer > lmax)
+			lmax = L[j].layer;
+
+	/* ---- seeds -> components (nearest contour point) ---- */
+	int64_t npc = pc->n;
+	cx = malloc((size_t)(3 * npc) * sizeof *cx);
+	tgt = malloc((size_t)(3 * m.n) * sizeof *tgt);
+	dcomp = malloc((size_t)m.n * sizeof *dcomp);
+	dstep = malloc((size_t)m.n * sizeof *dstep);
+	seedc = malloc((size_t)m.n * sizeof *seedc);
+	uh = malloc((size_t)(3 * m.n) * sizeof *uh);
+	tab = H->tab_new();
+	if (!cx || !tgt || !dcomp || !dstep || !seedc || !uh || !tab)
+		goto oom;
+	for (int64_t i = 0; i < 3 * npc; i++)
+		cx[i] = pc->xyz[i] * TLED_MM;
+	if (tled_grid_build(&cg, cx, npc, m.h_mean))
+		goto oom;
+	for (int64_t a = 0; a < m.n; a++) {
+		dcomp[a] = -1;
+		dstep[a] = -1;
+		seedc[a] = -1;
+		if (m.label[a] == TL_SEED && m.kind[a] != TLED_FIXED) {
+			int64_t id;
+			double d2;
+			if (tled_grid_knn(&cg, m.X + 3 * a, 1, -1, &id, &d2) == 1)
+				seedc[a] = pc->label[id];
+		}
+	}
+
+	/* ---- growth replay ---- */
+	tled_solver_opts_t so;
+	tled_solver_opts_default(&so);
+	so.dt = pv->dt;
+	so.dt_safety = pv->dt_safety;
+	so.dt_policy = pv->dt_policy ? TLED_DT_REDUCE : TLED_DT_REFUSE;
+	so.dt_estimate = pv->dt_estimate ? TLED_DTE_WAVE : TLED_DTE_EIGEN;
+	so.tol = pv->tol * TLED_MM;
+	so.max_iter = pv->max_iter;
+	so.ramp_iter = pv->ramp_iter;
+	so.damping = pv->damping;
+	so.contact = pv->contact;
+	hook_t hk = { st, 0, lmax + 1 };
+	so.cancelled = on_cancelled;
+	so.progress = on_progress;
+	so.hook_ctx = &hk;
+	double h = m.h_mean;
+	double margin = pv->sweep_margin * h;
+	int64_t ndriven = 0;
+	for (int step = 0; step <= lmax; step++) {
+		int l = lmax - step;
+		double ts = now_s();
+		hk.step = step;
+		int moved = 0;
+		int64_t created = 0;
+		memcpy(tgt, s.u, (size_t)(3 * m.n) * sizeof *tgt);
+		for (int j = 0; j < nl; j++) {
+			if (L[j].layer != l)
+				continue;
+			int c = L[j].comp;
+			/* the previous (inner) layer of this component */
+			int jp = -1;
+			for (int k = 0; k < nl; k++)
+				if (L[k].comp == c && L[k].layer > l &&
+				    (jp < 0 || L[k].layer < L[jp].layer))
+					jp = k;
+			if (jp < 0) {
+				/* innermost: create the tumour */
+				int64_t best = -1;
+				double bd = INFINITY, cen[3] = { 0, 0, 0 };
+				for (int64_t q = 0; q < L[j].n; q++)
+					for (int d = 0; d < 3; d++)
+						cen[d] += L[j].x[3 * q + d] / L[j].n;
+				for (int64_t a = 0; a < m.n; a++) {
+					if (m.kind[a] == TLED_FIXED || dcomp[a] >= 0)
+						continue;
+					double y[3];
+					for (int d = 0; d < 3; d++)
+						y[d] = m.X[3 * a + d] + s.u[3 * a + d];
+					double dd = 0;
+					for (int d = 0; d < 3; d++)
+						dd += (y[d] - cen[d]) * (y[d] - cen[d]);
+					if (dd < bd) {
+						bd = dd;
+						best = a;
+					}
+					if (seedc[a] == c ||
+					    layer_side(&L[j], y, h) < 0) {
+						dcomp[a] = c;
+						dstep[a] = step;
+						created++;
+					}
+				}
+				if (!created && best >= 0) {
+					dcomp[best] = c;
+					dstep[best] = step;
+					created++;
+				}
+				continue;
+			}
+			/* map every tumour node of c from layer jp to layer j */
+			for (int64_t a = 0; a < m.n; a++) {
+				if (dcomp[a] != c)
+					continue;
+				double y[3], d[3];
+				for (int k = 0; k < 3; k++)
+					y[k] = m.X[3 * a + k] + s.u[3 * a + k];
+				layer_map(&L[jp], y, h, d);
+				for (int k = 0; k < 3; k++)
+					tgt[3 * a + k] = s.u[3 * a + k] + d[k];
+				moved = 1;
+			}
+		}
+		ndriven = 0;
+		for (int64_t a = 0; a < m.n; a++)
+			if (dcomp[a] >= 0) {
+				m.kind[a] = TLED_DRIVEN;
+				ndriven++;
+			}
+		tled_relax_stats_t rs;
+		memset(&rs, 0, sizeof rs);
+		if (moved || step == 0) {
+			char tag[64];
+			snprintf(tag, sizeof tag, "growth step %d (layer %d)",
+				 step + 1, l);
+			int r = tled_relax(&s, &so, moved ? tgt : NULL, tag, &rs,
+					   err, sizeof err);
+			if (r == -2) {
+				rc = H->fail(st, ARMSTG_ECANCELLED, "%s", err);
+				goto out;
+			}
+			if (r) {
+				rc = H->fail(st, strstr(err, "critical time "
+							"step %") ||
+						     strstr(err, "above the critical")
+						     ? ARMSTG_EINVAL
+						     : ARMSTG_ENUMERIC,
+					     "%s", err);
+				goto out;
+			}
+			if (!rs.converged)
+				H->log(st, LOG_WARN, "%s: not converged after "
+				       "%d iterations (estimated error %.3g mm)",
+				       tag, rs.iters, rs.err_est / TLED_MM);
+		}
+		/* sweep: free nodes now inside layer l join the tumour */
+		int64_t swept = 0;
+		for (int j = 0; j < nl; j++) {
+			if (L[j].layer != l)
+				continue;
+			for (int64_t a = 0; a < m.n; a++) {
+				if (m.kind[a] != TLED_FREE || dcomp[a] >= 0)
+					continue;
+				double y[3];
+				for (int k = 0; k < 3; k++)
+					y[k] = m.X[3 * a + k] + s.u[3 * a + k];
+				if (layer_side(&L[j], y, h) < -margin) {
+					dcomp[a] = L[j].comp;
+					dstep[a] = step;
+					m.kind[a] = TLED_DRIVEN;
+					swept++;
+				}
+			}
+			/* integration points inside the tumour: switched off */
+			for (int64_t p = 0; p < m.nip; p++) {
+				if (s.ipoff[p])
+					continue;
+				double y[3] = { 0, 0, 0 };
+				for (int64_t e = m.ipptr[p]; e < m.ipptr[p + 1]; e++)
+					for (int k = 0; k < 3; k++)
+						y[k] += m.N[e] * s.u[3 * m.ipnode[e] + k];
+				for (int k = 0; k < 3; k++)
+					y[k] += m.ipX[3 * p + k];
+				if (layer_side(&L[j], y, h) < -0.5 * m.ip_h)
+					s.ipoff[p] = 1;
+			}
+		}
+		ndriven += swept;
+		int64_t row = H->tab_add_row(tab);
+		double wall = now_s() - ts;
+		H->tab_set_num(tab, row, "step", step + 1);
+		H->tab_set_num(tab, row, "layer", l);
+		H->tab_set_num(tab, row, "iterations", rs.iters);
+		H->tab_set_num(tab, row, "converged", rs.converged);
+		H->tab_set_num(tab, row, "dt_s", rs.dt);
+		H->tab_set_num(tab, row, "dt_crit_s", rs.dt_crit);
+		H->tab_set_num(tab, row, "kinetic_energy_J", rs.ke);
+		H->tab_set_num(tab, row, "strain_energy_J", rs.W);
+		H->tab_set_num(tab, row, "residual_N", rs.res);
+		H->tab_set_num(tab, row, "err_est_mm", rs.err_est / TLED_MM);
+		H->tab_set_num(tab, row, "jmin", rs.jmin);
+		H->tab_set_num(tab, row, "driven", (double)ndriven);
+		H->tab_set_num(tab, row, "swept", (double)swept);
+		H->tab_set_num(tab, row, "contacts", (double)rs.contacts);
+		H->tab_set_num(tab, row, "wall_s", wall);
+		H->progress(st, (step + 1.0) / (lmax + 1), "growth step %d/%d "
+			    "(layer %d): %d iterations, %lld tumour nodes",
+			    step + 1, lmax + 1, l, rs.iters,
+			    (long long)ndriven);
+	}
+
+	/* ---- outputs ---- */
+	/* displacement at the nodes: prescribed values for fixed and driven
+	 * nodes, the MLS approximation u^h(X_a) for free ones */
+	for (int64_t a = 0; a < m.n; a++) {
+		if (m.kind[a] != TLED_FREE ||
+		    tled_model_interp(&m, &ng, pv->support_k,
+				      pv->support_dilation, m.X + 3 * a, s.u,
+				      uh + 3 * a))
+			memcpy(uh + 3 * a, s.u + 3 * a, 3 * sizeof(double));
+		if (m.kind[a] == TLED_FIXED)
+			uh[3 * a] = uh[3 * a + 1] = uh[3 * a + 2] = 0;
+	}
+	/* final labels */
+	const layer_t *outer = NULL;
+	for (int64_t a = 0; a < m.n; a++) {
+		if (dcomp[a] < 0)
+			continue;
+		int32_t lab = m.label[a] == TL_SEED ? TL_SEED : TL_TUMOUR;
+		if (lab == TL_TUMOUR)
+			for (int j = 0; j < nl; j++)
+				if (L[j].layer == 0 && L[j].comp == dcomp[a]) {
+					outer = &L[j];
+					double y[3];
+					for (int k = 0; k < 3; k++)
+						y[k] = m.X[3 * a + k] + uh[3 * a + k];
+					if (layer_side(outer, y, h) > -0.5 * h)
+						lab = TL_TUMOUR_BND;
+				}
+		m.label[a] = lab;
+	}
+	on = H->ps_new(nin);
+	ot = H->ps_new(ndriven);
+	if (!on || !ot)
+		goto oom;
+	memcpy(on->xyz, pn->xyz, (size_t)(3 * nin) * sizeof(double));
+	for (int i = 0; i < pn->nattr; i++) {
+		if (!strcmp(pn->attr[i].name, "u"))
+			continue;
+		double *d = H->ps_add_attr(on, pn->attr[i].name,
+					   pn->attr[i].ncomp);
+		if (!d)
+			continue;
+		memcpy(d, pn->attr[i].data,
+		       (size_t)(nin * pn->attr[i].ncomp) * sizeof(double));
+	}
+	double *ou = H->ps_add_attr(on, "u", 3);
+	if (!ou) {
+		rc = H->fail(st, ARMSTG_EINVAL, "cannot add attribute 'u' to "
+			     "the output nodes (too many input attributes)");
+		goto out;
+	}
+	for (int64_t i = 0; i < nin; i++) {
+		int64_t a = m.rep[i];
+		on->label[i] = m.label[a];
+		for (int k = 0; k < 3; k++)
+			ou[3 * i + k] = uh[3 * a + k] / TLED_MM;
+	}
+	{
+		double *tu = H->ps_add_attr(ot, "u", 3);
+		double *tr = H->ps_add_attr(ot, "ref", 3);
+		double *ts = H->ps_add_attr(ot, "step", 1);
+		double *tc = H->ps_add_attr(ot, "component", 1);
+		if (!tu || !tr || !ts || !tc)
+			goto oom;
+		int64_t q = 0;
+		for (int64_t a = 0; a < m.n && q < ndriven; a++) {
+			if (dcomp[a] < 0)
+				continue;
+			ot->label[q] = m.label[a];
+			for (int k = 0; k < 3; k++) {
+				tu[3 * q + k] = uh[3 * a + k] / TLED_MM;
+				tr[3 * q + k] = m.X[3 * a + k] / TLED_MM;
+				ot->xyz[3 * q + k] = tr[3 * q + k] + tu[3 * q + k];
+			}
+			ts[q] = dstep[a] + 1;
+			tc[q] = dcomp[a];
+			q++;
+		}
+	}
+	H->log(st, LOG_INFO, "%d growth steps, %lld tumour nodes, %.2f s",
+	       lmax + 1, (long long)ndriven, now_s() - t0);
+	st->out[0] = &on->base;
+	st->out[1] = &ot->base;
+	st->out[2] = &tab->base;
+	on = ot = NULL;
+	tab = NULL;
+	goto out;
+oom:
+	rc = H->fail(st, ARMSTG_ENOMEM, "out of memory (%lld nodes, %lld "
+		     "contour points)", (long long)pn->n, (long long)pc->n);
+out:
+	if (on)
+		H->msg_unref(&on->base);
+	if (ot)
+		H->msg_unref(&ot->base);
+	if (tab)
+		H->msg_unref(&tab->base);
+	for (int j = 0; j < nl; j++)
+		layer_free(&L[j]);
+	free(L);
+	free(tgt);
+	free(cx);
+	free(dcomp);
+	free(dstep);
+	free(seedc);
+	free(uh);
+	tled_grid_free(&cg);
+	tled_grid_free(&ng);
+	tled_grid_free(&ing);
+	tled_solver_free(&s);
+	tled_model_free(&m);
+	free(Xin);
+	return rc;
+}
+
+static const armstg_plugin_t desc = {
+	ARMSTG_PLUGIN_HEADER,
+	.name = "tled_cpu",
+	.description = "mesh-free TLED tumour growth in the atlas (MLS, "
+		       "background integration, neo-Hookean, dynamic "
+		       "relaxation): node displacements and grown tumour",
+	.version = "1.0.0",
+	.license = "MIT",
+	.inputs = inputs,
+	.n_inputs = ARMSTG_COUNT(inputs),
+	.outputs = outputs,
+	.n_outputs = ARMSTG_COUNT(outputs),
+	.params = params,
+	.n_params = ARMSTG_COUNT(params),
+	.priv_size = sizeof(priv_t),
+	.devices = DEV_CPU,
+	.init = NULL,
+	.process = tled_process,
+	.fini = NULL,
+};
+
+ARMSTG_PLUGIN(desc)
