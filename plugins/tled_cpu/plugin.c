@@ -481,18 +481,14 @@ static int tled_process(armstg_stage_t *st)
 		rc = H->fail(st, ARMSTG_EINVAL, "invalid material parameters");
 		goto out;
 	}
-	if (pv->ip_spacing > 0) {
-		/* ip_factor is relative to the mean node spacing, which the
-		 * model computes: a rough pre-estimate from the bounding box
-		 * is refined below by rebuilding when far off */
-		mo.ip_factor = 1.0;
-	}
 	H->progress(st, 0, "building the model: %lld nodes", (long long)nin);
 	if (tled_model_build(&m, Xin, pn->label, nin, NULL, NULL, &mo, err,
 			     sizeof err)) {
 		rc = H->fail(st, ARMSTG_EINVAL, "model: %s", err);
 		goto out;
 	}
+	/* ip_factor is relative to the mean node spacing, known only once the
+	 * model is built: an explicit ip_spacing rebuilds it */
 	if (pv->ip_spacing > 0 &&
 	    fabs(pv->ip_spacing * TLED_MM - m.ip_h) > 1e-9 * m.ip_h) {
 		mo.ip_factor = pv->ip_spacing * TLED_MM / m.h_mean;
@@ -726,9 +722,7 @@ static int tled_process(armstg_stage_t *st)
 				goto out;
 			}
 			if (r) {
-				rc = H->fail(st, strstr(err, "critical time "
-							"step %") ||
-						     strstr(err, "above the critical")
+				rc = H->fail(st, strstr(err, "above the critical")
 						     ? ARMSTG_EINVAL
 						     : ARMSTG_ENUMERIC,
 					     "%s", err);
