@@ -3,7 +3,8 @@
  * Plugin loader: dlopen a .so, call its entry with the host table, and
  * refuse anything whose magic, ABI major, struct size or name is wrong, with
  * a message naming the file.  Search path: $ARMSTG_PLUGIN_PATH
- * (':'-separated), then <folder of the armstg executable>/plugins.
+ * (':'-separated), then <folder of the executable>/plugins and
+ * <folder of the executable>/../plugins.
  */
 #include <dirent.h>
 #include <dlfcn.h>
@@ -22,13 +23,16 @@ const char *plugin_search_path(void)
 	char exe[PATH_MAX];
 	const char *env = getenv("ARMSTG_PLUGIN_PATH");
 	ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
-	char def[PATH_MAX] = "build/plugins";
+	char def[2 * PATH_MAX + 16] = "build/plugins";
 	if (n > 0) {
 		exe[n] = 0;
 		char *slash = strrchr(exe, '/');
 		if (slash) {
 			*slash = 0;
-			snprintf(def, sizeof def, "%s/plugins", exe);
+			/* build/armstg -> build/plugins; a test program in
+			 * build/tests -> build/plugins too */
+			snprintf(def, sizeof def, "%s/plugins:%s/../plugins",
+				 exe, exe);
 		}
 	}
 	if (env && *env)

@@ -269,6 +269,14 @@ static int cmd_describe(const char *name)
 
 int main(int argc, char **argv)
 {
+	/* Idle OpenMP threads spin by default; on a shared or small machine
+	 * that makes 2 threads slower than 1.  libgomp reads the variable at
+	 * load time, so set it and start again once. */
+	if (!getenv("OMP_WAIT_POLICY")) {
+		setenv("OMP_WAIT_POLICY", "passive", 1);
+		execv("/proc/self/exe", argv);
+		/* if exec fails, carry on with the default policy */
+	}
 	if (argc < 2) {
 		usage(stderr);
 		return EXIT_USAGE;

@@ -9,6 +9,7 @@ BUILD=${BUILD:-build}
 export BUILD
 export ARMSTG_PLUGIN_PATH="$BUILD/plugins"
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
+export OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-passive}
 export ARMSTG_LOG=${ARMSTG_LOG:-warn}
 logs="$BUILD/test-logs"
 mkdir -p "$logs"

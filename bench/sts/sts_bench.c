@@ -6,7 +6,9 @@
  *   whole-tumour Dice against the reference (label > 0), volumes, time.
  *
  *   sts_bench [--data DIR] [--out DIR] [--set key=value]... CASE...
- *   CASE: b13p1 b13p2 b13p3 b23 tcga phantom
+ *   CASE: b13p1 b13p2 b13p3 b23 tcga phantom phantom:KEY=VALUE,...
+ *   (the latter runs the phantom with those of its parameters set, e.g.
+ *   phantom:seed=2,location=cortex)
  *
  * --out DIR writes DIR/<case>_{tumour,labels,brain}.nii.gz for a look in a
  * viewer.  Built and run by bench/sts/run.sh.
@@ -247,9 +249,20 @@ static int run_real(const caseinfo_t *c)
 	return rc;
 }
 
-/* the phantom plugin's patient at its defaults, against its true tumour */
-static int run_phantom(void)
+/* the phantom plugin's patient, against its true tumour.  spec: "phantom"
+ * (defaults) or "phantom:key=value,key=value" (phantom parameters) */
+static int run_phantom(const char *spec)
 {
+	char buf[512], what[600];
+	const char *pp[16];
+	int npp = 0;
+	const char *colon = strchr(spec, ':');
+	snprintf(buf, sizeof buf, "%s", colon ? colon + 1 : "");
+	for (char *tok = strtok(buf, ","); tok && npp < 16;
+	     tok = strtok(NULL, ","))
+		pp[npp++] = tok;
+	snprintf(what, sizeof what, "phantom plugin %s",
+		 colon ? colon + 1 : "defaults");
 	static const char *ports[4] = { "patient_t1", "patient_t1c",
 					"patient_t2", "patient_flair" };
 	rt_plugin_t pl;
@@ -262,7 +275,7 @@ static int run_phantom(void)
 	int nout = pl.desc->n_outputs;
 	plugin_unload(&pl);
 	msg_t **po = calloc(nout, sizeof(msg_t *));
-	int rc = run_stage("phantom", NULL, 0, NULL, po, nout, NULL);
+	int rc = run_stage("phantom", pp, npp, NULL, po, nout, NULL);
 	int ti = port_index("phantom", "patient_tumour", 1);
 	const msg_t *in[5] = { 0 };
 	for (int m = 0; !rc && m < 4; m++) {
@@ -274,14 +287,19 @@ static int run_phantom(void)
 	if (!rc && ti >= 0)
 		rc = run_stage("sts", g_set, g_nset, in, out, 5, &secs);
 	const vol_t *truth = ti >= 0 && po[ti] ? (const vol_t *)po[ti] : NULL;
-	row("phantom", "phantom plugin defaults", "t1+t1c+t2+flair",
+	row(spec, what, "t1+t1c+t2+flair",
 	    "truth (patient_tumour > 0)",
 	    rc ? NULL : (const vol_t *)out[2], truth, secs);
 	dump_table("phantom", out[4]);
-	save("phantom", "flair", in[3]);
-	save("phantom", "truth", &truth->base);
-	save("phantom", "tumour", out[2]);
-	save("phantom", "labels", out[3]);
+	char fname[512];
+	snprintf(fname, sizeof fname, "%s", spec);
+	for (char *c = fname; *c; c++)
+		if (*c == ':' || *c == ',' || *c == '=' || *c == '/')
+			*c = '_';
+	save(fname, "flair", in[3]);
+	save(fname, "truth", truth ? &truth->base : NULL);
+	save(fname, "tumour", out[2]);
+	save(fname, "labels", out[3]);
 	for (int i = 0; i < 5; i++)
 		if (out[i])
 			msg_unref(out[i]);
@@ -320,8 +338,9 @@ int main(int argc, char **argv)
 	rt_log_set_level(LOG_WARN);
 	int bad = 0;
 	for (int c = 0; c < ncase; c++) {
-		if (!strcmp(which[c], "phantom")) {
-			bad |= run_phantom() != 0;
+		if (!strncmp(which[c], "phantom", 7) &&
+		    (!which[c][7] || which[c][7] == ':')) {
+			bad |= run_phantom(which[c]) != 0;
 			continue;
 		}
 		int found = 0;

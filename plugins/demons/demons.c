@@ -429,7 +429,7 @@ static void exp_inplace(fimg_t *A, fimg_t *B, fimg_t **res, int nt)
 	double mvox;
 	fimg_field_maxnorm(A, NULL, &mvox);
 	int n = 0;
-	while (mvox / ldexp(1.0, n) > 0.25 && n < 30)
+	while (mvox / ldexp(1.0, n) > 0.5 && n < 30)
 		n++;
 	if (n == 0) {
 		*res = A;
@@ -691,14 +691,10 @@ static int demons_process(armstg_stage_t *st)
 				fimg_t *v;
 				exp_inplace(&A, &B, &v, nt);
 				/* s <- s o v, written into v, then swapped */
-				if (getenv("DEMONS_ITK_ORDER")) {
-					fimg_compose(v, &S, &S, nt);
-				} else {
 				fimg_compose(&S, v, v, nt);
 				fimg_t t = S;
 				S = *v;
 				*v = t;
-				}
 			} else {
 				int64_t ne = fgrid_nvox(&g) * 3;
 				for (int64_t e = 0; e < ne; e++)

@@ -6,6 +6,7 @@
  */
 #include <math.h>
 #include <stddef.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -28,6 +29,7 @@ typedef struct sts_priv {
 	int sg_order;
 	double k_csf, k_hyper, k_marker, k_enh;
 	double open_mm, close_mm, min_volume_mm3, keep_ratio;
+	int ref_t1;
 } sts_priv_t;
 
 static const armstg_port_t sts_inputs[] = {
@@ -94,6 +96,11 @@ static const armstg_param_t sts_params[] = {
 	{ "keep_ratio", PT_DOUBLE, "0.1", 0, 1, "",
 	  "components other than the largest kept when at least this "
 	  "fraction of it (multifocal tumours)", NULL, OFF(keep_ratio), 0 },
+	{ "ref_t1", PT_BOOL, "true", 0, 0, "",
+	  "measure FLAIR (or T2) hyperintensity against healthy tissue of "
+	  "the same T1 (or T1c) intensity, so grey matter, brighter than "
+	  "white matter, is not tumour; false: one image-wide level",
+	  NULL, OFF(ref_t1), 0 },
 };
 
 static int sts_init(armstg_stage_t *st)
@@ -257,6 +264,7 @@ static int sts_process(armstg_stage_t *st)
 	p.close_mm = pv->close_mm;
 	p.min_volume_mm3 = pv->min_volume_mm3;
 	p.keep_ratio = pv->keep_ratio;
+	p.ref_t1 = pv->ref_t1;
 	p.threads = si.grid.threads;
 
 	H->progress(st, 0.1, "segmenting %dx%dx%d", ref->nx, ref->ny,
@@ -299,6 +307,22 @@ static int sts_process(armstg_stage_t *st)
 		e.p_lo = e.p_hi = NAN;
 		thr_row(st, t, out.enh_source == 2 ? "t1c-t1" : "t1c_enh", &e,
 			0);
+	}
+	if (t && out.cond_ref >= 0) {
+		/* the healthy reference of the primary given T1: its
+		 * brightest tissue mode (grey matter) and th_2 there */
+		sts_thr_t e;
+		memset(&e, 0, sizeof e);
+		e.mode = out.cond_mode;
+		e.sigma = out.cond_sigma;
+		e.th_2 = out.cond_th2;
+		e.p_lo = e.p_hi = NAN;
+		e.n_modes = out.cond_nvalid;
+		char nm[32];
+		snprintf(nm, sizeof nm, "%s|%s",
+			 sts_mod_name[out.have[STS_FLAIR] ? STS_FLAIR : STS_T2],
+			 sts_mod_name[out.cond_ref]);
+		thr_row(st, t, nm, &e, 0);
 	}
 	o[OUT_THR] = (msg_t *)t;
 	if (fail_alloc) {

@@ -85,6 +85,7 @@ typedef struct sts_thr {
 	double th_2;      /* hyperintense (tumour candidate) level */
 	double th_omega;  /* strict hyperintense level: markers */
 	double p_lo, p_hi;/* 0.1 and 99.9 percentiles of the brain */
+	double quantum;   /* intensity quantum of the brain (0: continuous) */
 	int n_modes;      /* modes found in the smoothed brain histogram */
 	int th1_from_valley; /* 1: th_1 is a valley (CSF mode found) */
 	int th2_from_valley; /* 1: th_2 is a valley before a hyperintense mode */
@@ -104,6 +105,8 @@ typedef struct sts_params {
 	double close_mm;      /* closing radius, mm */
 	double min_volume_mm3;/* smallest tumour component kept */
 	double keep_ratio;    /* other components kept if >= ratio*largest */
+	int ref_t1;           /* 1: hyperintensity against healthy tissue of
+	                         the same T1 (or T1c) intensity (sts_cond) */
 	int threads;
 } sts_params_t;
 
@@ -118,11 +121,25 @@ int sts_hist_build(const float *v, const uint8_t *mask, int64_t n,
 		   int sg_order, sts_hist_t *h);
 void sts_hist_free(sts_hist_t *h);
 
+/* Only the bin geometry of sts_hist_build (nbins, lo, width, quantum; no
+ * arrays): the same lattice for other histograms of the same image.
+ * Returns 0 or -1 (bad arguments). */
+int sts_hist_grid(double lo, double hi, double quantum, int bins,
+		  int sg_half, sts_hist_t *h);
+
 /* Bin centre of bin b. */
 static inline double sts_hist_x(const sts_hist_t *h, double b)
 {
 	return h->lo + b * h->width;
 }
+
+/*
+ * Highest bin of the smoothed histogram: its centre (*mode) and width
+ * (*sigma: the narrower half width at half maximum / sqrt(2 ln 2), so a
+ * Gaussian's sigma; at least one bin).  Returns the bin, or -1 when the
+ * histogram is empty or never falls to half its peak.
+ */
+int sts_hist_peak(const sts_hist_t *h, double *mode, double *sigma);
 
 /*
  * Thresholds from a smoothed brain histogram (fills mode, sigma, th_1,
@@ -132,6 +149,49 @@ static inline double sts_hist_x(const sts_hist_t *h, double b)
  */
 int sts_hist_thresholds(const sts_hist_t *h, const sts_params_t *p,
 			int bright_csf, sts_thr_t *t);
+
+/* ---- healthy reference of one image given another (sts_cond.c) ----
+ *
+ * Healthy tissue does not have one FLAIR (or T2) intensity but one per
+ * tissue: grey matter is brighter than white matter, partial-volume voxels
+ * lie in between, CSF is dark.  T1 tells these tissues apart (CSF < GM <
+ * WM), so the healthy FLAIR level is a function of the T1 intensity: for
+ * every T1 bin, the mode (and its width) of the FLAIR histogram of the
+ * brain voxels in that bin.  A voxel is hyperintense only when it is
+ * brighter than healthy tissue of its own T1 intensity: the joint-histogram
+ * form of the thesis's double thresholding across modalities.  The mode is
+ * robust to a tumour as long as healthy voxels outnumber tumour voxels in
+ * each bin (grey matter is ~40% of a brain; a T1 bin where the tumour wins
+ * is outvoted by its neighbours through a running median of 3 bins).
+ */
+typedef struct sts_cond {
+	int nbins;        /* bins of the conditioning image x */
+	double xlo, xhi;  /* range of x covered (x units) */
+	double dx;        /* x bin width; bin b covers xlo + [b, b+1) dx */
+	double *mode;     /* per bin: mode of y, NAN when unusable */
+	double *sigma;    /* per bin: its width (narrower HWHM / 1.1774) */
+	int64_t *count;   /* per bin: voxels */
+	double *fmode;    /* mode and sigma with unusable bins filled by */
+	double *fsigma;   /* interpolation (what sts_cond_at reads) */
+	int nvalid;       /* usable bins */
+} sts_cond_t;
+
+/*
+ * Build the reference of y given x over mask[i] != 0: nxbins equal bins of
+ * x over [xlo, xhi]; y binned on the lattice `ygrid` (from sts_hist_grid)
+ * and smoothed per x bin with Savitzky-Golay (sg_half, sg_order); a bin is
+ * usable when it holds at least min_count voxels and has a peak.  Returns
+ * 0, -1 (bad arguments, or no usable bin), -2 (out of memory).
+ */
+int sts_cond_build(const float *x, const float *y, const uint8_t *mask,
+		   int64_t n, double xlo, double xhi, int nxbins,
+		   const sts_hist_t *ygrid, int sg_half, int sg_order,
+		   int64_t min_count, sts_cond_t *c);
+/* Healthy y mode and width at x, linearly interpolated between the centres
+ * of usable bins (constant beyond the outermost ones).  Returns 1, or 0
+ * when x lies outside [xlo, xhi] (no reference there). */
+int sts_cond_at(const sts_cond_t *c, double x, double *mode, double *sigma);
+void sts_cond_free(sts_cond_t *c);
 
 /* ---- binary morphology on a grid with voxel spacing sp (mm) ---- */
 
@@ -184,6 +244,12 @@ typedef struct sts_output {
 	int have[STS_NMOD];
 	double enh_mode, enh_sigma, th_enh; /* enhancement image thresholds */
 	int enh_source;      /* 0 none, 1 T1c alone, 2 T1c - T1 */
+	int cond_ref;        /* image giving the healthy reference of the
+	                        primary (STS_T1 / STS_T1C), -1 none */
+	int cond_nvalid;     /* its usable bins */
+	double cond_mode;    /* the brightest healthy mode of the primary */
+	double cond_sigma;   /* over those bins (grey matter in FLAIR), its */
+	double cond_th2;     /* width, and th_2 there */
 	int64_t n_brain, n_tumour, n_markers;
 	char note[256];      /* warning for the log ("" if none) */
 } sts_output_t;

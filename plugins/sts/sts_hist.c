@@ -138,13 +138,11 @@ void sts_hist_free(sts_hist_t *h)
 	h->nbins = 0;
 }
 
-int sts_hist_build(const float *v, const uint8_t *mask, int64_t n,
-		   double lo, double hi, double quantum, int bins, int sg_half,
-		   int sg_order, sts_hist_t *h)
+int sts_hist_grid(double lo, double hi, double quantum, int bins,
+		  int sg_half, sts_hist_t *h)
 {
 	memset(h, 0, sizeof *h);
-	if (!v || n <= 0 || bins < 4 || !(hi > lo) || !isfinite(lo) ||
-	    !isfinite(hi))
+	if (bins < 4 || !(hi > lo) || !isfinite(lo) || !isfinite(hi))
 		return -1;
 	double w = (hi - lo) / bins, edge0 = lo;
 	/* Quantised data (int16, or z-scored integers as in BraTS 2013):
@@ -166,6 +164,21 @@ int sts_hist_build(const float *v, const uint8_t *mask, int64_t n,
 	h->nbins = nb;
 	h->width = w;
 	h->lo = edge0 + 0.5 * w;
+	return 0;
+}
+
+int sts_hist_build(const float *v, const uint8_t *mask, int64_t n,
+		   double lo, double hi, double quantum, int bins, int sg_half,
+		   int sg_order, sts_hist_t *h)
+{
+	memset(h, 0, sizeof *h);
+	if (!v || n <= 0 || bins < 4 || !(hi > lo) || !isfinite(lo) ||
+	    !isfinite(hi))
+		return -1;
+	if (sts_hist_grid(lo, hi, quantum, bins, sg_half, h))
+		return -1;
+	int nb = h->nbins;
+	double w = h->width, edge0 = h->lo - 0.5 * w;
 	h->count = calloc(nb, sizeof(double));
 	h->smooth = calloc(nb, sizeof(double));
 	h->slope = calloc(nb, sizeof(double));
@@ -258,11 +271,10 @@ static int next_mode(const sts_hist_t *h, int after, double minh)
 	return -1;
 }
 
-int sts_hist_thresholds(const sts_hist_t *h, const sts_params_t *p,
-			int bright_csf, sts_thr_t *t)
+int sts_hist_peak(const sts_hist_t *h, double *mode, double *sigma)
 {
 	int nb = h->nbins;
-	const double *hs = h->smooth, *d = h->slope;
+	const double *hs = h->smooth;
 	int m = 0;
 	for (int b = 1; b < nb; b++)
 		if (hs[b] > hs[m])
@@ -275,17 +287,32 @@ int sts_hist_thresholds(const sts_hist_t *h, const sts_params_t *p,
 	 * converted to a Gaussian sigma (HWHM = sigma*sqrt(2 ln 2)) */
 	double xl = half_cross(h, m, -1, 0.5 * peak);
 	double xr = half_cross(h, m, +1, 0.5 * peak);
-	double mode = sts_hist_x(h, m);
+	double x = sts_hist_x(h, m);
 	double hw = INFINITY;
 	if (isfinite(xl))
-		hw = mode - xl;
-	if (isfinite(xr) && xr - mode < hw)
-		hw = xr - mode;
+		hw = x - xl;
+	if (isfinite(xr) && xr - x < hw)
+		hw = xr - x;
 	if (!isfinite(hw))
 		return -1;
-	double sigma = hw / sqrt(2 * log(2.0));
-	if (sigma < h->width)
-		sigma = h->width;
+	double s = hw / sqrt(2 * log(2.0));
+	if (s < h->width)
+		s = h->width;
+	*mode = x;
+	*sigma = s;
+	return m;
+}
+
+int sts_hist_thresholds(const sts_hist_t *h, const sts_params_t *p,
+			int bright_csf, sts_thr_t *t)
+{
+	int nb = h->nbins;
+	const double *hs = h->smooth, *d = h->slope;
+	double mode, sigma;
+	int m = sts_hist_peak(h, &mode, &sigma);
+	if (m < 0)
+		return -1;
+	double peak = hs[m];
 	t->mode = mode;
 	t->sigma = sigma;
 

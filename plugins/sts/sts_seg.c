@@ -28,6 +28,7 @@ void sts_params_default(sts_params_t *p)
 	p->close_mm = 2.0;
 	p->min_volume_mm3 = 500.0;
 	p->keep_ratio = 0.1;
+	p->ref_t1 = 1;
 	p->threads = 1;
 }
 
@@ -261,6 +262,7 @@ static int brain_hist(const float *v, const uint8_t *brain, int64_t n,
 	t->p_lo = pc[0];
 	t->p_hi = pc[1];
 	double qu = quantum(v, brain, n, nbrain, pc[0], pc[1]);
+	t->quantum = qu;
 	sts_hist_t h;
 	int rc = sts_hist_build(v, brain, n, pc[0], pc[1], qu, p->bins,
 				p->sg_half, p->sg_order, &h);
@@ -273,6 +275,70 @@ static int brain_hist(const float *v, const uint8_t *brain, int64_t n,
 			    "mode to derive thresholds from", name);
 	}
 	sts_hist_free(&h);
+	return 0;
+}
+
+/* ---- healthy reference of the primary image given T1 ---- */
+
+/* bins of the T1 (x) axis of the conditional reference, and the fewest
+ * voxels a bin needs (and at least STS_COND_MIN_FRAC of the brain) */
+#define STS_COND_BINS 32
+#define STS_COND_MIN_VOX 200
+#define STS_COND_MIN_FRAC 0.002
+
+/*
+ * Healthy level of the primary image (FLAIR or T2) as a function of the
+ * T1-like image cref (sts_cond, sts_algo.h).  The T1 axis spans the brain
+ * from its 0.1 percentile to the top of the healthy tissue in T1 (its
+ * brightest tissue mode + k_hyper sigma): brighter T1 voxels (enhancement
+ * in T1c, blood) have no healthy counterpart and keep the image-wide
+ * thresholds.  Fills o->cond_*; returns 0 or an error code.  A reference
+ * that cannot be built (too few voxels) is not an error: the image-wide
+ * thresholds are used, with a note.
+ */
+static int cond_reference(const sts_input_t *in, sts_output_t *o,
+			  const sts_params_t *p, int prim, int cref,
+			  int64_t n, sts_cond_t *cond, char *err, size_t es)
+{
+	const sts_thr_t *tx = &o->thr[cref], *ty = &o->thr[prim];
+	double xlo = tx->p_lo, xhi = tx->mode_hi + p->k_hyper * tx->sigma_hi;
+	if (xhi > tx->p_hi)
+		xhi = tx->p_hi;
+	sts_hist_t grid;
+	int64_t minc = (int64_t)ceil(STS_COND_MIN_FRAC * o->n_brain);
+	if (minc < STS_COND_MIN_VOX)
+		minc = STS_COND_MIN_VOX;
+	int rc = -1;
+	if (xhi > xlo && !sts_hist_grid(ty->p_lo, ty->p_hi, ty->quantum,
+					p->bins, p->sg_half, &grid))
+		rc = sts_cond_build(in->mod[cref], in->mod[prim], o->brain, n,
+				    xlo, xhi, STS_COND_BINS, &grid,
+				    p->sg_half, p->sg_order, minc, cond);
+	if (rc == -2)
+		return fail(err, es, ARMSTG_ENOMEM, "out of memory");
+	if (rc) {
+		char s[160];
+		snprintf(s, sizeof s, "too few brain voxels to measure healthy "
+			 "%s against %s: image-wide thresholds used",
+			 sts_mod_name[prim], sts_mod_name[cref]);
+		note(o, s);
+		return 0;
+	}
+	o->cond_ref = cref;
+	o->cond_nvalid = cond->nvalid;
+	o->cond_mode = o->cond_sigma = o->cond_th2 = NAN;
+	for (int b = 0; b < cond->nbins; b++) {
+		if (isnan(cond->mode[b]))
+			continue;
+		if (!(cond->fmode[b] <= o->cond_mode)) {
+			o->cond_mode = cond->fmode[b];
+			o->cond_sigma = cond->fsigma[b];
+		}
+		double t = fmax(ty->th_2, cond->fmode[b] +
+					  p->k_hyper * cond->fsigma[b]);
+		if (!(t <= o->cond_th2))
+			o->cond_th2 = t;
+	}
 	return 0;
 }
 
@@ -499,18 +565,40 @@ int sts_segment(const sts_input_t *in, const sts_params_t *p,
 		if (o->thr[ref].th_1 < th_csf)
 			th_csf = o->thr[ref].th_1;
 	}
+	/* the healthy level of the primary image depends on the tissue
+	 * (grey matter is brighter than white matter in FLAIR and T2), which
+	 * T1 (or T1c) tells apart: th_2 and th_omega are raised, voxel by
+	 * voxel, to the mode + k sigma of healthy tissue of the same T1
+	 * intensity (sts_cond; never lowered: where T1 says CSF the reference
+	 * is dark and the image-wide level stays) */
+	sts_cond_t cond;
+	memset(&cond, 0, sizeof cond);
+	o->cond_ref = -1;
+	int cref = o->have[STS_T1] ? STS_T1 : o->have[STS_T1C] ? STS_T1C : -1;
+	if (p->ref_t1 && cref >= 0) {
+		rc = cond_reference(in, o, p, prim, cref, n, &cond, err, es);
+		if (rc)
+			goto out;
+	}
 	int64_t nmark = 0;
 	for (int64_t i = 0; i < n; i++) {
-		uint8_t c = o->brain[i] &&
-			    in->mod[prim][i] > o->thr[prim].th_2;
+		double th2 = o->thr[prim].th_2, thw = o->thr[prim].th_omega;
+		double cm, cs;
+		if (o->cond_ref >= 0 && o->brain[i] &&
+		    sts_cond_at(&cond, in->mod[cref][i], &cm, &cs)) {
+			th2 = fmax(th2, cm + p->k_hyper * cs);
+			thw = fmax(thw, cm + p->k_marker * cs);
+		}
+		uint8_t c = o->brain[i] && in->mod[prim][i] > th2;
 		if (c && prim == STS_FLAIR && o->have[STS_T2])
 			c = in->mod[STS_T2][i] > o->thr[STS_T2].th_2;
 		if (c && prim == STS_T2 && ref != STS_T2)
 			c = in->mod[ref][i] > th_csf;
 		cand[i] = c;
-		t1[i] = c && in->mod[prim][i] > o->thr[prim].th_omega;
+		t1[i] = c && in->mod[prim][i] > thw;
 		nmark += t1[i];
 	}
+	sts_cond_free(&cond);
 	o->n_markers = nmark;
 	if (sts_reconstruct(g, t1, cand, o->tumour))
 		goto fail_nomem;
@@ -580,9 +668,21 @@ int sts_segment(const sts_input_t *in, const sts_params_t *p,
 	/* 7. closing and hole filling (necrotic centres are dark in FLAIR
 	 * and in T1c but enclosed by the tumour), then components again */
 	if (sts_dilate(g, o->tumour, p->close_mm, t1) ||
-	    sts_erode(g, t1, p->close_mm, t1) ||
-	    sts_fill_holes(g, t1, t1))
+	    sts_erode(g, t1, p->close_mm, t1))
 		goto fail_nomem;
+	int csfv = getenv("STS_CSFV") ? atoi(getenv("STS_CSFV")) : 0;
+	if (csfv == 1 && prim == STS_FLAIR)
+		for (int64_t i = 0; i < n; i++)
+			if (t1[i] && !o->tumour[i] &&
+			    in->mod[STS_FLAIR][i] < o->thr[STS_FLAIR].th_1)
+				t1[i] = 0;
+	if (sts_fill_holes(g, t1, t1))
+		goto fail_nomem;
+	if (csfv == 2 && prim == STS_FLAIR)
+		for (int64_t i = 0; i < n; i++)
+			if (t1[i] && !o->tumour[i] &&
+			    in->mod[STS_FLAIR][i] < o->thr[STS_FLAIR].th_1)
+				t1[i] = 0;
 	for (int64_t i = 0; i < n; i++)
 		o->tumour[i] = (t1[i] || o->tumour[i]) && o->brain[i];
 	int64_t nt = sts_keep_components(g, o->tumour, p->keep_ratio, min_vox);

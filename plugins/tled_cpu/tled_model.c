@@ -53,6 +53,7 @@ void tled_model_opts_default(tled_model_opts_t *o)
 	o->ip_factor = 1.0;
 	o->merge_tol = 1e-3 * TLED_MM;
 	o->corr = TLED_CORR_ALL;
+	o->ebc = 1;
 	/* thesis Table 3.1 */
 	tled_material_set(&o->mat[MAT_BRAIN], 3000, 0.49, 1000);
 	tled_material_set(&o->mat[MAT_CSF], 10, 0.1, 1000);
@@ -208,13 +209,18 @@ int tled_grid_knn(const tled_grid_t *g, const double x[3], int k, int64_t skip,
 		}
 		if (cnt == k) {
 			/* min distance from x to outside the block of ring r */
+			/* sides of the block already at the grid's edge hide
+			 * no further points (x may lie outside the grid) */
 			double lb = DBL_MAX;
 			for (int c = 0; c < 3; c++) {
-				double lo = g->lo[c] + (c0[c] - r) * g->cell;
-				double hi = g->lo[c] + (c0[c] + r + 1) * g->cell;
-				lb = fmin(lb, fmin(x[c] - lo, hi - x[c]));
+				if (c0[c] - r > 0)
+					lb = fmin(lb, x[c] - (g->lo[c] +
+							      (c0[c] - r) * g->cell));
+				if (c0[c] + r < g->nc[c] - 1)
+					lb = fmin(lb, g->lo[c] + (c0[c] + r + 1) *
+							      g->cell - x[c]);
 			}
-			if (lb > 0 && lb * lb >= d2[k - 1])
+			if (lb == DBL_MAX || (lb > 0 && lb * lb >= d2[k - 1]))
 				break;
 		}
 	}
@@ -456,6 +462,9 @@ void tled_model_free(tled_model_t *m)
 	free(m->bnode);
 	free(m->bX);
 	free(m->bn);
+	free(m->rid);
+	free(m->rN);
+	free(m->bt);
 	tled_grid_free(&m->bgrid);
 	memset(m, 0, sizeof *m);
 }
@@ -697,7 +706,8 @@ static void corr_apply(const corr_ctx_t *cx, const double *v, double *out,
 
 static int correct_gradients(tled_model_t *m, const double *w, const double *P,
 			     const double *Mi, const uint8_t *con,
-			     const int64_t *ent_ip, char *err, size_t errsize)
+			     const int64_t *ent_ip, const double *G, char *err,
+			     size_t errsize)
 {
 	int64_t n = m->n, ne = m->ipptr[m->nip];
 	double *g = calloc((size_t)(3 * n), sizeof *g);
@@ -717,7 +727,9 @@ static int correct_gradients(tled_model_t *m, const double *w, const double *P,
 	double g0[3] = { 0, 0, 0 }, rr[3] = { 0, 0, 0 };
 	for (int64_t a = 0; a < n; a++)
 		for (int c = 0; c < 3; c++) {
-			double v = con[a] ? -g[3 * a + c] : 0;
+			double v = con[a] ? (G ? G[3 * a + c] : 0) -
+						    g[3 * a + c]
+					  : 0;
 			r[3 * a + c] = v;
 			d[3 * a + c] = v;
 			rr[c] += v * v;
@@ -767,8 +779,10 @@ static int correct_gradients(tled_model_t *m, const double *w, const double *P,
 	double after = 0, before = 0;
 	for (int64_t a = 0; a < n; a++)
 		if (con[a])
-			for (int c = 0; c < 3; c++)
-				after += g[3 * a + c] * g[3 * a + c];
+			for (int c = 0; c < 3; c++) {
+				double v = g[3 * a + c] - (G ? G[3 * a + c] : 0);
+				after += v * v;
+			}
 	for (int c = 0; c < 3; c++)
 		before += g0[c] * g0[c];
 	m->corr_rel = before > 0 ? sqrt(after / before) : 0;
@@ -780,6 +794,90 @@ out:
 	free(q);
 	free(ev);
 	return rc;
+}
+
+/*
+ * Boundary weights t_b ~ A_b n_b (m^2) of the brain-boundary nodes: the
+ * surface integral of any smooth g over the boundary is ~ sum_b g(X_b) t_b.
+ * Start from A_b = (sqrt(3)/2) d_b^2 (d_b: mean distance to the 6 nearest
+ * boundary nodes, a hexagonal patch) and the PCA normals n_b, then the
+ * smallest change (weighted by A_b) that makes the discrete divergence
+ * theorem exact for constant and linear fields:
+ *     sum_b t_b = 0,     sum_b X_b (x) t_b = V I   (V = sum_ip V_ip).
+ * t_b = t0_b + A_b Lambda^T p_b, p_b = [1, (X_b - Xc)/L], a 4x4 solve.
+ * Returns 0, -1 on failure (no boundary or singular fit).
+ */
+static int boundary_weights(tled_model_t *m)
+{
+	int64_t nb = m->nb;
+	if (nb < 4)
+		return -1;
+	m->bt = calloc((size_t)(3 * nb), sizeof *m->bt);
+	double *A = malloc((size_t)nb * sizeof *A);
+	if (!m->bt || !A) {
+		free(A);
+		return -1;
+	}
+	double Xc[3] = { 0, 0, 0 }, L = 0, V = 0;
+	for (int64_t p = 0; p < m->nip; p++)
+		V += m->ipV[p];
+	for (int64_t b = 0; b < nb; b++)
+		for (int c = 0; c < 3; c++)
+			Xc[c] += m->bX[3 * b + c] / (double)nb;
+	for (int64_t b = 0; b < nb; b++)
+		for (int c = 0; c < 3; c++)
+			L = fmax(L, fabs(m->bX[3 * b + c] - Xc[c]));
+	if (!(L > 0)) {
+		free(A);
+		return -1;
+	}
+	double M[16] = { 0 }, R[12] = { 0 }; /* R: 4x3 right-hand side */
+	for (int64_t b = 0; b < nb; b++) {
+		int64_t ids[7];
+		double d2[7];
+		int k = tled_grid_knn(&m->bgrid, m->bX + 3 * b, 7, b, ids, d2);
+		double d = 0;
+		for (int i = 0; i < k; i++)
+			d += sqrt(d2[i]) / k;
+		A[b] = 0.5 * sqrt(3.0) * d * d;
+		double p[4] = { 1, 0, 0, 0 };
+		for (int c = 0; c < 3; c++)
+			p[c + 1] = (m->bX[3 * b + c] - Xc[c]) / L;
+		for (int r = 0; r < 4; r++) {
+			for (int q = 0; q < 4; q++)
+				M[4 * r + q] += A[b] * p[r] * p[q];
+			for (int c = 0; c < 3; c++)
+				R[3 * r + c] -= p[r] * A[b] * m->bn[3 * b + c];
+		}
+	}
+	for (int c = 0; c < 3; c++)
+		R[3 * (c + 1) + c] += V / L;
+	double Mi[16];
+	if (inv4(M, Mi)) {
+		free(A);
+		return -1;
+	}
+	double Lam[12];
+	for (int r = 0; r < 4; r++)
+		for (int c = 0; c < 3; c++) {
+			double v = 0;
+			for (int q = 0; q < 4; q++)
+				v += Mi[4 * r + q] * R[3 * q + c];
+			Lam[3 * r + c] = v;
+		}
+	for (int64_t b = 0; b < nb; b++) {
+		double p[4] = { 1, 0, 0, 0 };
+		for (int c = 0; c < 3; c++)
+			p[c + 1] = (m->bX[3 * b + c] - Xc[c]) / L;
+		for (int c = 0; c < 3; c++) {
+			double v = 0;
+			for (int r = 0; r < 4; r++)
+				v += Lam[3 * r + c] * p[r];
+			m->bt[3 * b + c] = A[b] * (m->bn[3 * b + c] + v);
+		}
+	}
+	free(A);
+	return 0;
 }
 
 /* ------------------------------------------------------------ build */
@@ -1157,7 +1255,68 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 			con[a] = 0;
 		}
 
+	/* ---- nodal rows: u^h(X_a) = sum_b Phi_b(X_a) u_b ---- */
+	m->ebc = o->ebc != 0;
+	m->rk = K;
+	m->rid = malloc((size_t)n * K * sizeof *m->rid);
+	m->rN = malloc((size_t)n * K * sizeof *m->rN);
+	if (!m->rid || !m->rN)
+		goto oom;
+	bad = -1;
+#pragma omp parallel num_threads(m->nthreads)
+	{
+		double *kd2 = malloc((size_t)K * sizeof *kd2);
+		double *dd = malloc((size_t)(4 * K) * sizeof *dd);
+#pragma omp for schedule(dynamic, 256)
+		for (int64_t a = 0; a < n; a++) {
+			int64_t *sid = m->rid + (int64_t)K * a;
+			int k = kd2 && dd ? tled_grid_knn(&ng, m->X + 3 * a, K, -1,
+							  sid, kd2)
+					  : 0;
+			if (k != K || tled_mls(m->X, sid, K, m->X + 3 * a,
+					       o->support_dilation *
+						       sqrt(kd2[K - 1]),
+					       m->rN + (int64_t)K * a, dd,
+					       dd + 3 * K)) {
+#pragma omp critical
+				if (bad < 0 || a < bad)
+					bad = a;
+			}
+		}
+		free(kd2);
+		free(dd);
+	}
+	if (bad >= 0) {
+		const double *x = m->X + 3 * bad;
+		rc = errf(err, errsize, "singular MLS moment matrix at node "
+			  "%lld (%.3f, %.3f, %.3f) mm: its %d nearest nodes are "
+			  "coplanar", (long long)bad, x[0] / TLED_MM,
+			  x[1] / TLED_MM, x[2] / TLED_MM, K);
+		goto fail;
+	}
+
 	/* ---- integration-constraint correction ---- */
+	double *G = NULL;
+	if (m->ebc) {
+		/* every node with mass is a dynamic unknown (the essential
+		 * conditions are constraints on u^h, tled_solve.h) */
+		for (int64_t a = 0; a < n; a++)
+			con[a] = m->mass[a] > 0;
+		if (boundary_weights(m) == 0 && m->nb > 0) {
+			G = calloc((size_t)(3 * n), sizeof *G);
+			if (!G)
+				goto oom;
+			for (int64_t b = 0; b < m->nb; b++) {
+				int64_t a0 = m->bnode[b];
+				for (int i = 0; i < K; i++) {
+					int64_t a = m->rid[(int64_t)K * a0 + i];
+					double N = m->rN[(int64_t)K * a0 + i];
+					for (int c = 0; c < 3; c++)
+						G[3 * a + c] += N * m->bt[3 * b + c];
+				}
+			}
+		}
+	}
 	/* only for nodes whose supports stay clear of the domain boundary:
 	 * there sum_ip V dN_a must vanish (the shape function vanishes on the
 	 * boundary); near it the true value is the boundary integral of N_a n,
@@ -1180,8 +1339,11 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		free(near);
 	}
 	if (o->corr != TLED_CORR_NONE &&
-	    correct_gradients(m, w, P, Mi, con, ent_ip, err, errsize))
+	    correct_gradients(m, w, P, Mi, con, ent_ip, G, err, errsize)) {
+		free(G);
 		goto fail;
+	}
+	free(G);
 
 	/* wave-speed time step estimate: h_min / c_max */
 	{

@@ -52,13 +52,19 @@ enum tled_label {
 	TL_SEED = 5,
 };
 
-/* Which nodes get the integration-constraint correction (sum_ip V dN_a = 0).
- * STATUS (see bench/tled/results.md): ALL passes the linear patch test to
- * 1e-9 but distorts the gradients of free nodes whose shape functions reach
- * the essential boundary (cavity test 70% off); INTERIOR / NONE leave the
- * essential-boundary error of non-interpolating MLS (patch test 65% off).
- * The fix planned: collocate the boundary conditions on the approximation
- * (u^h(X_b) = u_b) with multipliers and target b_a = sum_b N_a(X_b) A_b n_b. */
+/* Which nodes get the integration-constraint correction of the derivatives,
+ *   sum_ip V_ip dN_a(x_ip) = G_a.
+ * With ebc = 1 (default) the target is the boundary integral of N_a n
+ * evaluated with the brain-boundary nodes (label 1) as quadrature points,
+ *   G_a = sum_b Phi_a(X_b) t_b,   t_b ~ A_b n_b,
+ * the t_b fitted so that sum_a G_a = 0 and sum_a X_a (x) G_a = V I (the
+ * discrete divergence theorem for constant and linear fields); with the
+ * essential boundary conditions collocated by Lagrange multipliers
+ * (tled_solve.h) the linear patch test is then exact, and the correction
+ * is small because the target is the true integral to O(h).
+ * With ebc = 0 (legacy) the target is 0 for every non-fixed node (ALL):
+ * linear patch exact, but free nodes whose shape functions reach the
+ * essential boundary get distorted gradients (bench/tled/results.md). */
 enum tled_corr { TLED_CORR_NONE = 0, TLED_CORR_INTERIOR = 1, TLED_CORR_ALL = 2 };
 
 enum tled_mat_id { MAT_BRAIN = 0, MAT_CSF = 1, MAT_TUMOUR = 2, MAT_N = 3 };
@@ -82,6 +88,11 @@ typedef struct tled_model_opts {
 	double ip_factor;       /* ip grid spacing / mean node spacing */
 	double merge_tol;       /* m: nodes closer than this are merged */
 	int corr;               /* tled_corr: integration-constraint correction */
+	int ebc;                /* 1 (default): essential boundary conditions by
+	                           collocation u^h(X_c) = u_c (see tled_solve.h)
+	                           and the correction targets the boundary
+	                           integral; 0: legacy (nodal parameters of
+	                           fixed/driven nodes prescribed, target 0) */
 	tled_material_t mat[MAT_N];
 	int nthreads;           /* OpenMP threads (<=0: runtime default) */
 	/* Domain test for ip candidates (reference coordinates, m).  NULL: the
@@ -152,6 +163,15 @@ typedef struct tled_model {
 	double *bX;         /* 3*nb positions, m */
 	double *bn;         /* 3*nb outward unit normals */
 	tled_grid_t bgrid;  /* over bX */
+
+	/* essential boundary conditions by collocation (ebc = 1) */
+	int ebc;
+	int rk;             /* entries per nodal row */
+	int64_t *rid;       /* n*rk: support nodes of u^h at X_a */
+	double *rN;         /* n*rk: shape functions Phi_b(X_a) */
+	double *bt;         /* 3*nb: boundary weights t_b ~ A_b n_b (m^2),
+	                       fitted so that the discrete divergence theorem
+	                       holds for constant and linear fields */
 
 	/* diagnostics of the setup */
 	double corr_rel;    /* |integration-constraint residual| after / before */

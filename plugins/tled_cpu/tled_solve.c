@@ -55,6 +55,19 @@ void tled_solver_free(tled_solver_t *s)
 	free(s->s0);
 	free(s->ipact);
 	free(s->ipoff);
+	free(s->dkind);
+	free(s->cnode);
+	free(s->cbar);
+	free(s->cstart);
+	free(s->ctarget);
+	free(s->cl);
+	free(s->cr);
+	free(s->cz);
+	free(s->cp);
+	free(s->cq);
+	free(s->cdiag);
+	free(s->react);
+	free(s->wn);
 	memset(s, 0, sizeof *s);
 }
 
@@ -75,7 +88,10 @@ int tled_solver_init(tled_solver_t *s, tled_model_t *m, char *err,
 	s->VP = calloc((size_t)(9 * m->nip), sizeof(double));
 	s->ipact = calloc((size_t)m->nip, 1);
 	s->ipoff = calloc((size_t)m->nip, 1);
-	if (!s->ipoff || !s->u || !s->v || !s->f || !s->fprev || !s->ustart || !s->tmp ||
+	s->dkind = calloc((size_t)m->n, 1);
+	s->react = calloc(n3, sizeof(double));
+	s->wn = calloc(n3, sizeof(double));
+	if (!s->dkind || !s->react || !s->wn || !s->ipoff || !s->u || !s->v || !s->f || !s->fprev || !s->ustart || !s->tmp ||
 	    !s->tmp2 || !s->s0 || !s->VP || !s->ipact) {
 		tled_solver_free(s);
 		return errf(err, errsize, "out of memory (solver, %lld nodes)",
@@ -94,9 +110,15 @@ int tled_solver_init(tled_solver_t *s, tled_model_t *m, char *err,
 void tled_solver_update_active(tled_solver_t *s)
 {
 	const tled_model_t *m = s->m;
-	int64_t nf = 0;
-	for (int64_t a = 0; a < m->n; a++)
-		nf += m->kind[a] == TLED_FREE;
+	int64_t nf = 0, nc = 0;
+	for (int64_t a = 0; a < m->n; a++) {
+		if (m->ebc)
+			s->dkind[a] = m->mass[a] > 0 ? TLED_FREE : TLED_FIXED;
+		else
+			s->dkind[a] = m->kind[a];
+		nf += s->dkind[a] == TLED_FREE;
+		nc += m->ebc && m->mass[a] > 0 && m->kind[a] != TLED_FREE;
+	}
 	s->nfree = nf;
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
 	for (int64_t p = 0; p < m->nip; p++) {
@@ -106,8 +128,250 @@ void tled_solver_update_active(tled_solver_t *s)
 			continue;
 		}
 		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1] && !act; e++)
-			act = m->kind[m->ipnode[e]] == TLED_FREE;
+			act = s->dkind[m->ipnode[e]] == TLED_FREE;
 		s->ipact[p] = act;
+	}
+	if (!m->ebc)
+		return;
+	/* constraint set: fixed and driven nodes with mass */
+	if (nc != s->nc || !s->cnode) {
+		free(s->cnode);
+		free(s->cbar);
+		free(s->cstart);
+		free(s->ctarget);
+		free(s->cl);
+		free(s->cr);
+		free(s->cz);
+		free(s->cp);
+		free(s->cq);
+		free(s->cdiag);
+		size_t k = (size_t)(nc ? nc : 1);
+		s->cnode = malloc(k * sizeof *s->cnode);
+		s->cbar = calloc(3 * k, sizeof(double));
+		s->cstart = calloc(3 * k, sizeof(double));
+		s->ctarget = calloc(3 * k, sizeof(double));
+		s->cl = calloc(3 * k, sizeof(double));
+		s->cr = calloc(3 * k, sizeof(double));
+		s->cz = calloc(3 * k, sizeof(double));
+		s->cp = calloc(3 * k, sizeof(double));
+		s->cq = calloc(3 * k, sizeof(double));
+		s->cdiag = calloc(k, sizeof(double));
+	}
+	s->nc = nc;
+	if (!s->cnode || !s->cbar || !s->cstart || !s->ctarget || !s->cl ||
+	    !s->cr || !s->cz || !s->cp || !s->cq || !s->cdiag) {
+		s->nc = -1; /* reported by tled_relax */
+		return;
+	}
+	int64_t c = 0;
+	for (int64_t a = 0; a < m->n; a++)
+		if (m->mass[a] > 0 && m->kind[a] != TLED_FREE)
+			s->cnode[c++] = a;
+	/* current prescribed values: 0 for fixed nodes, u^h for driven ones */
+	for (c = 0; c < nc; c++) {
+		int64_t a = s->cnode[c];
+		double uh[3] = { 0, 0, 0 };
+		if (m->kind[a] == TLED_DRIVEN)
+			tled_solver_nodal_u(s, a, uh);
+		double dg = 0;
+		for (int i = 0; i < m->rk; i++) {
+			int64_t b = m->rid[(int64_t)m->rk * a + i];
+			double N = m->rN[(int64_t)m->rk * a + i];
+			if (s->dkind[b] == TLED_FREE)
+				dg += N * N / m->mass[b];
+		}
+		s->cdiag[c] = dg > 0 ? dg : 1;
+		for (int i = 0; i < 3; i++)
+			s->cbar[3 * c + i] = s->cstart[3 * c + i] =
+				s->ctarget[3 * c + i] = uh[i];
+	}
+}
+
+void tled_solver_nodal_u(const tled_solver_t *s, int64_t a, double out[3])
+{
+	const tled_model_t *m = s->m;
+	if (!m->ebc || !m->rid) {
+		for (int i = 0; i < 3; i++)
+			out[i] = s->u[3 * a + i];
+		return;
+	}
+	out[0] = out[1] = out[2] = 0;
+	for (int i = 0; i < m->rk; i++) {
+		int64_t b = m->rid[(int64_t)m->rk * a + i];
+		double N = m->rN[(int64_t)m->rk * a + i];
+		for (int c = 0; c < 3; c++)
+			out[c] += N * s->u[3 * b + c];
+	}
+}
+
+/* ------------------------------------------------------ collocation (ebc) */
+
+/* y = Phi_C W Phi_C^T x, W = diag(wt) over dynamic nodes (3 components) */
+static void ebc_S(tled_solver_t *s, const double *wt, const double *x,
+		  double *y)
+{
+	const tled_model_t *m = s->m;
+	int rk = m->rk;
+	double *z = s->wn;
+	memset(z, 0, (size_t)(3 * m->n) * sizeof *z);
+	for (int64_t c = 0; c < s->nc; c++) {
+		int64_t a = s->cnode[c];
+		for (int i = 0; i < rk; i++) {
+			int64_t b = m->rid[(int64_t)rk * a + i];
+			double N = m->rN[(int64_t)rk * a + i];
+			for (int d = 0; d < 3; d++)
+				z[3 * b + d] += N * x[3 * c + d];
+		}
+	}
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t c = 0; c < s->nc; c++) {
+		int64_t a = s->cnode[c];
+		double acc[3] = { 0, 0, 0 };
+		for (int i = 0; i < rk; i++) {
+			int64_t b = m->rid[(int64_t)rk * a + i];
+			double N = m->rN[(int64_t)rk * a + i] * wt[b];
+			for (int d = 0; d < 3; d++)
+				acc[d] += N * z[3 * b + d];
+		}
+		for (int d = 0; d < 3; d++)
+			y[3 * c + d] = acc[d];
+	}
+}
+
+/* solve (Phi_C W Phi_C^T) lambda = r (in s->cr) by Jacobi-preconditioned
+ * CG, three right-hand sides; lambda in s->cl */
+static int ebc_solve(tled_solver_t *s, const double *wt)
+{
+	int64_t nc3 = 3 * s->nc;
+	double *x = s->cl, *r = s->cr, *z = s->cz, *p = s->cp, *q = s->cq;
+	double rz[3] = { 0, 0, 0 }, r0[3] = { 0, 0, 0 };
+	memset(x, 0, (size_t)nc3 * sizeof *x);
+	for (int64_t i = 0; i < nc3; i++) {
+		z[i] = r[i] / s->cdiag[i / 3];
+		p[i] = z[i];
+		rz[i % 3] += r[i] * z[i];
+		r0[i % 3] = fmax(r0[i % 3], fabs(r[i]));
+	}
+	double rmax0 = fmax(r0[0], fmax(r0[1], r0[2]));
+	if (!(rmax0 > 0))
+		return 0;
+	int it;
+	for (it = 0; it < 1000; it++) {
+		ebc_S(s, wt, p, q);
+		double pq[3] = { 0, 0, 0 };
+		for (int64_t i = 0; i < nc3; i++)
+			pq[i % 3] += p[i] * q[i];
+		double al[3];
+		for (int d = 0; d < 3; d++)
+			al[d] = pq[d] > 0 ? rz[d] / pq[d] : 0;
+		double rm = 0, rzn[3] = { 0, 0, 0 };
+		for (int64_t i = 0; i < nc3; i++) {
+			x[i] += al[i % 3] * p[i];
+			r[i] -= al[i % 3] * q[i];
+			rm = fmax(rm, fabs(r[i]));
+			z[i] = r[i] / s->cdiag[i / 3];
+			rzn[i % 3] += r[i] * z[i];
+		}
+		if (rm <= 1e-10 * rmax0 || rm < 1e-16)
+			break;
+		for (int64_t i = 0; i < nc3; i++) {
+			int d = (int)(i % 3);
+			p[i] = z[i] + (rz[d] > 0 ? rzn[d] / rz[d] : 0) * p[i];
+		}
+		for (int d = 0; d < 3; d++)
+			rz[d] = rzn[d];
+	}
+	s->cg_iters = it + 1;
+	return 0;
+}
+
+/* impose u^h(X_c) = cbar_c: du = M^-1 Phi_C^T lambda; writes du into
+ * s->wn and returns the largest violation before the correction */
+static double ebc_project(tled_solver_t *s)
+{
+	const tled_model_t *m = s->m;
+	int rk = m->rk;
+	double vmax = 0;
+	double *wt = s->tmp2;
+	for (int64_t a = 0; a < m->n; a++)
+		wt[a] = s->dkind[a] == TLED_FREE ? 1 / m->mass[a] : 0;
+	for (int64_t c = 0; c < s->nc; c++) {
+		double uh[3];
+		tled_solver_nodal_u(s, s->cnode[c], uh);
+		for (int d = 0; d < 3; d++) {
+			s->cr[3 * c + d] = s->cbar[3 * c + d] - uh[d];
+			vmax = fmax(vmax, fabs(s->cr[3 * c + d]));
+		}
+	}
+	if (s->nc <= 0 || !(vmax > 0)) {
+		memset(s->wn, 0, (size_t)(3 * m->n) * sizeof *s->wn);
+		return vmax;
+	}
+	ebc_solve(s, wt);
+	double *du = s->wn;
+	memset(du, 0, (size_t)(3 * m->n) * sizeof *du);
+	for (int64_t c = 0; c < s->nc; c++) {
+		int64_t a = s->cnode[c];
+		for (int i = 0; i < rk; i++) {
+			int64_t b = m->rid[(int64_t)rk * a + i];
+			double N = m->rN[(int64_t)rk * a + i] * wt[b];
+			for (int d = 0; d < 3; d++)
+				du[3 * b + d] += N * s->cl[3 * c + d];
+		}
+	}
+	for (int64_t i = 0; i < 3 * m->n; i++)
+		s->u[i] += du[i];
+	return vmax;
+}
+
+double tled_solver_impose(tled_solver_t *s)
+{
+	if (!s->m->ebc || s->nc <= 0)
+		return 0;
+	ebc_project(s);
+	/* report what is left */
+	double vmax = 0;
+	for (int64_t c = 0; c < s->nc; c++) {
+		double uh[3];
+		tled_solver_nodal_u(s, s->cnode[c], uh);
+		for (int d = 0; d < 3; d++)
+			vmax = fmax(vmax, fabs(s->cbar[3 * c + d] - uh[d]));
+	}
+	return vmax;
+}
+
+/* Lanczos vectors live in the mass-scaled space y = M^1/2 u: project y
+ * onto the constraint null space, y -= M^-1/2 Phi^T S^-1 Phi M^-1/2 y */
+static void ebc_project_scaled(tled_solver_t *s, double *y)
+{
+	const tled_model_t *m = s->m;
+	int rk = m->rk;
+	if (!m->ebc || s->nc <= 0)
+		return;
+	double *wt = s->tmp2;
+	for (int64_t a = 0; a < m->n; a++)
+		wt[a] = s->dkind[a] == TLED_FREE ? 1 / m->mass[a] : 0;
+	for (int64_t c = 0; c < s->nc; c++) {
+		int64_t a = s->cnode[c];
+		double acc[3] = { 0, 0, 0 };
+		for (int i = 0; i < rk; i++) {
+			int64_t b = m->rid[(int64_t)rk * a + i];
+			double N = m->rN[(int64_t)rk * a + i] * sqrt(wt[b]);
+			for (int d = 0; d < 3; d++)
+				acc[d] += N * y[3 * b + d];
+		}
+		for (int d = 0; d < 3; d++)
+			s->cr[3 * c + d] = acc[d];
+	}
+	ebc_solve(s, wt);
+	for (int64_t c = 0; c < s->nc; c++) {
+		int64_t a = s->cnode[c];
+		for (int i = 0; i < rk; i++) {
+			int64_t b = m->rid[(int64_t)rk * a + i];
+			double N = m->rN[(int64_t)rk * a + i] * sqrt(wt[b]);
+			for (int d = 0; d < 3; d++)
+				y[3 * b + d] -= N * s->cl[3 * c + d];
+		}
 	}
 }
 
@@ -160,7 +424,7 @@ static void op_apply(tled_solver_t *s, const tled_ops_t *ops, const double *x,
 	double *up = s->tmp2, *fp = s->fprev;
 	double xmax = 0;
 	for (int64_t a = 0; a < n; a++)
-		if (m->kind[a] == TLED_FREE)
+		if (s->dkind[a] == TLED_FREE)
 			for (int i = 0; i < 3; i++)
 				xmax = fmax(xmax, fabs(x[3 * a + i]) /
 							  sqrt(m->mass[a]));
@@ -171,7 +435,7 @@ static void op_apply(tled_solver_t *s, const tled_ops_t *ops, const double *x,
 	double eps = 1e-6 * m->h_mean / xmax;
 	for (int sgn = 0; sgn < 2; sgn++) {
 		for (int64_t a = 0; a < n; a++) {
-			double im = m->kind[a] == TLED_FREE ? 1 / sqrt(m->mass[a]) : 0;
+			double im = s->dkind[a] == TLED_FREE ? 1 / sqrt(m->mass[a]) : 0;
 			for (int i = 0; i < 3; i++)
 				up[3 * a + i] = s->u[3 * a + i] +
 						(sgn ? -eps : eps) * im * x[3 * a + i];
@@ -179,7 +443,7 @@ static void op_apply(tled_solver_t *s, const tled_ops_t *ops, const double *x,
 		ops->forces(m, s->ipact, up, s->VP, sgn ? fp : y, NULL);
 	}
 	for (int64_t a = 0; a < n; a++) {
-		double im = m->kind[a] == TLED_FREE ? 1 / sqrt(m->mass[a]) : 0;
+		double im = s->dkind[a] == TLED_FREE ? 1 / sqrt(m->mass[a]) : 0;
 		for (int i = 0; i < 3; i++)
 			y[3 * a + i] = im * (y[3 * a + i] - fp[3 * a + i]) /
 				       (2 * eps);
@@ -219,18 +483,36 @@ int tled_solver_eigs(tled_solver_t *s, const tled_solver_opts_t *o,
 		r ^= r << 13;
 		r ^= r >> 7;
 		r ^= r << 17;
-		v1[i] = m->kind[i / 3] == TLED_FREE
+		v1[i] = s->dkind[i / 3] == TLED_FREE
 				? (double)(r >> 11) / 9007199254740992.0 - 0.5
 				: 0;
 		nrm += v1[i] * v1[i];
 	}
+	if (m->ebc && s->nc > 0) {
+		ebc_project_scaled(s, v1);
+		nrm = 0;
+		for (int64_t i = 0; i < n3; i++)
+			nrm += v1[i] * v1[i];
+	}
 	nrm = sqrt(nrm);
+	if (!(nrm > 0)) {
+		/* every direction is constrained: nothing can move */
+		free(al);
+		free(be);
+		free(v0);
+		free(v1);
+		free(w);
+		*lmax = *lmin = 0;
+		return 0;
+	}
 	for (int64_t i = 0; i < n3; i++)
 		v1[i] /= nrm;
 	double prev = 0, top = 0, bot = 0;
 	int k;
 	for (k = 0; k < kmax; k++) {
 		op_apply(s, ops, v1, w);
+		if (m->ebc && s->nc > 0)
+			ebc_project_scaled(s, w);
 		double a = 0;
 		for (int64_t i = 0; i < n3; i++)
 			a += w[i] * v1[i];
@@ -346,8 +628,26 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	tled_model_t *m = s->m;
 	const tled_ops_t *ops = o->ops ? o->ops : &cpu_ops;
 	int64_t n = m->n;
+	int ebc = m->ebc;
 	memset(st, 0, sizeof *st);
 	tled_solver_update_active(s);
+	if (ebc && s->nc < 0)
+		return errf(err, errsize, "%s: out of memory (constraints)", tag);
+	if (ebc) {
+		/* ramp ends of the collocated conditions: from the current u^h
+		 * (update_active) to the targets of driven nodes */
+		for (int64_t c = 0; c < s->nc; c++) {
+			int64_t a = s->cnode[c];
+			for (int i = 0; i < 3; i++)
+				s->ctarget[3 * c + i] =
+					target && m->kind[a] == TLED_DRIVEN
+						? target[3 * a + i]
+						: s->cstart[3 * c + i];
+		}
+		/* a state that violates the conditions (new constraints, or
+		 * fixed nodes given a displacement) is projected first */
+		tled_solver_impose(s);
+	}
 	double dt;
 	if (tled_solver_pick_dt(s, o, &dt, err, errsize))
 		return -1;
@@ -357,6 +657,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	st->dt_wave = m->dt_wave;
 	memcpy(s->ustart, s->u, (size_t)(3 * n) * sizeof *s->u);
 	memset(s->v, 0, (size_t)(3 * n) * sizeof *s->v);
+	memset(s->react, 0, (size_t)(3 * n) * sizeof *s->react);
 
 	double lam = s->lmin > 0 ? s->lmin : 0; /* omega_min^2 estimate */
 	if (s->lmax > 0 && lam < 1e-10 * s->lmax)
@@ -383,9 +684,9 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	int it;
 	s->contacts = 0;
 	for (it = 1; it <= o->max_iter; it++) {
+		double r = !target ? 1 : it > ramp ? 1 : (double)it / ramp;
 		/* prescribed displacements of driven nodes (linear ramp) */
-		if (target && it <= ramp + 1) {
-			double r = it > ramp ? 1 : (double)it / ramp;
+		if (!ebc && target && it <= ramp + 1) {
 			for (int64_t a = 0; a < n; a++)
 				if (m->kind[a] == TLED_DRIVEN)
 					for (int i = 0; i < 3; i++) {
@@ -421,7 +722,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		if (o->damping < 0 && have_prev && it > ramp + 1) {
 			double num = 0, den = 0;
 			for (int64_t a = 0; a < n; a++)
-				if (m->kind[a] == TLED_FREE)
+				if (s->dkind[a] == TLED_FREE)
 					for (int i = 0; i < 3; i++) {
 						double du = dt * s->v[3 * a + i];
 						num += du * (s->f[3 * a + i] -
@@ -438,7 +739,40 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			if (it % 10 == 0)
 				c = 2 * sqrt(lam);
 		}
-		ops->cd_step(m, m->kind, s->f, s->u, s->v, dt, c, &ci);
+		ops->cd_step(m, s->dkind, s->f, s->u, s->v, dt, c, &ci);
+		if (ebc && s->nc > 0 && ci.node_nan < 0) {
+			/* collocated conditions at this step's ramp value, the
+			 * correction also enters the velocity (its reaction is
+			 * a force M du / dt^2) */
+			for (int64_t k = 0; k < 3 * s->nc; k++)
+				s->cbar[k] = s->cstart[k] +
+					     r * (s->ctarget[k] - s->cstart[k]);
+			ebc_project(s);
+			const double *du = s->wn;
+			double wk = 0, vm = 0;
+			int64_t nvm = -1;
+			for (int64_t a = 0; a < n; a++) {
+				if (s->dkind[a] != TLED_FREE)
+					continue;
+				double v2 = 0;
+				for (int i = 0; i < 3; i++) {
+					double fr = m->mass[a] * du[3 * a + i] /
+						    (dt * dt);
+					s->react[3 * a + i] = fr;
+					wk += fr * (dt * s->v[3 * a + i] +
+						    du[3 * a + i]);
+					s->v[3 * a + i] += du[3 * a + i] / dt;
+					v2 += s->v[3 * a + i] * s->v[3 * a + i];
+				}
+				if (v2 > vm) {
+					vm = v2;
+					nvm = a;
+				}
+			}
+			Wext += fabs(wk);
+			ci.vmax = sqrt(vm);
+			ci.node_vmax = nvm;
+		}
 		{
 			double *t = s->fprev;
 			s->fprev = s->f;
@@ -501,13 +835,14 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		it = o->max_iter;
 	if (o->contact)
 		s->contacts += tled_contact(s);
-	/* final state: forces for the residual */
+	/* final state: forces for the residual (ebc: net of the reactions) */
 	ops->forces(m, s->ipact, s->u, s->VP, s->f, &fi);
 	double res = 0;
 	for (int64_t a = 0; a < n; a++)
-		if (m->kind[a] == TLED_FREE)
+		if (s->dkind[a] == TLED_FREE && (ebc || m->kind[a] == TLED_FREE))
 			for (int i = 0; i < 3; i++)
-				res = fmax(res, fabs(s->f[3 * a + i]));
+				res = fmax(res, fabs(s->f[3 * a + i] -
+						     (ebc ? s->react[3 * a + i] : 0)));
 	st->iters = it;
 	st->converged = nconv >= 5;
 	st->ke = ci.ke;

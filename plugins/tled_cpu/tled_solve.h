@@ -22,6 +22,27 @@
  * during the iterations by the Rayleigh quotient of the last increment
  * (du^T df / du^T M du); stop when the estimated distance to equilibrium
  * max|v| / omega_min falls below tol.
+ *
+ * Essential boundary conditions (model built with ebc = 1, the default).
+ * MLS shape functions do not interpolate: u^h(X_c) = sum_a Phi_a(X_c) u_a
+ * differs from the nodal parameter u_c, so prescribing u_c does not impose
+ * the boundary displacement.  Instead every node with mass is a dynamic
+ * unknown and the conditions u^h(X_c) = ubar_c at the fixed and driven
+ * nodes c are collocation constraints with Lagrange multipliers, enforced
+ * after each explicit step by the smallest mass-weighted correction
+ * (a linear-constraint projection, as SHAKE/RATTLE or the forward-increment
+ * Lagrange multipliers of Carpenter, Taylor & Katona 1991; the explicit
+ * meshless setting is Joldes, Chowdhury, Wittek & Miller 2017, EABE 80:94,
+ * who correct boundary nodal values so that the approximation matches):
+ *     S lambda = ubar - Phi_C u,  S = Phi_C M^-1 Phi_C^T  (CG, Jacobi),
+ *     u += M^-1 Phi_C^T lambda,   v += (that) / dt.
+ * The constraint force M du / dt^2 is the reaction; at equilibrium
+ * f_int = Phi_C^T Lambda, the Galerkin solution with collocated
+ * conditions.  With the boundary-integral target of the derivative
+ * correction (tled_model.h) the linear patch test is exact.  The critical
+ * step comes from the unconstrained operator (an upper bound for the
+ * constrained one), omega_min from the constrained one (Lanczos on
+ * P M^-1/2 K M^-1/2 P, P the projection).
  */
 #ifndef TLED_SOLVE_H
 #define TLED_SOLVE_H
@@ -72,6 +93,17 @@ typedef struct tled_solver {
 	uint8_t *ipact;
 	uint8_t *ipoff;     /* nip: 1 = integration point switched off (inside
 	                       the grown tumour: a cavity carries no stress) */
+	uint8_t *dkind;     /* n: dynamic kinds (ebc: every node with mass is
+	                       TLED_FREE; legacy: = m->kind) */
+	/* collocated essential conditions (m->ebc) */
+	int64_t nc;         /* constrained nodes (fixed + driven with mass) */
+	int64_t *cnode;     /* nc node ids */
+	double *cbar;       /* 3nc prescribed u^h, m */
+	double *cstart, *ctarget; /* 3nc ramp ends, m */
+	double *cl, *cr, *cz, *cp, *cq, *cdiag; /* CG work, 3nc (diag nc) */
+	double *react;      /* 3n constraint forces of the last step, N */
+	double *wn;         /* 3n scratch */
+	int cg_iters;       /* CG iterations of the last projection */
 	double lmax, lmin;  /* eigenvalue estimates of M^-1 K, 1/s^2 */
 	double dt_crit;     /* s, from the chosen estimate */
 	double dt_eigen;    /* s, 2/sqrt(lmax) */
@@ -119,5 +151,10 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 /* project nodes that left the brain back onto the boundary tangent plane of
  * the nearest boundary node; returns the number projected */
 int64_t tled_contact(tled_solver_t *s);
+/* displacement of node a (m): u^h(X_a) with ebc, the parameter otherwise */
+void tled_solver_nodal_u(const tled_solver_t *s, int64_t a, double out[3]);
+/* ebc: impose u^h(X_c) = s->cbar at the constrained nodes now (no
+ * velocity change); returns the largest remaining violation, m */
+double tled_solver_impose(tled_solver_t *s);
 
 #endif

@@ -1,0 +1,90 @@
+#!/usr/bin/env python3
+"""Collect metrics tables of the bench/pipeline runs (stdlib only).
+
+  collect.py row KEY METHOD WALL_S EVAL_TSV [RUN_METRICS_TSV]
+      one TSV row: the numbers of the metrics plugin's long tables
+  collect.py summary ROWS_TSV
+      mean over the first column's keys (seeds or cases) per method, Markdown
+"""
+import csv
+import math
+import sys
+
+
+def read_metrics(path):
+    """metric|structure|value|unit rows -> {(metric, structure): value}"""
+    out = {}
+    try:
+        with open(path, newline="") as f:
+            for r in csv.DictReader(f, delimiter="\t"):
+                try:
+                    out[(r["metric"], r["structure"])] = float(r["value"])
+                except (TypeError, ValueError):
+                    out[(r["metric"], r["structure"])] = math.nan
+    except FileNotFoundError:
+        pass
+    return out
+
+
+COLS = [
+    ("err_band_mean_mm", "err_mean", "band"),
+    ("err_band_median_mm", "err_median", "band"),
+    ("err_band_p95_mm", "err_p95", "band"),
+    ("err_brain_mean_mm", "err_mean", "mask"),
+    ("S_mm", "S", "ventricles"),
+    ("S_mean_mm", "S_mean", "ventricles"),
+    ("dice_ventricles", "dice", "ventricles"),
+    ("dice_tumour", "dice", "tumour"),
+    ("jac_min", "jac_min", "mask"),
+]
+
+
+def fmt(v):
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "nan"
+    return "%.4g" % v
+
+
+def row(args):
+    key, method, wall, ev = args[:4]
+    m = read_metrics(ev)
+    if len(args) > 4:
+        run = read_metrics(args[4])
+        for k, v in run.items():
+            m.setdefault(k, v)
+    vals = [fmt(m.get((a, b), math.nan)) for _, a, b in COLS]
+    print("\t".join([key, method] + vals + [wall]))
+
+
+def summary(args):
+    with open(args[0], newline="") as f:
+        rows = [r for r in csv.DictReader(f, delimiter="\t")]
+    key = list(rows[0].keys())[0] if rows else "key"
+    methods = []
+    for r in rows:
+        if r["method"] not in methods:
+            methods.append(r["method"])
+    cols = [c for c in rows[0].keys() if c not in (key, "method")] if rows else []
+    print("| method | n | " + " | ".join(cols) + " |")
+    print("|---|---|" + "---|" * len(cols))
+    for m in methods:
+        rs = [r for r in rows if r["method"] == m]
+        ok = [r for r in rs if r.get(cols[0]) not in (None, "failed")]
+        cells = []
+        for c in cols:
+            v = []
+            for r in ok:
+                try:
+                    x = float(r[c])
+                except (TypeError, ValueError):
+                    continue
+                if not math.isnan(x):
+                    v.append(x)
+            cells.append(fmt(sum(v) / len(v)) if v else "n/a")
+        print(f"| {m} | {len(ok)}/{len(rs)} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) < 3 or sys.argv[1] not in ("row", "summary"):
+        sys.exit(__doc__)
+    {"row": row, "summary": summary}[sys.argv[1]](sys.argv[2:])

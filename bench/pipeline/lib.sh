@@ -1,0 +1,66 @@
+# Shared by the bench/pipeline scripts (sourced, POSIX sh).  Run from the
+# repository root.
+
+BUILD=${BUILD:-build}
+export ARMSTG_PLUGIN_PATH="$PWD/$BUILD/plugins"
+export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
+# OpenMP threads sleep instead of spinning at barriers (shared machine)
+export OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-passive}
+export ARMSTG_LOG=${ARMSTG_LOG:-warn}
+ARMSTG="$BUILD/armstg"
+
+build_all() {
+	make --no-print-directory -s "$ARMSTG" \
+		"$BUILD/plugins/phantom.so" "$BUILD/plugins/demons.so" \
+		"$BUILD/plugins/warp.so" "$BUILD/plugins/levelset.so" \
+		"$BUILD/plugins/sampler.so" "$BUILD/plugins/tled_cpu.so" \
+		"$BUILD/plugins/labelmap.so" "$BUILD/plugins/metrics.so" \
+		"$BUILD/plugins/report.so" "$BUILD/plugins/sts.so" \
+		"$BUILD/plugins/nifti_source.so" "$BUILD/plugins/nifti_sink.so" \
+		"$BUILD/plugins/h5_sink.so"
+}
+
+# the environment that points the user-facing graphs at an exported phantom
+# (bench/pipeline/phantom_export.ini) in folder $1
+phantom_env() {
+	export PH="$1"
+	export ATLAS_T1="$PH/atlas_t1.nii.gz"
+	export ATLAS_LABELS="$PH/atlas_labels.nii.gz"
+	export ATLAS_TISSUES="$PH/atlas_labels.nii.gz"  # 1 CSF 2 GM 3 WM 4 LV 5 V3
+	export CSF_LABELS=1,4,5
+	export VENTRICLES=4,5
+	export TUMOUR_LABEL=6
+	export PATIENT_T1="$PH/patient_t1.nii.gz"
+	export PATIENT_FLAIR="$PH/patient_flair.nii.gz"
+	export PATIENT_LABELS="$PH/patient_tumour.nii.gz"  # BraTS 2013 codes
+	export PATIENT_MASK="$PH/patient_mask.nii.gz"
+}
+
+# the environment for BraTS 2013 case $1 (0001..0003) in data folder $2
+brats_env() {
+	d="$2/brats2013/brats_2013_pat$1_1"
+	export ATLAS_T1="$2/sri24/spgr.nii.gz"
+	export ATLAS_LABELS="$2/sri24/tzo116plus.nii.gz"
+	export ATLAS_TISSUES="$2/sri24/tissues.nii.gz"
+	export CSF_LABELS=1
+	export VENTRICLES=201-414
+	export TUMOUR_LABEL=1000
+	export PATIENT_T1="$d/T1c_subtrMeanDivStd.nii.gz"
+	export PATIENT_FLAIR="$d/Flair_subtrMeanDivStd.nii.gz"
+	export PATIENT_LABELS="$d/OTMultiClass.nii.gz"
+	export PATIENT_MASK="$d/brainmask.nii.gz"
+}
+
+# run_graph GRAPH OUT [--set ...]: run quietly, log in OUT.log; prints the
+# wall time in seconds; returns the run's exit status
+run_graph() {
+	g=$1 o=$2
+	shift 2
+	rm -rf "$o"
+	t0=$(date +%s.%N)
+	"$ARMSTG" run "$g" --out "$o" --jobs 2 "$@" >"$o.log" 2>&1
+	rc=$?
+	t1=$(date +%s.%N)
+	echo "$t0 $t1" | awk '{printf "%.1f\n", $2 - $1}'
+	return $rc
+}
