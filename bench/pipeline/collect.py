@@ -3,6 +3,8 @@
 
   collect.py row KEY METHOD WALL_S EVAL_TSV [RUN_METRICS_TSV]
       one TSV row: the numbers of the metrics plugin's long tables
+  collect.py trade FACTOR SPACING K SAFETY WALL_S RUN_DIR
+      one row of bench/pipeline/run_tradeoff.sh
   collect.py summary ROWS_TSV
       mean over the first column's keys (seeds or cases) per method, Markdown
 """
@@ -56,6 +58,42 @@ def row(args):
     print("\t".join([key, method] + vals + [wall]))
 
 
+def read_rows(path):
+    try:
+        with open(path, newline="") as f:
+            return list(csv.DictReader(f, delimiter="\t"))
+    except FileNotFoundError:
+        return []
+
+
+def trade(args):
+    factor, spacing, k, safety, wall, run = args
+    ev = read_metrics(run + "/eval/eval.tsv")
+    tled = math.nan
+    for r in read_rows(run + "/run.tsv"):
+        if r.get("stage") == "grow":
+            tled = float(r["wall_s"])
+    steps = iters = 0
+    for r in read_rows(run + "/growth.tsv"):
+        steps += 1
+        try:
+            iters += int(float(r.get("iterations", "0")))
+        except ValueError:
+            pass
+    nodes = "nan"
+    try:
+        with open(run + ".log") as f:
+            for line in f:
+                if line.startswith("[nodes@") and " nodes: " in line:
+                    nodes = line.split("]", 1)[1].split()[0]
+    except FileNotFoundError:
+        pass
+    print("\t".join([factor, spacing, k, safety, nodes, str(steps), str(iters),
+                     fmt(tled), wall, fmt(ev.get(("err_mean", "band"), math.nan)),
+                     fmt(ev.get(("err_p95", "band"), math.nan)),
+                     fmt(ev.get(("S", "ventricles"), math.nan))]))
+
+
 def summary(args):
     with open(args[0], newline="") as f:
         rows = [r for r in csv.DictReader(f, delimiter="\t")]
@@ -85,6 +123,7 @@ def summary(args):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) < 3 or sys.argv[1] not in ("row", "summary"):
+    cmds = {"row": row, "trade": trade, "summary": summary}
+    if len(sys.argv) < 3 or sys.argv[1] not in cmds:
         sys.exit(__doc__)
-    {"row": row, "summary": summary}[sys.argv[1]](sys.argv[2:])
+    cmds[sys.argv[1]](sys.argv[2:])

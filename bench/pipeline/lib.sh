@@ -64,3 +64,11 @@ run_graph() {
 	echo "$t0 $t1" | awk '{printf "%.1f\n", $2 - $1}'
 	return $rc
 }
+
+# absolute path of $1 (which need not exist)
+abspath() {
+	case $1 in
+	/*) echo "$1" ;;
+	*) echo "$PWD/$1" ;;
+	esac
+}

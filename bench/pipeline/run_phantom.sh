@@ -14,6 +14,7 @@
 # field: displacement error in the 15 mm band outside the tumour core, in the
 # brain; ventricle metric S and Dice.  --set options go to the armstg and
 # spherical runs (e.g. --set nodes.spacing=3).  Rows: DIR/phantom.tsv.
+# METHODS="direct plain" runs a subset.
 # PHANTOM_SET="phantom.location=deep ..." changes the phantom.
 set -eu
 cd "$(dirname "$0")/../.."
@@ -29,6 +30,7 @@ while [ $# -gt 0 ]; do
 	*) echo "usage: $0 [--out DIR] [--seeds LIST] [--set stage.key=value]..." >&2; exit 2 ;;
 	esac
 done
+OUT=$(abspath "$OUT")
 build_all
 mkdir -p "$OUT"
 TSV="$OUT/phantom.tsv"
@@ -39,8 +41,8 @@ for seed in $SEEDS; do
 	ph="$OUT/ph$seed"
 	# shellcheck disable=SC2086
 	run_graph bench/pipeline/phantom_export.ini "$ph" --set phantom.seed="$seed" $PSETS >/dev/null
-	phantom_env "$PWD/$ph"
-	for m in armstg direct plain sphere; do
+	phantom_env "$ph"
+	for m in ${METHODS:-armstg direct plain sphere}; do
 		o="$OUT/ph$seed-$m"
 		case $m in
 		armstg) g=graphs/armstg.ini; extra=$SETS ;;
@@ -55,7 +57,8 @@ for seed in $SEEDS; do
 			printf '%s\t%s\tfailed\n' "$seed" "$m" >>"$TSV"
 			continue
 		fi
-		RUN="$PWD/$o" run_graph bench/pipeline/eval_phantom.ini "$o/eval" >/dev/null
+		RUN="$o" run_graph bench/pipeline/eval_phantom.ini "$o/eval" >/dev/null ||
+		echo "$o: evaluation failed (see $o/eval.log)" >&2
 		python3 bench/pipeline/collect.py row "$seed" "$m" "$w" "$o/eval/eval.tsv" "$o/metrics.tsv" >>"$TSV"
 		tail -1 "$TSV"
 	done

@@ -14,7 +14,7 @@
 #    ventricle metric S (SRI24 lateral ventricles 201-414 vs the patient mask),
 #    S_mean, ventricle Dice; the run's own metrics give the tumour Dice
 #    (grown tumour in patient space vs the manual core).
-# Rows: DIR/real.tsv.  Needs bench/.venv with numpy scipy nibabel matplotlib
+# Rows: DIR/real.tsv.  METHODS="direct plain" runs a subset.  Needs bench/.venv with numpy scipy nibabel matplotlib
 # (installed on first use).
 set -eu
 cd "$(dirname "$0")/../.."
@@ -33,6 +33,7 @@ while [ $# -gt 0 ]; do
 	esac
 done
 CASES=${CASES:-"0001 0002 0003"}
+OUT=$(abspath "$OUT")
 build_all
 if [ ! -x bench/.venv/bin/python ]; then
 	python3 -m venv bench/.venv
@@ -46,7 +47,7 @@ TSV="$OUT/real.tsv"
 printf 'case\tmethod\terr_band_mean_mm\terr_band_median_mm\terr_band_p95_mm\terr_brain_mean_mm\tS_mm\tS_mean_mm\tdice_ventricles\tdice_tumour\tjac_min\twall_s\n' >"$TSV"
 for c in $CASES; do
 	brats_env "$c" "$DATA"
-	for m in armstg direct plain sphere; do
+	for m in ${METHODS:-armstg direct plain sphere}; do
 		o="$OUT/pat$c-$m"
 		case $m in
 		armstg) g=graphs/armstg.ini; extra=$SETS ;;
@@ -61,8 +62,9 @@ for c in $CASES; do
 			printf '%s\t%s\tfailed\n' "$c" "$m" >>"$TSV"
 			continue
 		fi
-		RUN="$PWD/$o" PATIENT_VENTRICLES="$PWD/$OUT/ventricles/pat${c}_ventricles.nii.gz" \
-			run_graph bench/pipeline/eval_real.ini "$o/eval" >/dev/null
+		RUN="$o" PATIENT_VENTRICLES="$OUT/ventricles/pat${c}_ventricles.nii.gz" \
+			run_graph bench/pipeline/eval_real.ini "$o/eval" >/dev/null ||
+			echo "pat$c $m: evaluation failed (see $o/eval.log)" >&2
 		python3 bench/pipeline/collect.py row "$c" "$m" "$w" "$o/eval/eval.tsv" "$o/metrics.tsv" >>"$TSV"
 		tail -1 "$TSV"
 	done

@@ -8,7 +8,8 @@
  *   sts_bench [--data DIR] [--out DIR] [--set key=value]... CASE...
  *   CASE: b13p1 b13p2 b13p3 b23 tcga phantom phantom:KEY=VALUE,...
  *   (the latter runs the phantom with those of its parameters set, e.g.
- *   phantom:seed=2,location=cortex)
+ *   phantom:seed=2,location=cortex; the key in=t1c+flair picks the images
+ *   given to sts, default all four)
  *
  * --out DIR writes DIR/<case>_{tumour,labels,brain}.nii.gz for a look in a
  * viewer.  Built and run by bench/sts/run.sh.
@@ -258,9 +259,13 @@ static int run_phantom(const char *spec)
 	int npp = 0;
 	const char *colon = strchr(spec, ':');
 	snprintf(buf, sizeof buf, "%s", colon ? colon + 1 : "");
+	const char *use = "t1+t1c+t2+flair";
 	for (char *tok = strtok(buf, ","); tok && npp < 16;
 	     tok = strtok(NULL, ","))
-		pp[npp++] = tok;
+		if (!strncmp(tok, "in=", 3))
+			use = tok + 3;  /* sts inputs, not a phantom parameter */
+		else
+			pp[npp++] = tok;
 	snprintf(what, sizeof what, "phantom plugin %s",
 		 colon ? colon + 1 : "defaults");
 	static const char *ports[4] = { "patient_t1", "patient_t1c",
@@ -279,15 +284,22 @@ static int run_phantom(const char *spec)
 	int ti = port_index("phantom", "patient_tumour", 1);
 	const msg_t *in[5] = { 0 };
 	for (int m = 0; !rc && m < 4; m++) {
-		int k = port_index("phantom", ports[m], 1);
-		in[m] = k >= 0 ? po[k] : NULL;
+		static const char *mn[4] = { "t1", "t1c", "t2", "flair" };
+		int k = port_index("phantom", ports[m], 1), on = 0;
+		/* is mn[m] one of the '+'-separated names in use? */
+		for (const char *q = use; *q;) {
+			size_t l = strcspn(q, "+");
+			on |= l == strlen(mn[m]) && !strncmp(q, mn[m], l);
+			q += l + (q[l] == '+');
+		}
+		in[m] = k >= 0 && on ? po[k] : NULL;
 	}
 	msg_t *out[5] = { 0 };
 	double secs = 0;
 	if (!rc && ti >= 0)
 		rc = run_stage("sts", g_set, g_nset, in, out, 5, &secs);
 	const vol_t *truth = ti >= 0 && po[ti] ? (const vol_t *)po[ti] : NULL;
-	row(spec, what, "t1+t1c+t2+flair",
+	row(spec, what, use,
 	    "truth (patient_tumour > 0)",
 	    rc ? NULL : (const vol_t *)out[2], truth, secs);
 	dump_table("phantom", out[4]);
@@ -300,6 +312,7 @@ static int run_phantom(const char *spec)
 	save(fname, "truth", truth ? &truth->base : NULL);
 	save(fname, "tumour", out[2]);
 	save(fname, "labels", out[3]);
+	save(fname, "tissue", out[1]);
 	for (int i = 0; i < 5; i++)
 		if (out[i])
 			msg_unref(out[i]);
@@ -316,7 +329,7 @@ int main(int argc, char **argv)
 	if (env && *env)
 		snprintf(g_data, sizeof g_data, "%s", env);
 	int ncase = 0;
-	const char *which[16];
+	const char *which[64];
 	for (int i = 1; i < argc; i++) {
 		if (!strcmp(argv[i], "--set") && i + 1 < argc &&
 		    g_nset < MAXSET)
@@ -327,7 +340,7 @@ int main(int argc, char **argv)
 			g_out = argv[++i];
 		else if (!strcmp(argv[i], "--data") && i + 1 < argc)
 			snprintf(g_data, sizeof g_data, "%s", argv[++i]);
-		else if (argv[i][0] != '-' && ncase < 16)
+		else if (argv[i][0] != '-' && ncase < 64)
 			which[ncase++] = argv[i];
 		else {
 			fprintf(stderr, "usage: sts_bench [-v] [--data DIR] [--out "

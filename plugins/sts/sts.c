@@ -280,8 +280,9 @@ static int sts_process(armstg_stage_t *st)
 	H->log(st, LOG_INFO, "brain %lld voxels, tumour %lld voxels "
 	       "(%lld markers), enhancement from %s", (long long)out.n_brain,
 	       (long long)out.n_tumour, (long long)out.n_markers,
-	       out.enh_source == 2 ? "t1c-t1" : out.enh_source ? "t1c"
-							       : "nothing");
+	       out.enh_source == 3 ? "t1c against t1 (same-tissue)"
+	       : out.enh_source == 2 ? "t1c-t1" : out.enh_source ? "t1c"
+								 : "nothing");
 
 	msg_t *o[N_OUT] = { 0 };
 	o[OUT_BRAIN] = (msg_t *)mask_vol(st, ref, out.brain, 0);
@@ -305,8 +306,8 @@ static int sts_process(armstg_stage_t *st)
 		e.sigma = out.enh_sigma;
 		e.th_2 = out.th_enh;
 		e.p_lo = e.p_hi = NAN;
-		thr_row(st, t, out.enh_source == 2 ? "t1c-t1" : "t1c_enh", &e,
-			0);
+		thr_row(st, t, out.enh_source == 3 ? "t1c|t1"
+			: out.enh_source == 2 ? "t1c-t1" : "t1c_enh", &e, 0);
 	}
 	if (t && out.cond_ref >= 0) {
 		/* the healthy reference of the primary given T1: its
@@ -350,7 +351,7 @@ static const armstg_plugin_t sts_desc = {
 		       "tumour masks from T1/T1c/T2/FLAIR by Savitzky-Golay "
 		       "histogram thresholds, double thresholding and "
 		       "geodesic reconstruction (Diaz thesis 3.1)",
-	.version = "1.0.0",
+	.version = "1.1.0",
 	.license = "MIT",
 	.inputs = sts_inputs,
 	.n_inputs = ARMSTG_COUNT(sts_inputs),

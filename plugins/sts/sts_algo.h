@@ -14,11 +14,13 @@
  *   3. double thresholding across modalities: markers above th_omega in the
  *      primary hyperintense modality (FLAIR, else T2), grown by geodesic
  *      reconstruction inside the voxels above th_2 in every hyperintense
- *      modality present
+ *      modality present; th_2 and th_omega of the primary are raised per
+ *      voxel to the healthy level of tissue with the same T1 (or T1c)
+ *      intensity (sts_cond below), so grey matter is not tumour
  *   4. morphology (opening by reconstruction, closing, hole filling) and the
  *      largest plausible components
- *   5. enhancement from T1c - T1 (both z-scored on their tissue mode) or T1c
- *      alone; core = enhancing region with the holes it encloses
+ *   5. enhancement: T1c above healthy T1c of the same T1 (sts_cond), or
+ *      T1c alone; core = enhancing region with the holes it encloses
  *
  * Units: intensities are whatever the file holds (every threshold is derived
  * from the image's own histogram, so raw int16 and z-scored floats behave
@@ -174,6 +176,7 @@ typedef struct sts_cond {
 	double *fmode;    /* mode and sigma with unusable bins filled by */
 	double *fsigma;   /* interpolation (what sts_cond_at reads) */
 	int nvalid;       /* usable bins */
+	int first, last;  /* the outermost usable bins */
 } sts_cond_t;
 
 /*
@@ -188,8 +191,9 @@ int sts_cond_build(const float *x, const float *y, const uint8_t *mask,
 		   const sts_hist_t *ygrid, int sg_half, int sg_order,
 		   int64_t min_count, sts_cond_t *c);
 /* Healthy y mode and width at x, linearly interpolated between the centres
- * of usable bins (constant beyond the outermost ones).  Returns 1, or 0
- * when x lies outside [xlo, xhi] (no reference there). */
+ * of usable bins (unusable bins between usable ones are interpolated too).
+ * Returns 1, or 0 when x lies outside the bins from the first to the last
+ * usable one (no reference there: the caller keeps image-wide levels). */
 int sts_cond_at(const sts_cond_t *c, double x, double *mode, double *sigma);
 void sts_cond_free(sts_cond_t *c);
 
@@ -243,7 +247,11 @@ typedef struct sts_output {
 	sts_thr_t thr[STS_NMOD];
 	int have[STS_NMOD];
 	double enh_mode, enh_sigma, th_enh; /* enhancement image thresholds */
-	int enh_source;      /* 0 none, 1 T1c alone, 2 T1c - T1 */
+	int enh_source;      /* 0 none, 1 T1c alone, 2 T1c - T1 (z-scores),
+	                        3 T1c against healthy T1c of the same T1
+	                        (sts_cond; enh_mode/sigma/th_enh then give
+	                        the brightest healthy T1c mode, its width and
+	                        the highest threshold) */
 	int cond_ref;        /* image giving the healthy reference of the
 	                        primary (STS_T1 / STS_T1C), -1 none */
 	int cond_nvalid;     /* its usable bins */

@@ -113,8 +113,9 @@ int sts_cond_build(const float *x, const float *y, const uint8_t *mask,
 		c->fsigma[b] = med3(c->sigma[b - 1], c->sigma[b],
 				    c->sigma[b + 1]);
 	}
-	/* fill unusable bins: linear between usable neighbours, constant
-	 * beyond the outermost ones */
+	/* fill unusable bins between usable ones linearly (partial volume
+	 * mixes the neighbouring tissues); beyond the outermost usable bins
+	 * there is no reference (sts_cond_at returns 0) */
 	int first = -1, last = -1;
 	for (int b = 0; b < nb; b++)
 		if (!isnan(c->fmode[b])) {
@@ -127,14 +128,8 @@ int sts_cond_build(const float *x, const float *y, const uint8_t *mask,
 		sts_cond_free(c);
 		return -1;
 	}
-	for (int b = 0; b < first; b++) {
-		c->fmode[b] = c->fmode[first];
-		c->fsigma[b] = c->fsigma[first];
-	}
-	for (int b = last + 1; b < nb; b++) {
-		c->fmode[b] = c->fmode[last];
-		c->fsigma[b] = c->fsigma[last];
-	}
+	c->first = first;
+	c->last = last;
 	for (int b = first + 1, prev = first; b <= last; b++) {
 		if (isnan(c->fmode[b]))
 			continue;
@@ -154,19 +149,23 @@ int sts_cond_at(const sts_cond_t *c, double x, double *mode, double *sigma)
 {
 	if (!c || !c->nvalid || !(x >= c->xlo) || !(x <= c->xhi))
 		return 0;
-	/* position in units of bins, measured from the centre of bin 0 */
-	double t = (x - c->xlo) / c->dx - 0.5;
+	/* the bins of the usable span [first, last] cover x in
+	 * xlo + [first, last + 1) dx; inside it, linear between centres */
+	double t = (x - c->xlo) / c->dx;
+	if (t < c->first || t > c->last + 1)
+		return 0;
+	t -= 0.5; /* from the centre of bin 0 */
 	int b0 = (int)floor(t);
 	double f = t - b0;
-	if (b0 < 0) {
-		b0 = 0;
+	if (b0 < c->first) {
+		b0 = c->first;
 		f = 0;
 	}
-	if (b0 >= c->nbins - 1) {
-		b0 = c->nbins - 1;
+	if (b0 >= c->last) {
+		b0 = c->last;
 		f = 0;
 	}
-	int b1 = b0 + 1 < c->nbins ? b0 + 1 : b0;
+	int b1 = b0 < c->last ? b0 + 1 : b0;
 	*mode = (1 - f) * c->fmode[b0] + f * c->fmode[b1];
 	*sigma = (1 - f) * c->fsigma[b0] + f * c->fsigma[b1];
 	return 1;

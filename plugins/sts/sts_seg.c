@@ -280,30 +280,29 @@ static int brain_hist(const float *v, const uint8_t *brain, int64_t n,
 
 /* ---- healthy reference of the primary image given T1 ---- */
 
-/* bins of the T1 (x) axis of the conditional reference, and the fewest
- * voxels a bin needs (and at least STS_COND_MIN_FRAC of the brain) */
+/* Bins of the T1 (x) axis of the conditional reference, and the fewest
+ * voxels a bin needs: at least STS_COND_MIN_VOX, and half the mean
+ * occupancy of a bin (STS_COND_MIN_FRAC of the brain).  Healthy tissue
+ * fills the T1 range between CSF and white matter densely (grey matter,
+ * partial volume), a tumour only sparsely; a T1 range that only the
+ * tumour populates must not define "healthy". */
 #define STS_COND_BINS 32
 #define STS_COND_MIN_VOX 200
-#define STS_COND_MIN_FRAC 0.002
+#define STS_COND_MIN_FRAC (0.5 / STS_COND_BINS)
 
 /*
- * Healthy level of the primary image (FLAIR or T2) as a function of the
- * T1-like image cref (sts_cond, sts_algo.h).  The T1 axis spans the brain
- * from its 0.1 percentile to the top of the healthy tissue in T1 (its
- * brightest tissue mode + k_hyper sigma): brighter T1 voxels (enhancement
- * in T1c, blood) have no healthy counterpart and keep the image-wide
- * thresholds.  Fills o->cond_*; returns 0 or an error code.  A reference
- * that cannot be built (too few voxels) is not an error: the image-wide
- * thresholds are used, with a note.
+ * Healthy level of image y (FLAIR or T2 against T1, or T1c against T1) as
+ * a function of the T1-like image x (sts_cond, sts_algo.h), over x in
+ * [xlo, xhi].  Returns 0 when built, 1 when it cannot be (too few voxels:
+ * a note is added and the caller falls back to image-wide levels), or a
+ * negative error code.
  */
 static int cond_reference(const sts_input_t *in, sts_output_t *o,
-			  const sts_params_t *p, int prim, int cref,
-			  int64_t n, sts_cond_t *cond, char *err, size_t es)
+			  const sts_params_t *p, int y, int x, double xlo,
+			  double xhi, int64_t n, sts_cond_t *cond, char *err,
+			  size_t es)
 {
-	const sts_thr_t *tx = &o->thr[cref], *ty = &o->thr[prim];
-	double xlo = tx->p_lo, xhi = tx->mode_hi + p->k_hyper * tx->sigma_hi;
-	if (xhi > tx->p_hi)
-		xhi = tx->p_hi;
+	const sts_thr_t *ty = &o->thr[y];
 	sts_hist_t grid;
 	int64_t minc = (int64_t)ceil(STS_COND_MIN_FRAC * o->n_brain);
 	if (minc < STS_COND_MIN_VOX)
@@ -311,35 +310,40 @@ static int cond_reference(const sts_input_t *in, sts_output_t *o,
 	int rc = -1;
 	if (xhi > xlo && !sts_hist_grid(ty->p_lo, ty->p_hi, ty->quantum,
 					p->bins, p->sg_half, &grid))
-		rc = sts_cond_build(in->mod[cref], in->mod[prim], o->brain, n,
-				    xlo, xhi, STS_COND_BINS, &grid,
-				    p->sg_half, p->sg_order, minc, cond);
+		rc = sts_cond_build(in->mod[x], in->mod[y], o->brain, n, xlo,
+				    xhi, STS_COND_BINS, &grid, p->sg_half,
+				    p->sg_order, minc, cond);
 	if (rc == -2)
 		return fail(err, es, ARMSTG_ENOMEM, "out of memory");
 	if (rc) {
 		char s[160];
 		snprintf(s, sizeof s, "too few brain voxels to measure healthy "
 			 "%s against %s: image-wide thresholds used",
-			 sts_mod_name[prim], sts_mod_name[cref]);
+			 sts_mod_name[y], sts_mod_name[x]);
 		note(o, s);
-		return 0;
-	}
-	o->cond_ref = cref;
-	o->cond_nvalid = cond->nvalid;
-	o->cond_mode = o->cond_sigma = o->cond_th2 = NAN;
-	for (int b = 0; b < cond->nbins; b++) {
-		if (isnan(cond->mode[b]))
-			continue;
-		if (!(cond->fmode[b] <= o->cond_mode)) {
-			o->cond_mode = cond->fmode[b];
-			o->cond_sigma = cond->fsigma[b];
-		}
-		double t = fmax(ty->th_2, cond->fmode[b] +
-					  p->k_hyper * cond->fsigma[b]);
-		if (!(t <= o->cond_th2))
-			o->cond_th2 = t;
+		return 1;
 	}
 	return 0;
+}
+
+/* For the thresholds table: the brightest healthy mode over the usable
+ * bins (grey matter, for FLAIR against T1), its width, and the highest
+ * threshold max(floor, mode + k sigma) over those bins. */
+static void cond_summary(const sts_cond_t *c, double floor_, double k,
+			 double *mode, double *sigma, double *th)
+{
+	*mode = *sigma = *th = NAN;
+	for (int b = 0; b < c->nbins; b++) {
+		if (isnan(c->mode[b]))
+			continue;
+		if (!(c->fmode[b] <= *mode)) {
+			*mode = c->fmode[b];
+			*sigma = c->fsigma[b];
+		}
+		double t = fmax(floor_, c->fmode[b] + k * c->fsigma[b]);
+		if (!(t <= *th))
+			*th = t;
+	}
 }
 
 /* ---- labels mode ---- */
@@ -415,6 +419,7 @@ int sts_segment(const sts_input_t *in, const sts_params_t *p,
 				    "voxel spacing %g mm along axis %d is not "
 				    "positive", g->sp[a], a);
 	int64_t n = (int64_t)g->nx * g->ny * g->nz;
+	o->cond_ref = -1;
 	int nmod = 0;
 	for (int m = 0; m < STS_NMOD; m++)
 		nmod += (o->have[m] = in->mod[m] != NULL);
@@ -576,9 +581,25 @@ int sts_segment(const sts_input_t *in, const sts_params_t *p,
 	o->cond_ref = -1;
 	int cref = o->have[STS_T1] ? STS_T1 : o->have[STS_T1C] ? STS_T1C : -1;
 	if (p->ref_t1 && cref >= 0) {
-		rc = cond_reference(in, o, p, prim, cref, n, &cond, err, es);
-		if (rc)
+		/* T1 axis: from the brain's 0.1 percentile to the top of the
+		 * healthy tissue in T1 (its brightest tissue mode + k_hyper
+		 * sigma); brighter T1 voxels (enhancement in T1c, blood) have
+		 * no healthy counterpart and keep the image-wide levels */
+		const sts_thr_t *tx = &o->thr[cref];
+		double xhi = tx->mode_hi + p->k_hyper * tx->sigma_hi;
+		rc = cond_reference(in, o, p, prim, cref, tx->p_lo,
+				    xhi < tx->p_hi ? xhi : tx->p_hi, n, &cond,
+				    err, es);
+		if (rc < 0)
 			goto out;
+		if (rc == 0) {
+			o->cond_ref = cref;
+			o->cond_nvalid = cond.nvalid;
+			cond_summary(&cond, o->thr[prim].th_2, p->k_hyper,
+				     &o->cond_mode, &o->cond_sigma,
+				     &o->cond_th2);
+		}
+		rc = 0;
 	}
 	int64_t nmark = 0;
 	for (int64_t i = 0; i < n; i++) {
@@ -624,7 +645,51 @@ int sts_segment(const sts_input_t *in, const sts_params_t *p,
 	 * the tumour (enhancing vessels elsewhere are not tumour) */
 	uint8_t *enh_m = cand; /* reuse */
 	memset(enh_m, 0, (size_t)n);
-	if (o->have[STS_T1C]) {
+	if (o->have[STS_T1C] && o->have[STS_T1] && p->ref_t1) {
+		/* enhancing: T1c brighter than healthy tissue of the same T1
+		 * (sts_cond of T1c given T1 over the whole T1 range): a
+		 * per-tissue T1c - T1 difference that holds for CSF, grey
+		 * and white matter alike, where z-scores on one mode do not
+		 * (their widths differ, so dark tissue gets a spurious
+		 * difference).  Score z = (T1c - mode(T1)) / sigma(T1). */
+		const sts_thr_t *tx = &o->thr[STS_T1];
+		sts_cond_t ce;
+		rc = cond_reference(in, o, p, STS_T1C, STS_T1, tx->p_lo,
+				    tx->p_hi, n, &ce, err, es);
+		if (rc < 0)
+			goto out;
+		if (rc == 0) {
+			enh = malloc(sizeof(float) * n);
+			if (!enh) {
+				sts_cond_free(&ce);
+				goto fail_nomem;
+			}
+			o->enh_source = 3;
+			cond_summary(&ce, -INFINITY, p->k_enh, &o->enh_mode,
+				     &o->enh_sigma, &o->th_enh);
+			/* T1 beyond the usable bins: the nearest one */
+			double xa = ce.xlo + ce.first * ce.dx,
+			       xb = ce.xlo + (ce.last + 1) * ce.dx;
+			for (int64_t i = 0; i < n; i++) {
+				double x = in->mod[STS_T1][i], cm = 0, cs = 1;
+				x = x < xa ? xa : x > xb ? xb : x;
+				sts_cond_at(&ce, x, &cm, &cs);
+				enh[i] = (float)((in->mod[STS_T1C][i] - cm) /
+						 cs);
+			}
+			sts_cond_free(&ce);
+			if (sts_dilate(g, o->tumour, p->open_mm + p->close_mm,
+				       t1))
+				goto fail_nomem;
+			for (int64_t i = 0; i < n; i++)
+				enh_m[i] = t1[i] && o->brain[i] &&
+					   enh[i] > p->k_enh;
+			for (int64_t i = 0; i < n; i++)
+				o->tumour[i] |= enh_m[i];
+		}
+		rc = 0;
+	}
+	if (o->have[STS_T1C] && !o->enh_source) {
 		enh = malloc(sizeof(float) * n);
 		if (!enh)
 			goto fail_nomem;
@@ -666,23 +731,21 @@ int sts_segment(const sts_input_t *in, const sts_params_t *p,
 	}
 
 	/* 7. closing and hole filling (necrotic centres are dark in FLAIR
-	 * and in T1c but enclosed by the tumour), then components again */
+	 * and in T1c but enclosed by the tumour), then components again.
+	 * The closing bridges gaps between tumour lobes; a gap voxel as dark
+	 * in FLAIR as CSF (below th_1: fluid-attenuated) is a sulcus or the
+	 * ventricle beside the tumour, not tumour, and is left out (enclosed
+	 * holes are still filled whatever their FLAIR: cysts, necrosis). */
 	if (sts_dilate(g, o->tumour, p->close_mm, t1) ||
 	    sts_erode(g, t1, p->close_mm, t1))
 		goto fail_nomem;
-	int csfv = getenv("STS_CSFV") ? atoi(getenv("STS_CSFV")) : 0;
-	if (csfv == 1 && prim == STS_FLAIR)
+	if (prim == STS_FLAIR)
 		for (int64_t i = 0; i < n; i++)
 			if (t1[i] && !o->tumour[i] &&
 			    in->mod[STS_FLAIR][i] < o->thr[STS_FLAIR].th_1)
 				t1[i] = 0;
 	if (sts_fill_holes(g, t1, t1))
 		goto fail_nomem;
-	if (csfv == 2 && prim == STS_FLAIR)
-		for (int64_t i = 0; i < n; i++)
-			if (t1[i] && !o->tumour[i] &&
-			    in->mod[STS_FLAIR][i] < o->thr[STS_FLAIR].th_1)
-				t1[i] = 0;
 	for (int64_t i = 0; i < n; i++)
 		o->tumour[i] = (t1[i] || o->tumour[i]) && o->brain[i];
 	int64_t nt = sts_keep_components(g, o->tumour, p->keep_ratio, min_vox);

@@ -54,6 +54,7 @@ void tled_model_opts_default(tled_model_opts_t *o)
 	o->merge_tol = 1e-3 * TLED_MM;
 	o->corr = TLED_CORR_ALL;
 	o->ebc = 1;
+	o->ebc_fixed = 1;
 	/* thesis Table 3.1 */
 	tled_material_set(&o->mat[MAT_BRAIN], 3000, 0.49, 1000);
 	tled_material_set(&o->mat[MAT_CSF], 10, 0.1, 1000);
@@ -704,6 +705,60 @@ static void corr_apply(const corr_ctx_t *cx, const double *v, double *out,
 	}
 }
 
+/* Remove from v (3n, per component) its least-squares fit by alpha +
+ * beta . X over the nodes with con set: the null space of the correction
+ * operator (a linear mu is reproduced exactly and gives no correction), so
+ * that CG works on the consistent part of a singular system. */
+static void null_project(const tled_model_t *m, const uint8_t *con, double *v)
+{
+	double A[16] = { 0 }, b[4][3] = { { 0 } }, Ai[16];
+	double xc[3] = { 0, 0, 0 };
+	int64_t cnt = 0;
+	for (int64_t a = 0; a < m->n; a++)
+		if (con[a]) {
+			for (int c = 0; c < 3; c++)
+				xc[c] += m->X[3 * a + c];
+			cnt++;
+		}
+	if (cnt < 4)
+		return;
+	for (int c = 0; c < 3; c++)
+		xc[c] /= (double)cnt;
+	double L = m->h_mean > 0 ? m->h_mean : 1;
+	for (int64_t a = 0; a < m->n; a++) {
+		if (!con[a])
+			continue;
+		double p[4] = { 1, (m->X[3 * a] - xc[0]) / L,
+				(m->X[3 * a + 1] - xc[1]) / L,
+				(m->X[3 * a + 2] - xc[2]) / L };
+		for (int r = 0; r < 4; r++) {
+			for (int q = 0; q < 4; q++)
+				A[4 * r + q] += p[r] * p[q];
+			for (int c = 0; c < 3; c++)
+				b[r][c] += p[r] * v[3 * a + c];
+		}
+	}
+	if (inv4(A, Ai))
+		return;
+	double co[4][3];
+	for (int r = 0; r < 4; r++)
+		for (int c = 0; c < 3; c++) {
+			co[r][c] = 0;
+			for (int q = 0; q < 4; q++)
+				co[r][c] += Ai[4 * r + q] * b[q][c];
+		}
+	for (int64_t a = 0; a < m->n; a++) {
+		if (!con[a])
+			continue;
+		double p[4] = { 1, (m->X[3 * a] - xc[0]) / L,
+				(m->X[3 * a + 1] - xc[1]) / L,
+				(m->X[3 * a + 2] - xc[2]) / L };
+		for (int c = 0; c < 3; c++)
+			v[3 * a + c] -= co[0][c] * p[0] + co[1][c] * p[1] +
+					co[2][c] * p[2] + co[3][c] * p[3];
+	}
+}
+
 static int correct_gradients(tled_model_t *m, const double *w, const double *P,
 			     const double *Mi, const uint8_t *con,
 			     const int64_t *ent_ip, const double *G, char *err,
@@ -734,6 +789,21 @@ static int correct_gradients(tled_model_t *m, const double *w, const double *P,
 			d[3 * a + c] = v;
 			rr[c] += v * v;
 		}
+	/* every node constrained (ebc): the operator is singular with the
+	 * linear fields as null space; work on the consistent part */
+	int singular = 1;
+	for (int64_t a = 0; a < n && singular; a++)
+		if (!con[a] && m->nptr[a + 1] > m->nptr[a])
+			singular = 0;
+	if (singular) {
+		null_project(m, con, r);
+		memcpy(d, r, (size_t)(3 * n) * sizeof *d);
+		for (int c = 0; c < 3; c++)
+			rr[c] = 0;
+		for (int64_t a = 0; a < n; a++)
+			for (int c = 0; c < 3; c++)
+				rr[c] += r[3 * a + c] * r[3 * a + c];
+	}
 	for (int c = 0; c < 3; c++)
 		g0[c] = sqrt(rr[c]);
 	/* scale for the stopping test: sum |V dN| is O(h^2) per node */
@@ -758,8 +828,12 @@ static int correct_gradients(tled_model_t *m, const double *w, const double *P,
 			for (int c = 0; c < 3; c++) {
 				x[3 * a + c] += al[c] * d[3 * a + c];
 				r[3 * a + c] -= al[c] * q[3 * a + c];
-				rn[c] += r[3 * a + c] * r[3 * a + c];
 			}
+		if (singular && it % 20 == 19)
+			null_project(m, con, r);
+		for (int64_t a = 0; a < n; a++)
+			for (int c = 0; c < 3; c++)
+				rn[c] += r[3 * a + c] * r[3 * a + c];
 		for (int64_t a = 0; a < n; a++)
 			for (int c = 0; c < 3; c++)
 				d[3 * a + c] = r[3 * a + c] +
@@ -1100,19 +1174,29 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		okip = malloc((size_t)nall);
 		if (!okip)
 			goto oom;
+		/* classify each cell by its centre and 8 corners: 1 all
+		 * inside, 2 partly inside (clipped below), 0 outside */
 #pragma omp parallel for schedule(dynamic, 1024) num_threads(m->nthreads)
 		for (int64_t t = 0; t < nall; t++) {
 			int i = (int)(t % nc[0]), j = (int)((t / nc[0]) % nc[1]),
 			    k = (int)(t / ((int64_t)nc[0] * nc[1]));
-			double x[3] = { lo[0] + (i + 0.5) * h,
-					lo[1] + (j + 0.5) * h,
-					lo[2] + (k + 0.5) * h };
-			okip[t] = o->inside ? o->inside(x, o->inside_ctx) != 0
-					    : default_inside(m, &ng, x);
+			int cnt = 0;
+			for (int q = 0; q < 9; q++) {
+				double f[3] = { 0.5, 0.5, 0.5 };
+				if (q < 8)
+					for (int d = 0; d < 3; d++)
+						f[d] = (q >> d) & 1;
+				double x[3] = { lo[0] + (i + f[0]) * h,
+						lo[1] + (j + f[1]) * h,
+						lo[2] + (k + f[2]) * h };
+				cnt += o->inside ? o->inside(x, o->inside_ctx) != 0
+						 : default_inside(m, &ng, x);
+			}
+			okip[t] = cnt == 9 ? 1 : cnt > 0 ? 2 : 0;
 		}
 		int64_t nip = 0;
 		for (int64_t t = 0; t < nall; t++)
-			nip += okip[t];
+			nip += okip[t] != 0;
 		if (nip < 1) {
 			rc = errf(err, errsize, "no integration point falls "
 				  "inside the domain");
@@ -1139,6 +1223,52 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 				p++;
 			}
 		m->ipptr[nip] = (int64_t)K * nip;
+		/* cells cut by the boundary: the volume inside and its
+		 * centroid from 4^3 sub-points (second-order integration of
+		 * the curved boundary instead of a staircase); a cell whose
+		 * sub-points all miss the domain keeps 1/64 of its volume at
+		 * its centre */
+		{
+			int64_t *pid = malloc((size_t)nip * sizeof *pid);
+			int64_t np2 = 0;
+			if (!pid)
+				goto oom;
+			p = 0;
+			for (int64_t t = 0; t < nall; t++)
+				if (okip[t]) {
+					if (okip[t] == 2)
+						pid[np2++] = p;
+					p++;
+				}
+#pragma omp parallel for schedule(dynamic, 64) num_threads(m->nthreads)
+			for (int64_t z = 0; z < np2; z++) {
+				int64_t q = pid[z];
+				double c0[3], acc[3] = { 0, 0, 0 };
+				int cnt = 0;
+				for (int d = 0; d < 3; d++)
+					c0[d] = m->ipX[3 * q + d] - 0.5 * h;
+				for (int sidx = 0; sidx < 64; sidx++) {
+					double x[3] = { c0[0] + ((sidx & 3) + 0.5) * h / 4,
+							c0[1] + (((sidx >> 2) & 3) + 0.5) * h / 4,
+							c0[2] + ((sidx >> 4) + 0.5) * h / 4 };
+					int in = o->inside ? o->inside(x, o->inside_ctx) != 0
+							   : default_inside(m, &ng, x);
+					if (in) {
+						for (int d = 0; d < 3; d++)
+							acc[d] += x[d];
+						cnt++;
+					}
+				}
+				if (cnt > 0) {
+					for (int d = 0; d < 3; d++)
+						m->ipX[3 * q + d] = acc[d] / cnt;
+					m->ipV[q] = h * h * h * cnt / 64.0;
+				} else {
+					m->ipV[q] = h * h * h / 64.0;
+				}
+			}
+			free(pid);
+		}
 		free(okip);
 		okip = NULL;
 	}
@@ -1257,6 +1387,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 
 	/* ---- nodal rows: u^h(X_a) = sum_b Phi_b(X_a) u_b ---- */
 	m->ebc = o->ebc != 0;
+	m->ebc_fixed = o->ebc_fixed != 0;
 	m->rk = K;
 	m->rid = malloc((size_t)n * K * sizeof *m->rid);
 	m->rN = malloc((size_t)n * K * sizeof *m->rN);
@@ -1301,7 +1432,8 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		/* every node with mass is a dynamic unknown (the essential
 		 * conditions are constraints on u^h, tled_solve.h) */
 		for (int64_t a = 0; a < n; a++)
-			con[a] = m->mass[a] > 0;
+			con[a] = m->mass[a] > 0 &&
+				 (m->ebc_fixed || m->kind[a] != TLED_FIXED);
 		if (boundary_weights(m) == 0 && m->nb > 0) {
 			G = calloc((size_t)(3 * n), sizeof *G);
 			if (!G)

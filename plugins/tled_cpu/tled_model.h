@@ -93,6 +93,10 @@ typedef struct tled_model_opts {
 	                           and the correction targets the boundary
 	                           integral; 0: legacy (nodal parameters of
 	                           fixed/driven nodes prescribed, target 0) */
+	int ebc_fixed;          /* with ebc: 1 (default) collocate the fixed
+	                           nodes too; 0: fixed nodes keep u = 0 as
+	                           nodal parameters (cheaper for large brain
+	                           boundaries, O(h) error there) */
 	tled_material_t mat[MAT_N];
 	int nthreads;           /* OpenMP threads (<=0: runtime default) */
 	/* Domain test for ip candidates (reference coordinates, m).  NULL: the
@@ -166,6 +170,7 @@ typedef struct tled_model {
 
 	/* essential boundary conditions by collocation (ebc = 1) */
 	int ebc;
+	int ebc_fixed;
 	int rk;             /* entries per nodal row */
 	int64_t *rid;       /* n*rk: support nodes of u^h at X_a */
 	double *rN;         /* n*rk: shape functions Phi_b(X_a) */

@@ -68,6 +68,8 @@ void tled_solver_free(tled_solver_t *s)
 	free(s->cdiag);
 	free(s->react);
 	free(s->wn);
+	free(s->chol);
+	free(s->wt);
 	memset(s, 0, sizeof *s);
 }
 
@@ -91,7 +93,8 @@ int tled_solver_init(tled_solver_t *s, tled_model_t *m, char *err,
 	s->dkind = calloc((size_t)m->n, 1);
 	s->react = calloc(n3, sizeof(double));
 	s->wn = calloc(n3, sizeof(double));
-	if (!s->dkind || !s->react || !s->wn || !s->ipoff || !s->u || !s->v || !s->f || !s->fprev || !s->ustart || !s->tmp ||
+	s->wt = calloc((size_t)m->n, sizeof(double));
+	if (!s->wt || !s->dkind || !s->react || !s->wn || !s->ipoff || !s->u || !s->v || !s->f || !s->fprev || !s->ustart || !s->tmp ||
 	    !s->tmp2 || !s->s0 || !s->VP || !s->ipact) {
 		tled_solver_free(s);
 		return errf(err, errsize, "out of memory (solver, %lld nodes)",
@@ -107,17 +110,118 @@ int tled_solver_init(tled_solver_t *s, tled_model_t *m, char *err,
 	return 0;
 }
 
+/* constrained (collocated) node: fixed or driven, dynamic */
+static int is_con(const tled_model_t *m, const uint8_t *dkind, int64_t a)
+{
+	return m->ebc && dkind[a] == TLED_FREE && m->kind[a] != TLED_FREE;
+}
+
+/*
+ * Dense Cholesky factor of S = Phi_C M^-1 Phi_C^T when the constraint set
+ * is small enough (else the projection falls back to CG).  Dependent
+ * constraints (e.g. two driven nodes closer than the support can tell
+ * apart) give a vanishing pivot: they are dropped (lambda = 0), counted in
+ * s->ndep.
+ */
+static void ebc_factor(tled_solver_t *s)
+{
+	const tled_model_t *m = s->m;
+	int64_t nc = s->nc;
+	free(s->chol);
+	s->chol = NULL;
+	s->ndep = 0;
+	if (nc <= 0 || nc > TLED_CHOL_MAX)
+		return;
+	double *S = calloc((size_t)(nc * nc), sizeof *S);
+	int64_t *cof = malloc((size_t)m->n * sizeof *cof);
+	int64_t *cnt = calloc((size_t)m->n + 1, sizeof *cnt);
+	if (!S || !cof || !cnt) {
+		free(S);
+		free(cof);
+		free(cnt);
+		return;
+	}
+	/* node -> (constraint, N) lists */
+	int rk = m->rk;
+	for (int64_t c = 0; c < nc; c++)
+		for (int i = 0; i < rk; i++)
+			cnt[m->rid[(int64_t)rk * s->cnode[c] + i] + 1]++;
+	for (int64_t a = 0; a < m->n; a++)
+		cnt[a + 1] += cnt[a];
+	int64_t ne = cnt[m->n];
+	int64_t *lc = malloc((size_t)(ne ? ne : 1) * sizeof *lc);
+	double *ln = malloc((size_t)(ne ? ne : 1) * sizeof *ln);
+	if (!lc || !ln) {
+		free(S);
+		free(cof);
+		free(cnt);
+		free(lc);
+		free(ln);
+		return;
+	}
+	memcpy(cof, cnt, (size_t)m->n * sizeof *cof);
+	for (int64_t c = 0; c < nc; c++)
+		for (int i = 0; i < rk; i++) {
+			int64_t a = m->rid[(int64_t)rk * s->cnode[c] + i];
+			lc[cof[a]] = c;
+			ln[cof[a]++] = m->rN[(int64_t)rk * s->cnode[c] + i];
+		}
+	for (int64_t a = 0; a < m->n; a++) {
+		if (!(s->wt[a] > 0))
+			continue;
+		for (int64_t p = cnt[a]; p < cnt[a + 1]; p++)
+			for (int64_t q = cnt[a]; q < cnt[a + 1]; q++)
+				S[lc[p] * nc + lc[q]] += ln[p] * ln[q] * s->wt[a];
+	}
+	free(cof);
+	free(cnt);
+	free(lc);
+	free(ln);
+	double dmax = 0;
+	for (int64_t i = 0; i < nc; i++)
+		dmax = fmax(dmax, S[i * nc + i]);
+	/* in-place lower Cholesky, rows in parallel for the inner products */
+	for (int64_t j = 0; j < nc; j++) {
+		double d = S[j * nc + j];
+		for (int64_t k = 0; k < j; k++)
+			d -= S[j * nc + k] * S[j * nc + k];
+		if (!(d > 1e-10 * dmax)) {
+			/* dependent: drop the constraint */
+			for (int64_t k = 0; k < j; k++)
+				S[j * nc + k] = 0;
+			S[j * nc + j] = 0;
+			s->ndep++;
+			continue;
+		}
+		d = sqrt(d);
+		S[j * nc + j] = d;
+#pragma omp parallel for schedule(static) num_threads(m->nthreads) if (nc - j > 256)
+		for (int64_t i = j + 1; i < nc; i++) {
+			double v = S[i * nc + j];
+			const double *ri = S + i * nc, *rj = S + j * nc;
+			for (int64_t k = 0; k < j; k++)
+				v -= ri[k] * rj[k];
+			S[i * nc + j] = v / d;
+		}
+	}
+	s->chol = S;
+}
+
 void tled_solver_update_active(tled_solver_t *s)
 {
 	const tled_model_t *m = s->m;
 	int64_t nf = 0, nc = 0;
 	for (int64_t a = 0; a < m->n; a++) {
 		if (m->ebc)
-			s->dkind[a] = m->mass[a] > 0 ? TLED_FREE : TLED_FIXED;
+			s->dkind[a] = m->mass[a] > 0 && (m->ebc_fixed ||
+							 m->kind[a] != TLED_FIXED)
+					      ? TLED_FREE
+					      : TLED_FIXED;
 		else
 			s->dkind[a] = m->kind[a];
+		s->wt[a] = s->dkind[a] == TLED_FREE ? 1 / m->mass[a] : 0;
 		nf += s->dkind[a] == TLED_FREE;
-		nc += m->ebc && m->mass[a] > 0 && m->kind[a] != TLED_FREE;
+		nc += is_con(m, s->dkind, a);
 	}
 	s->nfree = nf;
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
@@ -165,7 +269,7 @@ void tled_solver_update_active(tled_solver_t *s)
 	}
 	int64_t c = 0;
 	for (int64_t a = 0; a < m->n; a++)
-		if (m->mass[a] > 0 && m->kind[a] != TLED_FREE)
+		if (is_con(m, s->dkind, a))
 			s->cnode[c++] = a;
 	/* current prescribed values: 0 for fixed nodes, u^h for driven ones */
 	for (c = 0; c < nc; c++) {
@@ -185,6 +289,7 @@ void tled_solver_update_active(tled_solver_t *s)
 			s->cbar[3 * c + i] = s->cstart[3 * c + i] =
 				s->ctarget[3 * c + i] = uh[i];
 	}
+	ebc_factor(s);
 }
 
 void tled_solver_nodal_u(const tled_solver_t *s, int64_t a, double out[3])
@@ -243,6 +348,36 @@ static void ebc_S(tled_solver_t *s, const double *wt, const double *x,
 static int ebc_solve(tled_solver_t *s, const double *wt)
 {
 	int64_t nc3 = 3 * s->nc;
+	if (s->chol) {
+		/* forward and back substitution, 3 right-hand sides */
+		int64_t nc = s->nc;
+		const double *Lf = s->chol;
+		double *x = s->cl;
+		memcpy(x, s->cr, (size_t)nc3 * sizeof *x);
+		for (int64_t i = 0; i < nc; i++) {
+			double d = Lf[i * nc + i];
+			for (int c = 0; c < 3; c++) {
+				double v = x[3 * i + c];
+				for (int64_t k = 0; k < i; k++)
+					v -= Lf[i * nc + k] * x[3 * k + c];
+				x[3 * i + c] = d > 0 ? v / d : 0;
+			}
+		}
+		/* L^T x = y, column-oriented so that rows of L stay
+		 * contiguous */
+		for (int64_t i = nc - 1; i >= 0; i--) {
+			double d = Lf[i * nc + i];
+			const double *ri = Lf + i * nc;
+			for (int c = 0; c < 3; c++) {
+				double xi = d > 0 ? x[3 * i + c] / d : 0;
+				x[3 * i + c] = xi;
+				for (int64_t k = 0; k < i; k++)
+					x[3 * k + c] -= ri[k] * xi;
+			}
+		}
+		s->cg_iters = 0;
+		return 0;
+	}
 	double *x = s->cl, *r = s->cr, *z = s->cz, *p = s->cp, *q = s->cq;
 	double rz[3] = { 0, 0, 0 }, r0[3] = { 0, 0, 0 };
 	memset(x, 0, (size_t)nc3 * sizeof *x);
@@ -292,9 +427,7 @@ static double ebc_project(tled_solver_t *s)
 	const tled_model_t *m = s->m;
 	int rk = m->rk;
 	double vmax = 0;
-	double *wt = s->tmp2;
-	for (int64_t a = 0; a < m->n; a++)
-		wt[a] = s->dkind[a] == TLED_FREE ? 1 / m->mass[a] : 0;
+	const double *wt = s->wt;
 	for (int64_t c = 0; c < s->nc; c++) {
 		double uh[3];
 		tled_solver_nodal_u(s, s->cnode[c], uh);
@@ -348,9 +481,7 @@ static void ebc_project_scaled(tled_solver_t *s, double *y)
 	int rk = m->rk;
 	if (!m->ebc || s->nc <= 0)
 		return;
-	double *wt = s->tmp2;
-	for (int64_t a = 0; a < m->n; a++)
-		wt[a] = s->dkind[a] == TLED_FREE ? 1 / m->mass[a] : 0;
+	const double *wt = s->wt;
 	for (int64_t c = 0; c < s->nc; c++) {
 		int64_t a = s->cnode[c];
 		double acc[3] = { 0, 0, 0 };
@@ -749,7 +880,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 					     r * (s->ctarget[k] - s->cstart[k]);
 			ebc_project(s);
 			const double *du = s->wn;
-			double wk = 0, vm = 0;
+			double wk = 0, vm = 0, ke = 0;
 			int64_t nvm = -1;
 			for (int64_t a = 0; a < n; a++) {
 				if (s->dkind[a] != TLED_FREE)
@@ -764,12 +895,14 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 					s->v[3 * a + i] += du[3 * a + i] / dt;
 					v2 += s->v[3 * a + i] * s->v[3 * a + i];
 				}
+				ke += 0.5 * m->mass[a] * v2;
 				if (v2 > vm) {
 					vm = v2;
 					nvm = a;
 				}
 			}
 			Wext += fabs(wk);
+			ci.ke = ke;
 			ci.vmax = sqrt(vm);
 			ci.node_vmax = nvm;
 		}

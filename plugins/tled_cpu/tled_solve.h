@@ -87,6 +87,8 @@ typedef struct tled_solver_opts {
 
 void tled_solver_opts_default(tled_solver_opts_t *o);
 
+#define TLED_CHOL_MAX 2500 /* largest constraint set factored densely */
+
 typedef struct tled_solver {
 	tled_model_t *m;    /* kinds (m->kind) are read live */
 	double *u, *v, *f, *fprev, *VP, *ustart, *tmp, *tmp2, *s0;
@@ -104,6 +106,10 @@ typedef struct tled_solver {
 	double *react;      /* 3n constraint forces of the last step, N */
 	double *wn;         /* 3n scratch */
 	int cg_iters;       /* CG iterations of the last projection */
+	double *chol;       /* nc x nc dense Cholesky factor of S (row-major
+	                       lower), when nc <= TLED_CHOL_MAX; else CG */
+	int64_t ndep;       /* constraints dropped as linearly dependent */
+	double *wt;         /* n: 1/mass of dynamic nodes, 0 otherwise */
 	double lmax, lmin;  /* eigenvalue estimates of M^-1 K, 1/s^2 */
 	double dt_crit;     /* s, from the chosen estimate */
 	double dt_eigen;    /* s, 2/sqrt(lmax) */

@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * sts algorithm pieces against known answers: Savitzky-Golay coefficients,
- * histogram thresholds on a synthetic three-class mixture, exact distance
+ * histogram thresholds on a synthetic three-class mixture, the healthy
+ * reference of one image given another (sts_cond), exact distance
  * transform, morphology, reconstruction, hole filling, components.
  */
 #include <math.h>
@@ -205,6 +206,125 @@ static void test_thresholds_grey_matter_mode(void **state)
 	free(v);
 }
 
+/* ---- healthy reference of y given x (sts_cond) ---- */
+
+/* healthy FLAIR-like level of a T1-like intensity x in [20, 100]: CSF
+ * (x 20, y 20) -> grey matter (x 50, y 110) -> white matter (x 90, y 70),
+ * linear in between as partial volume mixes the tissues */
+static double healthy_y(double x)
+{
+	return x <= 50 ? 20 + (x - 20) * 3.0 : 110 - (x - 50) * 1.0;
+}
+
+static void test_cond_reference(void **state)
+{
+	(void)state;
+	/* 86% healthy: x uniform on [20, 100), y = healthy_y(x) + N(0, 4).
+	 * 6% tumour at x in [45, 55) (grey-matter-like T1) with y N(200,10):
+	 * brighter than any healthy tissue; it is < half of each of its x
+	 * bins, so the bins' modes stay healthy.
+	 * 3% tumour alone in x [110, 120) (no healthy tissue there; < the
+	 * minimum count per bin): no reference there.
+	 * 5% tumour in ONE bin, x [77.5, 80) (2.5 wide), y N(200, 4): it
+	 * outnumbers the healthy voxels of that bin (2.7%); the median of
+	 * 3 bins must outvote it. */
+	int64_t n = 400000;
+	float *x = malloc(sizeof(float) * n), *y = malloc(sizeof(float) * n);
+	uint64_t s = 5;
+	for (int64_t i = 0; i < n; i++) {
+		int c = (int)(i % 100);
+		double u = ((i * 2654435761u) % 1000003) / 1000003.0;
+		double xx, yy;
+		if (c < 6) {
+			xx = 45 + 10 * u;
+			yy = 200 + 10 * gauss(&s);
+		} else if (c < 9) {
+			xx = 110 + 10 * u;
+			yy = 200 + 10 * gauss(&s);
+		} else if (c < 14) {
+			xx = 77.5 + 2.5 * u;
+			yy = 200 + 4 * gauss(&s);
+		} else {
+			xx = 20 + 80 * u;
+			yy = healthy_y(xx) + 4 * gauss(&s);
+		}
+		x[i] = (float)xx;
+		y[i] = (float)yy;
+	}
+	sts_hist_t grid;
+	assert_int_equal(sts_hist_grid(0, 250, 0, 250, 5, &grid), 0);
+	assert_int_equal(grid.nbins, 250);
+	sts_cond_t c;
+	/* x over [20, 120] in 40 bins of 2.5; each healthy bin holds
+	 * 0.86/32 = 2.7% of the voxels; a usable bin needs 1% */
+	assert_int_equal(sts_cond_build(x, y, NULL, n, 20, 120, 40, &grid, 5,
+					2, n / 100, &c), 0);
+	assert_int_equal(c.nbins, 40);
+	print_message("usable bins %d (first %d last %d)\n", c.nvalid,
+		      c.first, c.last);
+	/* healthy x [20, 100) = bins 0..31 usable, tumour-only 36..39 not */
+	assert_int_equal(c.first, 0);
+	assert_int_equal(c.last, 31);
+	for (int b = 32; b < 40; b++)
+		assert_true(isnan(c.mode[b]));
+	double m, sg;
+	const double xs[] = { 25, 35, 48.75, 50, 51.25, 65, 78.75, 85, 95 };
+	for (size_t k = 0; k < sizeof xs / sizeof xs[0]; k++) {
+		assert_int_equal(sts_cond_at(&c, xs[k], &m, &sg), 1);
+		/* the healthy level varies by up to 3*2.5/2 across a bin
+		 * (slope 3 left of 50) */
+		double want = healthy_y(xs[k]);
+		print_message("x %.2f: mode %.1f (healthy %.1f) sigma %.2f\n",
+			      xs[k], m, want, sg);
+		assert_true(fabs(m - want) < 5);
+		assert_true(sg > 2.5 && sg < 8);
+	}
+	/* the single tumour-dominated bin [77.5, 80) really has the tumour
+	 * as its raw mode; the median of 3 gives back healthy tissue */
+	assert_true(c.mode[23] > 180);
+	assert_true(fabs(c.fmode[23] - healthy_y(78.75)) < 5);
+	/* no reference beyond the usable bins: the tumour-only range, and
+	 * outside [xlo, xhi] */
+	assert_int_equal(sts_cond_at(&c, 112, &m, &sg), 0);
+	assert_int_equal(sts_cond_at(&c, 10, &m, &sg), 0);
+	assert_int_equal(sts_cond_at(&c, 130, &m, &sg), 0);
+	assert_int_equal(sts_cond_at(&c, NAN, &m, &sg), 0);
+	sts_cond_free(&c);
+	/* bad arguments and an empty mask */
+	assert_int_equal(sts_cond_build(x, y, NULL, n, 50, 20, 40, &grid, 5,
+					2, 1, &c), -1);
+	uint8_t *none = calloc((size_t)n, 1);
+	assert_int_equal(sts_cond_build(x, y, none, n, 20, 120, 40, &grid, 5,
+					2, 1, &c), -1);
+	assert_null(c.mode);
+	free(none);
+	free(x);
+	free(y);
+}
+
+static void test_hist_peak(void **state)
+{
+	(void)state;
+	/* N(100, 10) plus a tail on the right: the peak is at 100 and the
+	 * narrower (left) half width gives sigma 10 */
+	int64_t n = 200000;
+	float *v = malloc(sizeof(float) * n);
+	uint64_t s = 3;
+	for (int64_t i = 0; i < n; i++)
+		v[i] = (float)(i % 5 ? 100 + 10 * gauss(&s)
+				     : 130 + 20 * gauss(&s));
+	sts_hist_t h;
+	assert_int_equal(sts_hist_build(v, NULL, n, 0, 240, 0, 240, 5, 2,
+					&h), 0);
+	double m, sg;
+	assert_true(sts_hist_peak(&h, &m, &sg) >= 0);
+	print_message("peak %.2f sigma %.2f\n", m, sg);
+	assert_true(fabs(m - 100) < 2);
+	assert_true(fabs(sg - 10) < 1.2);
+	sts_hist_free(&h);
+	free(v);
+}
+
 static void test_hist_quantised_no_comb(void **state)
 {
 	(void)state;
@@ -356,6 +476,8 @@ int main(void)
 		cmocka_unit_test(test_thresholds_three_modes),
 		cmocka_unit_test(test_thresholds_grey_matter_mode),
 		cmocka_unit_test(test_hist_quantised_no_comb),
+		cmocka_unit_test(test_hist_peak),
+		cmocka_unit_test(test_cond_reference),
 		cmocka_unit_test(test_edt_bruteforce),
 		cmocka_unit_test(test_morphology),
 		cmocka_unit_test(test_reconstruct_and_components),

@@ -193,6 +193,10 @@ static void small_model(tled_model_t *m, tled_solver_t *s, double nu)
 		if (m->kind[a] == TLED_FREE)
 			for (int i = 0; i < 3; i++)
 				s->u[3 * a + i] = 1e-5 * (synth_rand(&r) - 0.5);
+	/* the collocated conditions (fixed faces: u^h = 0) hold from the
+	 * start, so the initial energy is that of an admissible state */
+	tled_solver_update_active(s);
+	tled_solver_impose(s);
 	free(X);
 	synth_free(&c);
 }
@@ -236,7 +240,15 @@ static void test_dt_critical(void **state)
 			print_message("%s\n", err);
 		assert_int_equal(rc, 0);
 		assert_int_equal(st.iters, 50000);
-		assert_true(st.ke + st.W < 3 * E0);
+		/* energy bounded: the half-step kinetic energy of central
+		 * differences overestimates the conserved (shadow) energy of
+		 * a mode with omega dt / 2 = q by up to 1 / (1 - q^2); at 0.9 x
+		 * critical q <= 0.9, so 1 / (1 - 0.81) = 5.3 (measured 2.6 at
+		 * nu 0.49, 3.3 at nu 0.499 after 50k steps; a growing
+		 * instability reaches 100 within a few thousand steps) */
+		print_message("nu %.3f: energy after 50k steps %.3g x initial\n",
+			      nu, (st.ke + st.W) / E0);
+		assert_true(st.ke + st.W < 5.3 * E0);
 		for (int64_t i = 0; i < 3 * m.n; i++)
 			assert_true(isfinite(s.u[i]));
 		/* 1.1x: blow-up detected */

@@ -1,0 +1,64 @@
+#!/bin/sh
+# The speed-accuracy trade a user makes (issue 6, "Evidence"): node spacing,
+# support size and time-step safety factor of the growth simulation against
+# the phantom displacement error and the CPU time of the tled_cpu stage.
+#
+#   sh bench/pipeline/run_tradeoff.sh [--out DIR] [--seed N]
+#
+# One factor at a time around the defaults of graphs/armstg.ini (nodes 4 mm,
+# support_k 20, dt_safety 0.8), on one exported phantom; every run is the
+# user-facing graphs/armstg.ini with --set.  The dense-field width follows the
+# spacing (growth.sigma = 1.5 x spacing).  Rows: DIR/tradeoff.tsv; plot:
+# DIR/tradeoff.png (bench/pipeline/plot_tradeoff.py, needs matplotlib).
+# SPACINGS, SUPPORTS, SAFETIES override the lists.
+set -eu
+cd "$(dirname "$0")/../.."
+. bench/pipeline/lib.sh
+OUT=out/bench-tradeoff
+SEED=1
+while [ $# -gt 0 ]; do
+	case $1 in
+	--out) OUT=$2; shift 2 ;;
+	--seed) SEED=$2; shift 2 ;;
+	*) echo "usage: $0 [--out DIR] [--seed N]" >&2; exit 2 ;;
+	esac
+done
+SPACINGS=${SPACINGS:-"2 3 4 5 6"}
+SUPPORTS=${SUPPORTS:-"12 32"}
+SAFETIES=${SAFETIES:-"0.5 0.95"}
+OUT=$(abspath "$OUT")
+build_all
+# the sampler's node count is read from its log line
+export ARMSTG_LOG=warn,nodes=info
+mkdir -p "$OUT"
+ph="$OUT/ph$SEED"
+run_graph bench/pipeline/phantom_export.ini "$ph" --set phantom.seed="$SEED" >/dev/null
+phantom_env "$ph"
+TSV="$OUT/tradeoff.tsv"
+printf 'factor\tspacing_mm\tsupport_k\tdt_safety\tnodes\tgrowth_steps\titerations\ttled_wall_s\ttotal_wall_s\terr_band_mean_mm\terr_band_p95_mm\tS_mm\n' >"$TSV"
+
+one() { # factor spacing k safety
+	o="$OUT/run-$1-$2-$3-$4"
+	sig=$(echo "$2" | awk '{print 1.5 * $1}')
+	if ! w=$(run_graph graphs/armstg.ini "$o" --set nodes.spacing="$2" \
+		--set growth.sigma="$sig" --set grow.support_k="$3" \
+		--set grow.dt_safety="$4"); then
+		echo "$1 spacing $2 k $3 safety $4: FAILED (see $o.log)" >&2
+		tail -2 "$o.log" >&2
+		printf '%s\t%s\t%s\t%s\tfailed\n' "$1" "$2" "$3" "$4" >>"$TSV"
+		return 0
+	fi
+	RUN="$o" run_graph bench/pipeline/eval_phantom.ini "$o/eval" >/dev/null ||
+		echo "$o: evaluation failed (see $o/eval.log)" >&2
+	python3 bench/pipeline/collect.py trade "$1" "$2" "$3" "$4" "$w" "$o" >>"$TSV"
+	tail -1 "$TSV"
+}
+
+for s in $SPACINGS; do one spacing "$s" 20 0.8; done
+for k in $SUPPORTS; do one support_k 4 "$k" 0.8; done
+for f in $SAFETIES; do one dt_safety 4 20 "$f"; done
+if bench/.venv/bin/python -c "import matplotlib" 2>/dev/null; then
+	bench/.venv/bin/python bench/pipeline/plot_tradeoff.py "$TSV" "$OUT/tradeoff.png"
+else
+	echo "matplotlib missing (bench/.venv): no plot" >&2
+fi
