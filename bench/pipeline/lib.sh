@@ -38,31 +38,32 @@ phantom_env() {
 
 # the environment for BraTS 2013 case $1 (0001..0003) in data folder $2
 brats_env() {
-	d="$2/brats2013/brats_2013_pat$1_1"
+	_be_d="$2/brats2013/brats_2013_pat$1_1"
 	export ATLAS_T1="$2/sri24/spgr.nii.gz"
 	export ATLAS_LABELS="$2/sri24/tzo116plus.nii.gz"
 	export ATLAS_TISSUES="$2/sri24/tissues.nii.gz"
 	export CSF_LABELS=1
 	export VENTRICLES=201-414
 	export TUMOUR_LABEL=1000
-	export PATIENT_T1="$d/T1c_subtrMeanDivStd.nii.gz"
-	export PATIENT_FLAIR="$d/Flair_subtrMeanDivStd.nii.gz"
-	export PATIENT_LABELS="$d/OTMultiClass.nii.gz"
-	export PATIENT_MASK="$d/brainmask.nii.gz"
+	export PATIENT_T1="$_be_d/T1c_subtrMeanDivStd.nii.gz"
+	export PATIENT_FLAIR="$_be_d/Flair_subtrMeanDivStd.nii.gz"
+	export PATIENT_LABELS="$_be_d/OTMultiClass.nii.gz"
+	export PATIENT_MASK="$_be_d/brainmask.nii.gz"
 }
 
 # run_graph GRAPH OUT [--set ...]: run quietly, log in OUT.log; prints the
 # wall time in seconds; returns the run's exit status
 run_graph() {
-	g=$1 o=$2
+	# (sh has no local variables: _rg_ names keep the caller's intact)
+	_rg_g=$1 _rg_o=$2
 	shift 2
-	rm -rf "$o"
-	t0=$(date +%s.%N)
-	"$ARMSTG" run "$g" --out "$o" --jobs 2 "$@" >"$o.log" 2>&1
-	rc=$?
-	t1=$(date +%s.%N)
-	echo "$t0 $t1" | awk '{printf "%.1f\n", $2 - $1}'
-	return $rc
+	rm -rf "$_rg_o"
+	_rg_t0=$(date +%s.%N)
+	"$ARMSTG" run "$_rg_g" --out "$_rg_o" --jobs 2 "$@" >"$_rg_o.log" 2>&1
+	_rg_rc=$?
+	_rg_t1=$(date +%s.%N)
+	echo "$_rg_t0 $_rg_t1" | awk '{printf "%.1f\n", $2 - $1}'
+	return $_rg_rc
 }
 
 # absolute path of $1 (which need not exist)

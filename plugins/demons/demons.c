@@ -28,6 +28,20 @@
  *   s     <- s o exp(u)   (diffeomorphic: s(x) = v(x) + s(x + v(x)))
  *   or s  <- s + u        (additive, Thirion)
  *   s     <- G_{sigma_field} * s                            (diffusion-like)
+ * G is a discrete Gaussian (fimg_smooth) of sigma mm at every level, or of
+ * sigma voxels of each level's grid (sigma_unit=voxel, ITK's convention).
+ * The force, its bound and the update are those of ITK's
+ * ESMDemonsRegistrationFunction / DiffeomorphicDemonsRegistrationFilter
+ * (checked term by term; bench/demons/results.md): their denominator
+ * |2J|^2 + diff^2/N with N = max_step^2 * mean squared spacing gives the
+ * same u as ours with sigma_x^2 = 4N.
+ *
+ * On binary masks the MSE of the finest level rises over its first
+ * iterations (2e-3 -> 3e-3 in the benchmark): the field smoothing of
+ * sigma_field pulls the field carried over from the coarser levels, which
+ * fitted their blurred images closely, towards the equilibrium of force
+ * and smoothing of the sharp images.  SimpleITK does the same under the
+ * same smoothing; it is not a defect of the update.
  * A level stops after its iterations or when the MSE improved by less than
  * tol (relative) over the last 5 iterations.
  */

@@ -409,7 +409,7 @@ static int tled_process(armstg_stage_t *st)
 	double *Xin = malloc((size_t)(3 * nin) * sizeof *Xin);
 	tled_model_t m;
 	tled_solver_t s;
-	tled_grid_t ing = { 0 }, ng = { 0 }, cg = { 0 };
+	tled_grid_t ing = { 0 }, cg = { 0 };
 	memset(&m, 0, sizeof m);
 	memset(&s, 0, sizeof s);
 	layer_t *L = NULL;
@@ -471,6 +471,16 @@ static int tled_process(armstg_stage_t *st)
 				  : TLED_CORR_NONE;
 	mo.nthreads = H->threads(st);
 	mo.material = mat_of;
+	/* collocating the fixed brain boundary needs a dense factor of its
+	 * constraint matrix: affordable up to ~1500 boundary nodes; beyond,
+	 * fixed nodes keep u = 0 as nodal parameters (O(h) slack there, where
+	 * the displacement is small anyway) */
+	{
+		int64_t nb = 0;
+		for (int64_t i = 0; i < nin; i++)
+			nb += pn->label[i] == TL_BOUNDARY;
+		mo.ebc_fixed = nb <= 1500;
+	}
 	mo.material_ctx = &mc;
 	if (tled_material_set(&mo.mat[MAT_BRAIN], pv->e_brain, pv->nu_brain,
 			      pv->density) ||
@@ -509,10 +519,6 @@ static int tled_process(armstg_stage_t *st)
 			m.label[a] = TL_TISSUE;
 	if (tled_solver_init(&s, &m, err, sizeof err)) {
 		rc = H->fail(st, ARMSTG_ENOMEM, "solver: %s", err);
-		goto out;
-	}
-	if (tled_grid_build(&ng, m.X, m.n, m.h_mean)) {
-		rc = H->fail(st, ARMSTG_ENOMEM, "out of memory (node grid)");
 		goto out;
 	}
 
@@ -645,7 +651,8 @@ static int tled_process(armstg_stage_t *st)
 		hk.step = step;
 		int moved = 0;
 		int64_t created = 0;
-		memcpy(tgt, s.u, (size_t)(3 * m.n) * sizeof *tgt);
+		for (int64_t a = 0; a < m.n; a++)
+			tled_solver_nodal_u(&s, a, tgt + 3 * a);
 		for (int j = 0; j < nl; j++) {
 			if (L[j].layer != l)
 				continue;
@@ -667,8 +674,9 @@ static int tled_process(armstg_stage_t *st)
 					if (m.kind[a] == TLED_FIXED || dcomp[a] >= 0)
 						continue;
 					double y[3];
+					tled_solver_nodal_u(&s, a, y);
 					for (int d = 0; d < 3; d++)
-						y[d] = m.X[3 * a + d] + s.u[3 * a + d];
+						y[d] += m.X[3 * a + d];
 					double dd = 0;
 					for (int d = 0; d < 3; d++)
 						dd += (y[d] - cen[d]) * (y[d] - cen[d]);
@@ -694,12 +702,14 @@ static int tled_process(armstg_stage_t *st)
 			for (int64_t a = 0; a < m.n; a++) {
 				if (dcomp[a] != c)
 					continue;
-				double y[3], d[3];
+				double y[3], d[3], uh[3];
+				tled_solver_nodal_u(&s, a, uh);
 				for (int k = 0; k < 3; k++)
-					y[k] = m.X[3 * a + k] + s.u[3 * a + k];
+					y[k] = m.X[3 * a + k] + uh[k];
 				layer_map(&L[jp], y, h, d);
+				/* prescribed value of u^h at the node */
 				for (int k = 0; k < 3; k++)
-					tgt[3 * a + k] = s.u[3 * a + k] + d[k];
+					tgt[3 * a + k] = uh[k] + d[k];
 				moved = 1;
 			}
 		}
@@ -742,8 +752,9 @@ static int tled_process(armstg_stage_t *st)
 				if (m.kind[a] != TLED_FREE || dcomp[a] >= 0)
 					continue;
 				double y[3];
+				tled_solver_nodal_u(&s, a, y);
 				for (int k = 0; k < 3; k++)
-					y[k] = m.X[3 * a + k] + s.u[3 * a + k];
+					y[k] += m.X[3 * a + k];
 				if (layer_side(&L[j], y, h) < -margin) {
 					dcomp[a] = L[j].comp;
 					dstep[a] = step;
@@ -790,15 +801,11 @@ static int tled_process(armstg_stage_t *st)
 	}
 
 	/* ---- outputs ---- */
-	/* displacement at the nodes: prescribed values for fixed and driven
-	 * nodes, the MLS approximation u^h(X_a) for free ones */
+	/* displacement at the nodes: u^h(X_a), which equals the prescribed
+	 * value at fixed and driven nodes (collocated conditions) */
 	for (int64_t a = 0; a < m.n; a++) {
-		if (m.kind[a] != TLED_FREE ||
-		    tled_model_interp(&m, &ng, pv->support_k,
-				      pv->support_dilation, m.X + 3 * a, s.u,
-				      uh + 3 * a))
-			memcpy(uh + 3 * a, s.u + 3 * a, 3 * sizeof(double));
-		if (m.kind[a] == TLED_FIXED)
+		tled_solver_nodal_u(&s, a, uh + 3 * a);
+		if (m.kind[a] == TLED_FIXED && !m.ebc_fixed)
 			uh[3 * a] = uh[3 * a + 1] = uh[3 * a + 2] = 0;
 	}
 	/* final labels */
@@ -896,7 +903,6 @@ out:
 	free(seedc);
 	free(uh);
 	tled_grid_free(&cg);
-	tled_grid_free(&ng);
 	tled_grid_free(&ing);
 	tled_solver_free(&s);
 	tled_model_free(&m);

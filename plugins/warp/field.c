@@ -537,14 +537,14 @@ int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
  * were smoothed less than asked.  Bessel values by Miller's backward
  * recurrence I_{n-1} = I_{n+1} + (2n/t) I_n, started 10 sigma (at least
  * 20) beyond the radius and normalised with e^t = I_0 + 2 sum I_n.
- * Truncated at 3 sigma (radius >= 1) and renormalised to sum 1.
+ * Truncated at 3 sigma (radius >= 2) and renormalised to sum 1.
  */
 static float *gauss_kernel(double sigma_vox, int *radius)
 {
 	const double t = sigma_vox * sigma_vox;
 	int r = (int)ceil(3.0 * sigma_vox);
-	if (r < 1)
-		r = 1;
+	if (r < 2) /* radius 1 would lose t^2 of the variance t */
+		r = 2;
 	int nmax = r + (int)fmax(20.0, ceil(10.0 * sigma_vox));
 	double *q = calloc((size_t)nmax + 2, sizeof *q);
 	float *k = malloc(sizeof(float) * (2 * r + 1));

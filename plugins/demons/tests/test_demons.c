@@ -423,6 +423,113 @@ static void test_bad_input(void **state)
 	msg_unref(&vec->base);
 }
 
+/*
+ * normalize=local against a multiplicative bias: the fixed image times a
+ * smooth field b(x) = 1 + 0.25 x/30 + 0.15 y/30 (about 0.7..1.3 over the
+ * head).  Histogram matching cannot undo a spatially varying gain; the
+ * local mean division can, so its field error must stay below 0.5 voxel
+ * and beat histogram's.
+ */
+static void test_local_bias(void **state)
+{
+	fixture_t *fx = *state;
+	char e[1024];
+	vol_t *fb = vol_clone(fx->fixed);
+	for (int k = 0; k < FZ; k++)
+		for (int j = 0; j < FY; j++)
+			for (int i = 0; i < FX; i++) {
+				double x[3];
+				vol_to_world(fb, i, j, k, x);
+				int64_t v = vol_idx(fb, i, j, k);
+				vol_set(fb, v, vol_get(fb, v) *
+					(1 + 0.25 * x[0] / 30 + 0.15 * x[1] / 30));
+			}
+	double err[2], base;
+	const char *mode[2] = { "normalize=histogram", "normalize=local" };
+	for (int m = 0; m < 2; m++) {
+		const char *p[] = { "levels=3", "iterations=40,30,20", mode[m],
+				    NULL };
+		reg_out_t o = { 0 };
+		assert_int_equal(run_demons(p, fb, fx->moving, NULL, NULL, &o, e,
+					    sizeof e), 0);
+		field_error(o.field, fx->fmask, &err[m], &base);
+		double jm = jac_min(o.field);
+		print_message("biased fixed, %s: field error %.2f voxel (true "
+			      "field mean %.2f mm), min Jacobian %.3f\n", mode[m],
+			      err[m] / SP, base, jm);
+		assert_true(jm > 0);
+		reg_free(&o);
+	}
+	assert_true(err[1] / SP < 0.5);
+	assert_true(err[1] < err[0]);
+	msg_unref(&fb->base);
+}
+
+/* sigma_unit=voxel is sigma_field times the level's spacing: 1 voxel at
+ * 1.5 mm gives exactly the field of sigma_field=1.5 mm */
+static void test_sigma_unit(void **state)
+{
+	fixture_t *fx = *state;
+	char e[1024];
+	reg_out_t a = { 0 }, b = { 0 };
+	const char *pa[] = { "levels=1", "iterations=5", "sigma_field=1",
+			     "sigma_unit=voxel", NULL };
+	const char *pb[] = { "levels=1", "iterations=5", "sigma_field=1.5",
+			     NULL };
+	assert_int_equal(run_demons(pa, fx->fixed, fx->moving, NULL, NULL, &a, e,
+				    sizeof e), 0);
+	assert_int_equal(run_demons(pb, fx->fixed, fx->moving, NULL, NULL, &b, e,
+				    sizeof e), 0);
+	int64_t n = vol_nvox(a.field) * 3;
+	double d = 0, m = 0;
+	for (int64_t v = 0; v < n; v++) {
+		d = fmax(d, fabs(((float *)a.field->data)[v] -
+				 ((float *)b.field->data)[v]));
+		m = fmax(m, fabs(((float *)a.field->data)[v]));
+	}
+	print_message("sigma 1 voxel vs 1.5 mm: max |difference| %g mm (max "
+		      "|field| %.2f mm)\n", d, m);
+	assert_true(m > 0.5);
+	assert_true(d == 0);
+	reg_free(&a);
+	reg_free(&b);
+}
+
+/*
+ * The pyramid smooths fields by sigma_field at every level, i.e. by well
+ * under a voxel on coarse grids (1.5 mm on a 4 mm grid).  fimg_smooth must
+ * give the asked variance there too: a sampled Gaussian of sigma 0.375
+ * voxel has a variance of only 0.054 voxel^2 instead of 0.141.
+ */
+static void test_smooth_subvoxel(void **state)
+{
+	(void)state;
+	double A[16];
+	aff_las(A, 21, 21, 21);
+	for (int t = 0; t < 3; t++) {
+		const double sig_vox = (double[]){ 0.2, 0.375, 0.75 }[t];
+		fgrid_t g;
+		assert_int_equal(fgrid_make(&g, 21, 21, 21, A), 0);
+		fimg_t f;
+		assert_int_equal(fimg_alloc(&f, &g, 1), 0);
+		const int64_t c = (10 * 21 + 10) * 21 + 10;
+		f.d[c] = 1;
+		assert_int_equal(fimg_smooth(&f, sig_vox * SP, 1), 0);
+		double m = 0, v = 0;
+		for (int i = 0; i < 21; i++) {
+			double w = f.d[c - 10 + i];
+			m += w;
+			v += w * (i - 10) * (i - 10);
+		}
+		/* the other axes carry the same mass fraction: normalise */
+		v /= m;
+		print_message("smooth sigma %.3f voxel: variance %.4f voxel^2 "
+			      "(want %.4f)\n", sig_vox, v, sig_vox * sig_vox);
+		assert_float_equal(v, sig_vox * sig_vox, 0.02 * sig_vox * sig_vox);
+		fimg_free(&f);
+	}
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -432,6 +539,9 @@ int main(void)
 		cmocka_unit_test(test_inverse_consistency),
 		cmocka_unit_test(test_fixed_mask),
 		cmocka_unit_test(test_bad_input),
+		cmocka_unit_test(test_local_bias),
+		cmocka_unit_test(test_sigma_unit),
+		cmocka_unit_test(test_smooth_subvoxel),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }

@@ -4,8 +4,8 @@
  * $BUILD/plugins/phantom.so and run like a graph stage): a healthy subject
  * (no tumour) deformed from the atlas by a known smooth random field.
  * Asserts the recovered atlas->patient field matches the phantom's
- * true_field to < 0.5 voxel mean inside the patient brain, with a positive
- * Jacobian.  Skips cleanly when the phantom plugin is not built.
+ * true_field to < 0.5 voxel mean inside the patient brain (< 0.3 with the
+ * default bias field and normalize=local), with a positive Jacobian.  Skips cleanly when the phantom plugin is not built.
  */
 #include <math.h>
 
@@ -122,9 +122,10 @@ static void test_phantom_noisy(void **state)
 }
 
 /* the phantom's default T1: noise 3% and a multiplicative bias 0.9..1.1
- * (wavelengths >= 180 mm), which plain SSD demons cannot model (error 0.52
- * voxel, no better than the zero field's 0.56); normalize=local divides
- * each image by its local mean first */
+ * (wavelengths >= 180 mm), which plain SSD demons cannot model (histogram
+ * mode: error 0.52 voxel, no better than the zero field's 0.56);
+ * normalize=local divides each image by its local mean (4 mm) first:
+ * 0.17 voxel, as good as the clean image */
 static void test_phantom_bias(void **state)
 {
 	(void)state;
@@ -137,7 +138,7 @@ static void test_phantom_bias(void **state)
 	print_message("phantom T1 with bias (2 mm voxels), normalize=local: "
 		      "true field mean %.2f mm, error %.2f voxel, min Jacobian "
 		      "%.3f\n", base, err, jm);
-	assert_true(err < 0.5);
+	assert_true(err < 0.3);
 	assert_true(jm > 0);
 }
 
