@@ -50,6 +50,8 @@ int main(int argc, char **argv)
 		else if (!strcmp(k, "lin")) c.lin = v;
 		else if (!strcmp(k, "jit")) c.jit = v;
 		else if (!strcmp(k, "dil")) c.dil = v;
+		else if (!strcmp(k, "ha")) c.ha = v;
+		else if (!strcmp(k, "ramp")) c.ramp = (int)v;
 		else {
 			fprintf(stderr, "unknown key %s\n", k);
 			return 2;

@@ -32,6 +32,7 @@ typedef struct cavity_cfg {
 	int corr;         /* tled_corr */
 	double ip_factor; /* ip spacing / mean node spacing (0: model default) */
 	double dil;       /* support dilation (0: model default) */
+	double ha;        /* node spacing on the cavity surface (0: h) */
 	double lin;       /* != 0: patch test instead: every boundary node
 	                     driven by u = lin * G X (G a fixed matrix) */
 	const char *dump; /* optional: write r, u_r, exact, |u_t| per node (mm) */
@@ -99,6 +100,20 @@ static inline void cavity_run(const cavity_cfg_t *c, int steps,
 	synth_cloud_t cl = { 0 };
 	synth_shell(&cl, c->a, c->b, c->h, c->jit, TL_BOUNDARY, TL_BOUNDARY,
 		    17);
+	if (c->ha > 0 && c->ha != c->h) {
+		/* replace the cavity surface by a finer one */
+		synth_cloud_t c2 = { 0 };
+		double o[3] = { 0, 0, 0 };
+		for (int64_t i = 0; i < cl.n; i++) {
+			const double *p = cl.x + 3 * i;
+			double r = sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+			if (!(cl.label[i] == TL_BOUNDARY && r < 0.5 * (c->a + c->b)))
+				synth_push(&c2, p[0], p[1], p[2], cl.label[i]);
+		}
+		synth_sphere(&c2, o, c->a, c->ha, TL_BOUNDARY);
+		synth_free(&cl);
+		cl = c2;
+	}
 	int64_t n = cl.n;
 	double *X = malloc((size_t)(3 * n) * sizeof *X);
 	uint8_t *kind = malloc((size_t)n);
