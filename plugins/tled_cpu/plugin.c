@@ -85,6 +85,7 @@ typedef struct priv {
 	double merge_tol;
 	double sweep_margin;
 	const char *csf_labels;
+	int drive;
 } priv_t;
 
 static const armstg_param_t params[] = {
@@ -160,6 +161,12 @@ static const armstg_param_t params[] = {
 	{ "csf_labels", PT_STRING, "1,4,5", 0, 0, "",
 	  "values of the labels volume that are ventricles or sulci "
 	  "(comma-separated)", NULL, offsetof(priv_t, csf_labels), 0 },
+	{ "drive", PT_ENUM, "nodal", 0, 0, "",
+	  "how the tumour nodes are driven: nodal (their nodal parameters "
+	  "prescribed; robust, but u^h lags: weak push) or collocated "
+	  "(u^h = the layer map at a subset of tumour nodes 0.5 h apart, "
+	  "Lagrange multipliers; experimental: bench/tled/results.md)",
+	  "nodal|collocated", offsetof(priv_t, drive), 0 },
 };
 
 static const armstg_port_t inputs[] = {
@@ -329,6 +336,69 @@ static void on_progress(void *ctx, int iter, int max_iter, double err_m)
 			      err_m / TLED_MM);
 }
 
+/*
+ * Collocated driving: choose which tumour nodes (dcomp >= 0) carry a
+ * collocation constraint u^h(X_a) = target.  Greedy: nodes already
+ * constrained first (so constraints persist from step to step), then the
+ * rest in index order; a node is taken when no taken node lies within
+ * sep (m) of its current position.  The others become free (their u^h
+ * follows from the constrained ones).  Returns the number taken.
+ * O(n_tumour^2), fine for the few thousand tumour nodes of a run.
+ */
+static int64_t select_driven(tled_model_t *m, const tled_solver_t *s,
+			     const int32_t *dcomp, double sep, int64_t *ids,
+			     double *y)
+{
+	int64_t nt = 0, nsel = 0;
+	for (int pass = 0; pass < 2; pass++)
+		for (int64_t a = 0; a < m->n; a++)
+			if (dcomp[a] >= 0 && (m->kind[a] == TLED_DRIVEN) == !pass)
+				ids[nt++] = a;
+	for (int64_t q = 0; q < nt; q++) {
+		int64_t a = ids[q];
+		double *ya = y + 3 * q;
+		tled_solver_nodal_u(s, a, ya);
+		for (int k = 0; k < 3; k++)
+			ya[k] += m->X[3 * a + k];
+		int ok = 1;
+		/* nor within sep of a fixed (brain boundary) node: u^h = 0
+		 * there, and two conflicting constraints that close are
+		 * nearly dependent (huge multipliers: a tumour touching the
+		 * brain boundary blew up) */
+		if (m->nb > 0) {
+			int64_t b = -1;
+			tled_boundary_side(m, ya, &b);
+			if (b >= 0) {
+				double d2 = 0;
+				for (int k = 0; k < 3; k++)
+					d2 += (ya[k] - m->bX[3 * b + k]) *
+					      (ya[k] - m->bX[3 * b + k]);
+				ok = d2 >= sep * sep;
+			}
+		}
+		for (int64_t p = 0; p < nsel && ok; p++) {
+			double d2 = 0;
+			for (int k = 0; k < 3; k++)
+				d2 += (ya[k] - y[3 * p + k]) * (ya[k] - y[3 * p + k]);
+			ok = d2 >= sep * sep;
+		}
+		if (ok) {
+			/* keep the taken ones packed at the front of y */
+			if (nsel != q) {
+				double t[3];
+				memcpy(t, ya, sizeof t);
+				memcpy(y + 3 * nsel, t, sizeof t);
+			}
+			m->kind[a] = TLED_DRIVEN;
+			nsel++;
+		} else {
+			m->kind[a] = TLED_FREE;
+		}
+
+	}
+	return nsel;
+}
+
 static const ps_attr_t *find_attr(const ps_t *p, const char *name)
 {
 	for (int i = 0; i < p->nattr; i++)
@@ -416,7 +486,8 @@ static int tled_process(armstg_stage_t *st)
 	int nl = 0;
 	double *tgt = NULL, *cx = NULL;
 	int32_t *dcomp = NULL, *dstep = NULL, *seedc = NULL;
-	double *uh = NULL;
+	double *uh = NULL, *sely = NULL;
+	int64_t *selid = NULL;
 	tab_t *tab = NULL;
 	ps_t *on = NULL, *ot = NULL;
 	if (!Xin)
@@ -472,14 +543,18 @@ static int tled_process(armstg_stage_t *st)
 	mo.nthreads = H->threads(st);
 	mo.material = mat_of;
 	mo.material_ctx = &mc;
-	/* Growth uses the legacy driving (nodal parameters of fixed and
-	 * driven nodes prescribed; derivative correction target 0): the
-	 * collocated conditions of tled_solve.h (exact patch test, used by the
-	 * cavity tests) make the constraint system near-singular when driven
-	 * nodes are much closer than the node spacing (the sampler's seeds sit
-	 * 0.5 mm apart) and the first growth steps then invert integration
-	 * points: bench/tled/results.md, open item. */
-	mo.ebc = 0;
+	/* drive = nodal (default): the legacy driving (nodal parameters of
+	 * fixed and driven nodes prescribed; derivative correction target
+	 * 0).  Stable, but u^h at driven nodes lags the prescribed values, so
+	 * the push is weak (bench/tled/results.md).
+	 * drive = collocated: essential conditions by collocation
+	 * (tled_solve.h): u^h at the fixed boundary nodes is 0 and u^h at the
+	 * driven tumour nodes follows the layer map exactly.  Only a
+	 * well-separated subset of the tumour nodes is collocated
+	 * (select_driven): constraints at nodes much closer than the node
+	 * spacing (the sampler's seeds sit 0.5 mm apart) are nearly
+	 * dependent and make the projection ill-conditioned. */
+	mo.ebc = pv->drive == 1;
 	if (tled_material_set(&mo.mat[MAT_BRAIN], pv->e_brain, pv->nu_brain,
 			      pv->density) ||
 	    tled_material_set(&mo.mat[MAT_CSF], pv->e_csf, pv->nu_csf,
@@ -605,8 +680,11 @@ static int tled_process(armstg_stage_t *st)
 	dstep = malloc((size_t)m.n * sizeof *dstep);
 	seedc = malloc((size_t)m.n * sizeof *seedc);
 	uh = malloc((size_t)(3 * m.n) * sizeof *uh);
+	selid = malloc((size_t)m.n * sizeof *selid);
+	sely = malloc((size_t)(3 * m.n) * sizeof *sely);
 	tab = H->tab_new();
-	if (!cx || !tgt || !dcomp || !dstep || !seedc || !uh || !tab)
+	if (!cx || !tgt || !dcomp || !dstep || !seedc || !uh || !selid ||
+	    !sely || !tab)
 		goto oom;
 	for (int64_t i = 0; i < 3 * npc; i++)
 		cx[i] = pc->xyz[i] * TLED_MM;
@@ -713,10 +791,15 @@ static int tled_process(armstg_stage_t *st)
 		}
 		ndriven = 0;
 		for (int64_t a = 0; a < m.n; a++)
-			if (dcomp[a] >= 0) {
-				m.kind[a] = TLED_DRIVEN;
-				ndriven++;
-			}
+			ndriven += dcomp[a] >= 0;
+		int64_t ncol = ndriven;
+		if (m.ebc)
+			ncol = select_driven(&m, &s, dcomp, 0.5 * h, selid,
+					     sely);
+		else
+			for (int64_t a = 0; a < m.n; a++)
+				if (dcomp[a] >= 0)
+					m.kind[a] = TLED_DRIVEN;
 		tled_relax_stats_t rs;
 		memset(&rs, 0, sizeof rs);
 		if (moved || step == 0) {
@@ -790,6 +873,7 @@ static int tled_process(armstg_stage_t *st)
 		H->tab_set_num(tab, row, "jmin", rs.jmin);
 		H->tab_set_num(tab, row, "driven", (double)ndriven);
 		H->tab_set_num(tab, row, "swept", (double)swept);
+		H->tab_set_num(tab, row, "collocated", (double)ncol);
 		H->tab_set_num(tab, row, "contacts", (double)rs.contacts);
 		H->tab_set_num(tab, row, "wall_s", wall);
 		H->progress(st, (step + 1.0) / (lmax + 1), "growth step %d/%d "
@@ -900,6 +984,8 @@ out:
 	free(dstep);
 	free(seedc);
 	free(uh);
+	free(selid);
+	free(sely);
 	tled_grid_free(&cg);
 	tled_grid_free(&ing);
 	tled_solver_free(&s);

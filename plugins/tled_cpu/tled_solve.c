@@ -211,10 +211,26 @@ void tled_solver_update_active(tled_solver_t *s)
 {
 	const tled_model_t *m = s->m;
 	int64_t nf = 0, nc = 0;
+	/* ebc: a node whose integration points are all switched off (deep
+	 * inside the grown tumour) has no stiffness; as a dynamic unknown it
+	 * would be a zero-energy mode (omega_min -> 0: dynamic relaxation
+	 * stalls).  Such nodes keep their nodal parameters (not dynamic, not
+	 * collocated). */
+	uint8_t *stiff = NULL;
+	if (m->ebc) {
+		stiff = calloc((size_t)m->n, 1);
+		if (stiff)
+			for (int64_t p = 0; p < m->nip; p++)
+				if (!s->ipoff[p])
+					for (int64_t e = m->ipptr[p];
+					     e < m->ipptr[p + 1]; e++)
+						stiff[m->ipnode[e]] = 1;
+	}
 	for (int64_t a = 0; a < m->n; a++) {
 		if (m->ebc)
 			s->dkind[a] = m->mass[a] > 0 && (m->ebc_fixed ||
-							 m->kind[a] != TLED_FIXED)
+							 m->kind[a] != TLED_FIXED) &&
+					      (!stiff || stiff[a])
 					      ? TLED_FREE
 					      : TLED_FIXED;
 		else
@@ -223,6 +239,7 @@ void tled_solver_update_active(tled_solver_t *s)
 		nf += s->dkind[a] == TLED_FREE;
 		nc += is_con(m, s->dkind, a);
 	}
+	free(stiff);
 	s->nfree = nf;
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
 	for (int64_t p = 0; p < m->nip; p++) {
@@ -718,14 +735,30 @@ int64_t tled_contact(tled_solver_t *s)
 	if (m->nb == 0)
 		return 0;
 	int64_t cnt = 0;
+	/* ebc: the node's position is X + u^h(X) (the nodal parameter is
+	 * not the displacement), gathered first (s->wn) so that the
+	 * corrections below do not race with the reads; the penetration is
+	 * removed from the node's own parameter (its shape function at
+	 * itself dominates), repeated every step until u^h is inside */
+	int useh = m->ebc && m->rid && s->wn;
+	if (useh) {
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+		for (int64_t a = 0; a < m->n; a++)
+			tled_solver_nodal_u(s, a, s->wn + 3 * a);
+	}
 #pragma omp parallel for schedule(static) reduction(+ : cnt) \
 	num_threads(m->nthreads)
 	for (int64_t a = 0; a < m->n; a++) {
-		if (m->kind[a] == TLED_FIXED)
+		/* ebc: collocated (driven) and non-dynamic nodes are left
+		 * to their conditions */
+		if (m->kind[a] == TLED_FIXED ||
+		    (useh && (s->dkind[a] != TLED_FREE ||
+			      m->kind[a] == TLED_DRIVEN)))
 			continue;
 		double y[3];
 		for (int i = 0; i < 3; i++)
-			y[i] = m->X[3 * a + i] + s->u[3 * a + i];
+			y[i] = m->X[3 * a + i] +
+			       (useh ? s->wn[3 * a + i] : s->u[3 * a + i]);
 		int64_t b;
 		double side = tled_boundary_side(m, y, &b);
 		if (b < 0 || !(side > s->s0[a]))

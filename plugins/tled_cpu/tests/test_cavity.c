@@ -36,7 +36,7 @@ static void test_cavity_small_strain(void **state)
 	(void)state;
 	cavity_cfg_t c;
 	cavity_cfg_default(&c);
-	c.h = 3;
+	c.h = tled_quick() ? 5 : 3; /* quick (asan-test): 351 nodes */
 	c.nthreads = 1;
 	cavity_res_t r;
 	run(&c, 1, &r);
@@ -55,12 +55,15 @@ static void test_cavity_convergence(void **state)
 	cavity_cfg_default(&c);
 	c.nthreads = 1;
 	cavity_res_t r4, r25;
-	c.h = 4;
+	/* quick (asan-test): h 6 -> 5 mm (measured 5.8 -> 2.9 % RMS) */
+	const double h0 = tled_quick() ? 6 : 4, h1 = tled_quick() ? 5 : 2.5;
+	c.h = h0;
 	run(&c, 1, &r4);
-	c.h = 2.5;
+	c.h = h1;
 	run(&c, 1, &r25);
-	double order = log(r4.rms / r25.rms) / log(4 / 2.5);
-	print_message("observed order (RMS, h 4 -> 2.5 mm): %.2f\n", order);
+	double order = log(r4.rms / r25.rms) / log(h0 / h1);
+	print_message("observed order (RMS, h %g -> %g mm): %.2f\n", h0, h1,
+		      order);
 	assert_true(r25.rms < r4.rms);
 	assert_true(r25.max < r4.max);
 }
@@ -73,7 +76,7 @@ static void test_shell_patch(void **state)
 	(void)state;
 	cavity_cfg_t c;
 	cavity_cfg_default(&c);
-	c.h = 3;
+	c.h = tled_quick() ? 5 : 3;
 	c.nthreads = 1;
 	c.lin = 0.01;
 	c.tol = 1e-9;
@@ -89,6 +92,16 @@ static void test_shell_patch(void **state)
 static void test_cavity_large(void **state)
 {
 	(void)state;
+	/* quick (asan-test): skipped.  It needs 2873 nodes and about 3000
+	 * iterations (13 s CPU at -O2; no smaller variant stays stable: a
+	 * 5 mm cavity in a 15-20 mm sphere, or h 3.5-4 mm, inverts the wall
+	 * near 1.7-1.8 a, bench/tled/results.md), and every code path it
+	 * uses is exercised under ASan by the other cavity tests. */
+	if (tled_quick()) {
+		print_message("skipped in quick mode (ARMSTG_TEST_QUICK): runs "
+			      "in the full make test\n");
+		skip();
+	}
 	cavity_cfg_t c;
 	cavity_cfg_default(&c);
 	c.a = 5;

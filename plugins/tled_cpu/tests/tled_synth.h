@@ -12,6 +12,14 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* ARMSTG_TEST_QUICK set (and not "0"): the smaller test variants (make
+ * asan-test), same assertions */
+static inline int tled_quick(void)
+{
+	const char *q = getenv("ARMSTG_TEST_QUICK");
+	return q && *q && strcmp(q, "0") != 0;
+}
+
 typedef struct synth_cloud {
 	int64_t n, cap;
 	double *x;      /* 3n, mm */
