@@ -5,12 +5,12 @@
 #
 #   sh bench/pipeline/run_tradeoff.sh [--out DIR] [--seed N]
 #
-# One factor at a time around the defaults of graphs/armstg.ini (nodes 4 mm,
+# One factor at a time around the defaults of graphs/armstg.ini (nodes 6 mm,
 # support_k 20, dt_safety 0.8), on one exported phantom; every run is the
 # user-facing graphs/armstg.ini with --set.  The dense-field width follows the
 # spacing (growth.sigma = 1.5 x spacing).  Rows: DIR/tradeoff.tsv; plot:
 # DIR/tradeoff.png (bench/pipeline/plot_tradeoff.py, needs matplotlib).
-# SPACINGS, SUPPORTS, SAFETIES override the lists.
+# SPACINGS, SUPPORTS, SAFETIES override the lists ("none": skip the spacing sweep).
 set -eu
 cd "$(dirname "$0")/../.."
 . bench/pipeline/lib.sh
@@ -24,6 +24,7 @@ while [ $# -gt 0 ]; do
 	esac
 done
 SPACINGS=${SPACINGS:-"2 3 4 5 6"}
+# rows already measured are kept when APPEND=1 (the spacing sweep is long)
 SUPPORTS=${SUPPORTS:-"12 32"}
 SAFETIES=${SAFETIES:-"0.5 0.95"}
 OUT=$(abspath "$OUT")
@@ -35,6 +36,7 @@ ph="$OUT/ph$SEED"
 run_graph bench/pipeline/phantom_export.ini "$ph" --set phantom.seed="$SEED" >/dev/null
 phantom_env "$ph"
 TSV="$OUT/tradeoff.tsv"
+[ "${APPEND:-0}" = 1 ] && [ -f "$TSV" ] ||
 printf 'factor\tspacing_mm\tsupport_k\tdt_safety\tnodes\tgrowth_steps\titerations\ttled_wall_s\ttotal_wall_s\terr_band_mean_mm\terr_band_p95_mm\tS_mm\n' >"$TSV"
 
 one() { # factor spacing k safety
@@ -54,9 +56,9 @@ one() { # factor spacing k safety
 	tail -1 "$TSV"
 }
 
-for s in $SPACINGS; do one spacing "$s" 20 0.8; done
-for k in $SUPPORTS; do one support_k 4 "$k" 0.8; done
-for f in $SAFETIES; do one dt_safety 4 20 "$f"; done
+for s in $SPACINGS; do [ "$s" = none ] || one spacing "$s" 20 0.8; done
+for k in $SUPPORTS; do one support_k 6 "$k" 0.8; done
+for f in $SAFETIES; do one dt_safety 6 20 "$f"; done
 if bench/.venv/bin/python -c "import matplotlib" 2>/dev/null; then
 	bench/.venv/bin/python bench/pipeline/plot_tradeoff.py "$TSV" "$OUT/tradeoff.png"
 else
