@@ -1035,6 +1035,27 @@ static void write_run_table(graph_t *g, const run_opts_t *o, double total)
 	}
 }
 
+/* mkdir -p */
+static int mkdir_p(const char *dir)
+{
+	char buf[PATH_MAX];
+	if (snprintf(buf, sizeof buf, "%s", dir) >= (int)sizeof buf) {
+		errno = ENAMETOOLONG;
+		return -1;
+	}
+	for (char *p = buf + 1; *p; p++) {
+		if (*p != '/')
+			continue;
+		*p = 0;
+		if (mkdir(buf, 0777) && errno != EEXIST)
+			return -1;
+		*p = '/';
+	}
+	if (mkdir(buf, 0777) && errno != EEXIST)
+		return -1;
+	return 0;
+}
+
 int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize)
 {
 	run_opts_t opts = *o;
@@ -1042,7 +1063,7 @@ int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize)
 		opts.outdir = ".";
 	if (opts.jobs < 1)
 		opts.jobs = 1;
-	if (mkdir(opts.outdir, 0777) && errno != EEXIST) {
+	if (mkdir_p(opts.outdir)) {
 		snprintf(err, errsize, "cannot create output folder '%s': %s",
 			 opts.outdir, strerror(errno));
 		return ARMSTG_EIO;

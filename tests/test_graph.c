@@ -130,8 +130,11 @@ static int count_files(const char *dir)
 static void test_run_and_expansion(void **state)
 {
 	(void)state;
-	char gp[256], err[4096], out[] = "/tmp/armstg-out-XXXXXX", f[1400];
-	assert_non_null(mkdtemp(out));
+	char gp[256], err[4096], base[] = "/tmp/armstg-out-XXXXXX", f[1400];
+	char out[1100];
+	assert_non_null(mkdtemp(base));
+	/* --out may name folders that do not exist yet */
+	snprintf(out, sizeof out, "%s/new/deeper", base);
 	setenv("ARMSTG_T_N", "3", 1);
 	const char *sets[] = { "gen.value=7" };
 	graph_t *g = graph_load(write_tmp(good, gp, sizeof gp), sets, 1, err,
