@@ -229,18 +229,44 @@ static int h_vol_read(armstg_stage_t *st, const char *path, vol_t **out)
 	return 0;
 }
 
-static int h_vol_write(armstg_stage_t *st, const char *path, const vol_t *v)
+typedef int (*writer_fn)(const char *path, const void *obj, char *err,
+			 size_t errsize);
+
+/* Every sink write: a temporary name in the target folder, renamed when the
+ * run succeeds (see h_out_path). */
+static int write_via_tmp(armstg_stage_t *st, const char *path, writer_fn w,
+			 const void *obj)
 {
 	char tmp[PATH_MAX], e[1024] = "";
 	int rc = h_out_path(st, path, tmp, sizeof tmp);
 	if (rc)
 		return rc;
-	rc = vol_write_nifti(tmp, v, e, sizeof e);
+	rc = w(tmp, obj, e, sizeof e);
 	if (rc) {
 		unlink(tmp);
 		return fail_tmp(st, rc, e, tmp);
 	}
 	return 0;
+}
+
+static int w_vol(const char *p, const void *o, char *e, size_t n)
+{
+	return vol_write_nifti(p, o, e, n);
+}
+
+static int w_ps(const char *p, const void *o, char *e, size_t n)
+{
+	return ps_write_h5(p, o, e, n);
+}
+
+static int w_tab(const char *p, const void *o, char *e, size_t n)
+{
+	return tab_write_file(p, o, e, n);
+}
+
+static int h_vol_write(armstg_stage_t *st, const char *path, const vol_t *v)
+{
+	return write_via_tmp(st, path, w_vol, v);
 }
 
 static int h_ps_read(armstg_stage_t *st, const char *path, ps_t **out)
@@ -252,16 +278,7 @@ static int h_ps_read(armstg_stage_t *st, const char *path, ps_t **out)
 
 static int h_ps_write(armstg_stage_t *st, const char *path, const ps_t *p)
 {
-	char tmp[PATH_MAX], e[1024] = "";
-	int rc = h_out_path(st, path, tmp, sizeof tmp);
-	if (rc)
-		return rc;
-	rc = ps_write_h5(tmp, p, e, sizeof e);
-	if (rc) {
-		unlink(tmp);
-		return fail_tmp(st, rc, e, tmp);
-	}
-	return 0;
+	return write_via_tmp(st, path, w_ps, p);
 }
 
 static int h_tab_read(armstg_stage_t *st, const char *path, tab_t **out)
@@ -273,16 +290,7 @@ static int h_tab_read(armstg_stage_t *st, const char *path, tab_t **out)
 
 static int h_tab_write(armstg_stage_t *st, const char *path, const tab_t *t)
 {
-	char tmp[PATH_MAX], e[1024] = "";
-	int rc = h_out_path(st, path, tmp, sizeof tmp);
-	if (rc)
-		return rc;
-	rc = tab_write_file(tmp, t, e, sizeof e);
-	if (rc) {
-		unlink(tmp);
-		return fail_tmp(st, rc, e, tmp);
-	}
-	return 0;
+	return write_via_tmp(st, path, w_tab, t);
 }
 
 static int h_threads(armstg_stage_t *st)
