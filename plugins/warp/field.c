@@ -1030,17 +1030,58 @@ static void buckets_free(buckets_t *b)
 	free(b->idx);
 }
 
-/* Moving least squares of order 1 at y; returns 0 when no support. */
-static int mls_at(const buckets_t *b, const double *xyz, const double *vec,
-		  const double y[3], double sigma, double out[3])
+/* cubic smoothstep: 0 for x <= a, 1 for x >= b, C1 in between */
+static double smoothstep(double x, double a, double b)
 {
-	const double R = 3 * sigma, R2 = R * R, is2 = 0.5 / (sigma * sigma);
+	if (x <= a)
+		return 0;
+	if (x >= b)
+		return 1;
+	double t = (x - a) / (b - a);
+	return t * t * (3 - 2 * t);
+}
+
+/*
+ * Moving least squares at y (Lancaster & Salkauskas 1981, Math. Comp. 37:
+ * 141-158): order-1 fit with Gaussian weights, guarded against
+ * extrapolation.  Let m be the weighted mean offset of the nodes from y and
+ * C their weighted covariance (mm^2).
+ *  - conditioning c = det C / (tr C / 3)^3 in [0, 1] (1: isotropic spread);
+ *  - one-sidedness rho = |m| / sqrt(tr C / 3): ~0 inside a uniform cloud,
+ *    ~0.9 on its face, growing linearly with the distance outside it
+ *    (thresholds 1.5, 2.5 keep the fit exact 3 mm inside a cloud corner
+ *    at sigma 4: test_from_points_linear).
+ * The result is beta * (order-1 fit) + (1 - beta) * (weighted mean,
+ * Shepard 1968, order 0), beta = [1 - S(rho; 1.5, 2.5)] * S(c; 1e-4, 1e-2)
+ * with S the cubic smoothstep, so the linear fit (exact for linear fields)
+ * is used wherever y is surrounded by nodes, and only the bounded weighted
+ * mean where it would extrapolate.  The magnitude is then capped at the
+ * largest nodal |d| within the search radius (a linear field inside the
+ * nodes' hull never exceeds it, so exactness is kept), and multiplied by
+ * the taper 1 - S(dmin; sigma, sigma + taper), dmin = distance to the
+ * nearest node, so the field falls smoothly to zero away from the cloud.
+ * Weights are exp(-(r^2 - dmin^2) / 2 sigma^2) (a common factor, which
+ * cancels in every normalised moment, avoids underflow far from nodes).
+ * dmin is searched within Rs = max(3 sigma, sigma + taper) (3 sigma first,
+ * the cheap common case); the fit uses the nodes within
+ * min(Rs, dmin + 3 sigma) (relative weight >= exp(-4.5), as the plain 3 sigma
+ * cut-off had).  Returns 0 (and out = 0) when no node is within Rs.
+ */
+typedef struct mls_acc {
+	double S0, S1[3], S2[3][3], R0[3], R1[3][3], dmax2;
+} mls_acc_t;
+
+/* visit the nodes within radius R of y: acc NULL -> *rmin2 = min r^2,
+ * else accumulate the weighted moments with w = exp(-(r^2 - rmin2) is2) */
+static void mls_scan(const buckets_t *b, const double *xyz, const double *vec,
+		     const double y[3], double R, double is2, double *rmin2,
+		     mls_acc_t *acc)
+{
+	const double R2 = R * R;
 	int cl[3];
 	for (int a = 0; a < 3; a++)
 		cl[a] = (int)floor((y[a] - b->lo[a]) / b->cell);
 	int span = (int)ceil(R / b->cell);
-	double S0 = 0, S1[3] = { 0 }, S2[3][3] = { { 0 } }, R0[3] = { 0 },
-	       R1[3][3] = { { 0 } };
 	for (int cz = cl[2] - span; cz <= cl[2] + span; cz++) {
 		if (cz < 0 || cz >= b->n[2])
 			continue;
@@ -1059,73 +1100,126 @@ static int mls_at(const buckets_t *b, const double *xyz, const double *vec,
 					double r2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2];
 					if (r2 > R2)
 						continue;
-					double w = exp(-r2 * is2);
+					if (!acc) {
+						if (r2 < *rmin2)
+							*rmin2 = r2;
+						continue;
+					}
+					double w = exp(-(r2 - *rmin2) * is2);
 					const double *d = vec + 3 * p;
-					S0 += w;
+					double dn2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+					if (dn2 > acc->dmax2)
+						acc->dmax2 = dn2;
+					acc->S0 += w;
 					for (int a = 0; a < 3; a++) {
-						S1[a] += w * q[a];
-						R0[a] += w * d[a];
+						acc->S1[a] += w * q[a];
+						acc->R0[a] += w * d[a];
 						for (int bb = 0; bb < 3; bb++) {
-							S2[a][bb] += w * q[a] * q[bb];
-							R1[a][bb] += w * q[a] * d[bb];
+							acc->S2[a][bb] += w * q[a] * q[bb];
+							acc->R1[a][bb] += w * q[a] * d[bb];
 						}
 					}
 				}
 			}
 		}
 	}
-	if (!(S0 > 1e-300))
+}
+
+static int mls_at(const buckets_t *b, const double *xyz, const double *vec,
+		  const double y[3], double sigma, double taper, double out[3])
+{
+	const double Rs = fmax(3 * sigma, sigma + taper),
+		     is2 = 0.5 / (sigma * sigma);
+	out[0] = out[1] = out[2] = 0;
+	double rmin2 = DBL_MAX;
+	mls_scan(b, xyz, vec, y, 3 * sigma, is2, &rmin2, NULL);
+	if (rmin2 > 9 * sigma * sigma && Rs > 3 * sigma)
+		mls_scan(b, xyz, vec, y, Rs, is2, &rmin2, NULL);
+	if (rmin2 > Rs * Rs)
+		return 0;
+	const double dmin = sqrt(rmin2);
+	mls_acc_t A;
+	memset(&A, 0, sizeof A);
+	mls_scan(b, xyz, vec, y, fmin(Rs, dmin + 3 * sigma), is2, &rmin2, &A);
+	if (!(A.S0 > 0))
 		return 0;
 	double m[3], md[3], C[3][3], X[3][3];
 	for (int a = 0; a < 3; a++) {
-		m[a] = S1[a] / S0;
-		md[a] = R0[a] / S0;
+		m[a] = A.S1[a] / A.S0;
+		md[a] = A.R0[a] / A.S0;
 	}
 	for (int a = 0; a < 3; a++)
 		for (int bb = 0; bb < 3; bb++) {
-			C[a][bb] = S2[a][bb] / S0 - m[a] * m[bb];
-			X[a][bb] = R1[a][bb] / S0 - m[a] * md[bb];
+			C[a][bb] = A.S2[a][bb] / A.S0 - m[a] * m[bb];
+			X[a][bb] = A.R1[a][bb] / A.S0 - m[a] * md[bb];
 		}
 	double tr = C[0][0] + C[1][1] + C[2][2];
 	double det = C[0][0] * (C[1][1] * C[2][2] - C[1][2] * C[2][1]) -
 		     C[0][1] * (C[1][0] * C[2][2] - C[1][2] * C[2][0]) +
 		     C[0][2] * (C[1][0] * C[2][1] - C[1][1] * C[2][0]);
 	double t3 = tr / 3;
-	if (!(tr > 1e-12) || !(det > 1e-6 * t3 * t3 * t3)) {
-		/* points do not span 3-D: weighted mean (Shepard) */
-		memcpy(out, md, sizeof md);
-		return 1;
+	double beta = 0, lin[3] = { 0 };
+	if (tr > 1e-12 * sigma * sigma) {
+		double cond = det / (t3 * t3 * t3);
+		double rho = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]) /
+			     sqrt(t3);
+		beta = (1 - smoothstep(rho, 1.5, 2.5)) *
+		       smoothstep(cond, 1e-4, 1e-2);
 	}
-	double Ci[3][3];
-	Ci[0][0] = (C[1][1] * C[2][2] - C[1][2] * C[2][1]) / det;
-	Ci[0][1] = (C[0][2] * C[2][1] - C[0][1] * C[2][2]) / det;
-	Ci[0][2] = (C[0][1] * C[1][2] - C[0][2] * C[1][1]) / det;
-	Ci[1][0] = (C[1][2] * C[2][0] - C[1][0] * C[2][2]) / det;
-	Ci[1][1] = (C[0][0] * C[2][2] - C[0][2] * C[2][0]) / det;
-	Ci[1][2] = (C[0][2] * C[1][0] - C[0][0] * C[1][2]) / det;
-	Ci[2][0] = (C[1][0] * C[2][1] - C[1][1] * C[2][0]) / det;
-	Ci[2][1] = (C[0][1] * C[2][0] - C[0][0] * C[2][1]) / det;
-	Ci[2][2] = (C[0][0] * C[1][1] - C[0][1] * C[1][0]) / det;
-	/* gradient G[a][c] = d d_c / d q_a = (C^-1 X)[a][c];
-	 * value at q = 0: md - G^T m */
-	for (int c = 0; c < 3; c++) {
-		double v = md[c];
-		for (int a = 0; a < 3; a++) {
-			double G = 0;
-			for (int bb = 0; bb < 3; bb++)
-				G += Ci[a][bb] * X[bb][c];
-			v -= G * m[a];
+	if (beta > 0) {
+		double Ci[3][3];
+		Ci[0][0] = (C[1][1] * C[2][2] - C[1][2] * C[2][1]) / det;
+		Ci[0][1] = (C[0][2] * C[2][1] - C[0][1] * C[2][2]) / det;
+		Ci[0][2] = (C[0][1] * C[1][2] - C[0][2] * C[1][1]) / det;
+		Ci[1][0] = (C[1][2] * C[2][0] - C[1][0] * C[2][2]) / det;
+		Ci[1][1] = (C[0][0] * C[2][2] - C[0][2] * C[2][0]) / det;
+		Ci[1][2] = (C[0][2] * C[1][0] - C[0][0] * C[1][2]) / det;
+		Ci[2][0] = (C[1][0] * C[2][1] - C[1][1] * C[2][0]) / det;
+		Ci[2][1] = (C[0][1] * C[2][0] - C[0][0] * C[2][1]) / det;
+		Ci[2][2] = (C[0][0] * C[1][1] - C[0][1] * C[1][0]) / det;
+		/* gradient G[a][c] = d d_c / d q_a = (C^-1 X)[a][c];
+		 * value at q = 0: md - G^T m */
+		for (int c = 0; c < 3; c++) {
+			double v = md[c];
+			for (int a = 0; a < 3; a++) {
+				double G = 0;
+				for (int bb = 0; bb < 3; bb++)
+					G += Ci[a][bb] * X[bb][c];
+				v -= G * m[a];
+			}
+			lin[c] = v;
 		}
-		out[c] = v;
 	}
+	double v[3], vn2 = 0;
+	for (int c = 0; c < 3; c++) {
+		v[c] = beta * lin[c] + (1 - beta) * md[c];
+		vn2 += v[c] * v[c];
+	}
+	double sc = vn2 > A.dmax2 ? sqrt(A.dmax2 / vn2) : 1;
+	sc *= 1 - smoothstep(dmin, sigma, sigma + taper);
+	for (int c = 0; c < 3; c++)
+		out[c] = v[c] * sc;
 	return 1;
 }
 
 int field_from_points(const double *xyz, const double *vec, int64_t n,
-		      double sigma_mm, fimg_t *out, int64_t *n_unsupported,
-		      int nthreads)
+		      double sigma_mm, double taper_mm, fimg_t *out,
+		      int64_t *n_unsupported, int nthreads)
 {
-	if (!out || out->nc != 3 || !(sigma_mm > 0) || n < 0 ||
+	if (taper_mm == 0) {
+		/* auto: 2 sigma, and at least 3 x the largest nodal |d|, so the
+		 * taper's gradient (<= 1.5 |d| / taper for the smoothstep) stays
+		 * <= 0.5 and cannot fold the field */
+		taper_mm = 2 * sigma_mm;
+		for (int64_t p = 0; p < n && vec; p++) {
+			const double *d = vec + 3 * p;
+			double dn = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+			if (3 * dn > taper_mm)
+				taper_mm = 3 * dn;
+		}
+	}
+	if (!out || out->nc != 3 || !(sigma_mm > 0) || !(taper_mm > 0) ||
+	    !isfinite(taper_mm) || n < 0 ||
 	    (n > 0 && (!xyz || !vec)))
 		return ARMSTG_EINVAL;
 	const fgrid_t *g = &out->g;
@@ -1154,13 +1248,11 @@ int field_from_points(const double *xyz, const double *vec, int64_t n,
 	const int64_t cnv = fgrid_nvox(&cg);
 	double *cv = malloc(sizeof(double) * (size_t)cnv * 3);
 	uint8_t *ok = malloc((size_t)cnv);
-	uint8_t *ok2 = malloc((size_t)cnv);
 	buckets_t b;
 	int rc = buckets_build(&b, xyz, n, 3 * sigma_mm);
-	if (!cv || !ok || !ok2 || rc) {
+	if (!cv || !ok || rc) {
 		free(cv);
 		free(ok);
-		free(ok2);
 		buckets_free(&b);
 		return ARMSTG_ENOMEM;
 	}
@@ -1170,51 +1262,10 @@ int field_from_points(const double *xyz, const double *vec, int64_t n,
 				(double)(e / ((int64_t)cn[0] * cn[1])) },
 		       y[3];
 		aff_apply(cg.v2w, p, y);
-		ok[e] = (uint8_t)mls_at(&b, xyz, vec, y, sigma_mm, cv + 3 * e);
-		if (!ok[e])
-			cv[3 * e] = cv[3 * e + 1] = cv[3 * e + 2] = 0;
+		ok[e] = (uint8_t)mls_at(&b, xyz, vec, y, sigma_mm, taper_mm,
+					cv + 3 * e);
 	}
 	buckets_free(&b);
-	/* extension into unsupported nodes: average of filled 6-neighbours,
-	 * layer by layer */
-	memcpy(ok2, ok, (size_t)cnv);
-	const int64_t cs[3] = { 1, cn[0], (int64_t)cn[0] * cn[1] };
-	int64_t any_ok = 0;
-	for (int64_t e = 0; e < cnv; e++)
-		any_ok += ok[e];
-	for (int changed = any_ok > 0; changed;) {
-		changed = 0;
-		for (int64_t e = 0; e < cnv; e++) {
-			if (ok2[e])
-				continue;
-			int64_t idx[3] = { e % cn[0], e / cn[0] % cn[1],
-					   e / ((int64_t)cn[0] * cn[1]) };
-			double s[3] = { 0 };
-			int m = 0;
-			for (int a = 0; a < 3; a++)
-				for (int dd = -1; dd <= 1; dd += 2) {
-					int64_t q = idx[a] + dd;
-					if (q < 0 || q >= cn[a])
-						continue;
-					int64_t o = e + dd * cs[a];
-					if (ok2[o] != 1)
-						continue;
-					for (int c = 0; c < 3; c++)
-						s[c] += cv[3 * o + c];
-					m++;
-				}
-			if (m) {
-				for (int c = 0; c < 3; c++)
-					cv[3 * e + c] = s[c] / m;
-				ok2[e] = 2; /* filled in this pass */
-				changed = 1;
-			}
-		}
-		for (int64_t e = 0; e < cnv; e++)
-			if (ok2[e] == 2)
-				ok2[e] = 1;
-	}
-	free(ok2);
 	/* trilinear refinement onto the output grid (exact for linear) */
 	int64_t nuns = 0;
 #pragma omp parallel for num_threads(NT(nthreads)) schedule(static) \

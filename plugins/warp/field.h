@@ -188,18 +188,26 @@ int fimg_jacobian(const fimg_t *u, fimg_t *out, field_jac_stats_t *stats,
 /*
  * Dense field from scattered displacements: at each voxel centre y of out
  * (nc 3), a local weighted least-squares fit of an affine function
- * d(p) = a + B (p - y) to the points within 3 sigma with Gaussian weights
+ * d(p) = a + B (p - y) to the points near y with Gaussian weights
  * exp(-|p-y|^2 / 2 sigma^2) (moving least squares of order 1, so any
- * linear field is reproduced exactly); where the points do not span 3-D it
- * falls back to the weighted mean.  It is evaluated on a grid coarser by
+ * linear field is reproduced exactly where y is surrounded by points).
+ * Where the fit would extrapolate (points one-sided: weighted centroid more
+ * than ~1.5 weighted spreads away from y, or not spanning 3-D) it blends
+ * smoothly into the weighted mean (Shepard, order 0); |value| is capped at
+ * the largest nodal |d| nearby; and the result is tapered by
+ * 1 - smoothstep(dmin; sigma, sigma + taper_mm), dmin = distance from y to
+ * the nearest point, so it is exactly 0 farther than sigma + taper_mm from
+ * every point (taper_mm 0: auto, max(2 sigma, 3 x max nodal |d|), which
+ * keeps the taper's gradient <= 0.5 so it cannot fold the field).  Points within
+ * max(3 sigma, sigma + taper_mm) are used.  Evaluated on a grid coarser by
  * an integer factor (spacing <= sigma/2) and trilinearly refined, which
- * keeps linear fields exact.  Voxels with no point within 3 sigma are
- * filled by repeated averaging of filled neighbours (extension) and counted
- * in *n_unsupported.  xyz, vec: n*3 interleaved world mm.
+ * keeps linear fields exact.  *n_unsupported counts voxels whose nearest
+ * coarse node has no point within the search radius (value 0 there).
+ * xyz, vec: n*3 interleaved world mm.
  */
 int field_from_points(const double *xyz, const double *vec, int64_t n,
-		      double sigma_mm, fimg_t *out, int64_t *n_unsupported,
-		      int nthreads);
+		      double sigma_mm, double taper_mm, fimg_t *out,
+		      int64_t *n_unsupported, int nthreads);
 
 /* max over voxels of |u| in mm, and of |u| in voxels (via the affine). */
 void fimg_field_maxnorm(const fimg_t *u, double *max_mm, double *max_vox);

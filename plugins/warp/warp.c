@@ -21,7 +21,8 @@
  *   exp          field (a stationary velocity) -> its exponential (scaling
  *                and squaring).
  *   from_points  points (attribute `attr`, 3 components) + reference ->
- *                field on reference (moving least squares, sigma mm).
+ *                field on reference (moving least squares, sigma mm;
+ *                extrapolation guarded, tapered to 0 over taper mm).
  *   jacobian     field -> volume det(I + du/dx), table min/max/mean/folds.
  */
 #include <math.h>
@@ -50,6 +51,7 @@ typedef struct warp_priv {
 	int max_iter;
 	double tol;
 	double sigma;
+	double taper;
 	const char *attr;
 	int points_are;
 } warp_priv_t;
@@ -97,6 +99,12 @@ static const armstg_param_t warp_params[] = {
 	{ "sigma", PT_DOUBLE, "5", 0.01, 1000, "mm",
 	  "from_points: Gaussian width of the moving least-squares weights "
 	  "(use about 1.5x the point spacing)", NULL, OFF(sigma), 0 },
+	{ "taper", PT_DOUBLE, "0", 0, 1e4, "mm",
+	  "from_points: beyond sigma from the nearest point the field falls "
+	  "smoothly to 0 over this distance (0: auto = max(2 x sigma, "
+	  "3 x largest point |d|), shorter than ~1.5 |d| folds); where the points "
+	  "are one-sided the fit becomes a bounded weighted mean",
+	  NULL, OFF(taper), 0 },
 	{ "attr", PT_STRING, "u", 0, 0, "",
 	  "from_points: name of the 3-component displacement attribute", NULL,
 	  OFF(attr), 0 },
@@ -344,7 +352,8 @@ static int do_points(armstg_stage_t *st, warp_priv_t *p, int nt)
 		goto fail;
 	h->progress(st, 0, "dense field from %lld points, sigma %g mm",
 		    (long long)ps->n, p->sigma);
-	if ((rc = field_from_points(xyz, vec, ps->n, p->sigma, &o, &nuns, nt)))
+	if ((rc = field_from_points(xyz, vec, ps->n, p->sigma, p->taper, &o,
+				    &nuns, nt)))
 		goto fail;
 	out = h->vol_new(g.nx, g.ny, g.nz, 3, DT_F32, ref->affine);
 	t = one_row(st, &row);
@@ -359,8 +368,8 @@ static int do_points(armstg_stage_t *st, warp_priv_t *p, int nt)
 		       (double)nuns / (double)fgrid_nvox(&g));
 	if (nuns)
 		h->log(st, LOG_INFO,
-		       "%lld voxels (%.1f%%) have no point within 3 sigma: "
-		       "filled by extension", (long long)nuns,
+		       "%lld voxels (%.1f%%) are beyond the taper from every "
+		       "point: field 0 there", (long long)nuns,
 		       100.0 * (double)nuns / (double)fgrid_nvox(&g));
 	fimg_free(&o);
 	free(xyz);

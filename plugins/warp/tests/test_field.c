@@ -436,7 +436,7 @@ static void test_from_points_linear(void **state)
 	fimg_t u;
 	fimg_alloc(&u, &g, 3);
 	int64_t nun = -1;
-	assert_int_equal(field_from_points(xyz, vec, n, 4.0, &u, &nun, 2), 0);
+	assert_int_equal(field_from_points(xyz, vec, n, 4.0, 0, &u, &nun, 2), 0);
 	int64_t nv = fgrid_nvox(&g);
 	double maxerr = 0;
 	for (int64_t e = 0; e < nv; e++) {
@@ -452,17 +452,34 @@ static void test_from_points_linear(void **state)
 	print_message("from_points: %lld points, linear field max err %.2e mm, "
 		      "%lld unsupported\n", (long long)n, maxerr, (long long)nun);
 	assert_int_equal(nun, 0);
-	assert_true(maxerr < 1e-3);
+	assert_true(maxerr < 1e-5);
 	/* no points at all: zero field, every voxel unsupported */
-	assert_int_equal(field_from_points(NULL, NULL, 0, 4.0, &u, &nun, 2), 0);
+	assert_int_equal(field_from_points(NULL, NULL, 0, 4.0, 0, &u, &nun, 2),
+			 0);
 	assert_int_equal(nun, nv);
-	/* a single cluster far inside: the rest is extended, not NaN */
-	assert_int_equal(field_from_points(xyz + 3 * (n / 2), vec + 3 * (n / 2),
-					   1, 2.0, &u, &nun, 2), 0);
+	/* a single point (voxel 15,15,15 +- jitter) inside: its value (order 0) within sigma, zero
+	 * beyond sigma + taper (2 + 3 mm), never NaN */
+	const double *p1 = xyz + 3 * (n / 2 + 90), *v1 = vec + 3 * (n / 2 + 90);
+	assert_int_equal(field_from_points(p1, v1, 1, 2.0, 3.0, &u, &nun, 2), 0);
 	assert_true(nun > nv / 2);
-	for (int64_t e = 0; e < nv * 3; e++)
-		assert_true(isfinite(u.d[e]));
-	assert_float_equal(u.d[0], vec[3 * (n / 2)], 1e-4);
+	int64_t nnear = 0;
+	for (int64_t e = 0; e < nv; e++) {
+		double w[3];
+		world(&g, e, w);
+		double r = sqrt((w[0] - p1[0]) * (w[0] - p1[0]) +
+				(w[1] - p1[1]) * (w[1] - p1[1]) +
+				(w[2] - p1[2]) * (w[2] - p1[2]));
+		for (int c = 0; c < 3; c++) {
+			assert_true(isfinite(u.d[e + c * nv]));
+			if (r > 2.0 + 3.0)
+				assert_float_equal(u.d[e + c * nv], 0, 0);
+			if (r < 1.0) {
+				assert_float_equal(u.d[e + c * nv], v1[c], 1e-4);
+				nnear++;
+			}
+		}
+	}
+	assert_true(nnear >= 3);
 	free(xyz);
 	free(vec);
 	fimg_free(&u);
@@ -510,6 +527,209 @@ static void test_labels(void **state)
 	fimg_free(&out);
 }
 
+/* max over points of |vec| */
+static double max_norm3(const double *vec, int64_t n)
+{
+	double m = 0;
+	for (int64_t p = 0; p < n; p++)
+		m = fmax(m, sqrt(vec[3 * p] * vec[3 * p] +
+				 vec[3 * p + 1] * vec[3 * p + 1] +
+				 vec[3 * p + 2] * vec[3 * p + 2]));
+	return m;
+}
+
+/* jittered lattice (spacing h mm, jitter +-0.25 h) of world points kept by
+ * keep(); value = Fb + s * FB (w - c) */
+static int64_t lattice(double lo, double hi, double h, const double c[3],
+		       double s, int (*keep)(const double *, const double *),
+		       double *xyz, double *vec, int64_t cap)
+{
+	int64_t n = 0;
+	unsigned st = 777;
+	for (double z = lo; z <= hi; z += h)
+		for (double y = lo; y <= hi; y += h)
+			for (double x = lo; x <= hi; x += h) {
+				double w[3] = { x, y, z };
+				for (int a = 0; a < 3; a++) {
+					st = st * 1103515245u + 12345u;
+					w[a] += c[a] + h * (((st >> 8) % 1000) /
+							    1000.0 - 0.5) * 0.5;
+				}
+				if (!keep(w, c) || n >= cap)
+					continue;
+				memcpy(xyz + 3 * n, w, sizeof w);
+				for (int k = 0; k < 3; k++) {
+					double v = Fb[k];
+					for (int d = 0; d < 3; d++)
+						v += s * FB[k][d] * (w[d] - c[d]);
+					vec[3 * n + k] = v;
+				}
+				n++;
+			}
+	return n;
+}
+
+static double dist3(const double a[3], const double b[3])
+{
+	return sqrt((a[0] - b[0]) * (a[0] - b[0]) +
+		    (a[1] - b[1]) * (a[1] - b[1]) +
+		    (a[2] - b[2]) * (a[2] - b[2]));
+}
+
+#define BALL_R 16.0
+static int in_ball(const double *w, const double *c)
+{
+	return dist3(w, c) <= BALL_R;
+}
+
+static int in_slab(const double *w, const double *c)
+{
+	return w[0] - c[0] <= 0 && w[0] - c[0] >= -12;
+}
+
+/*
+ * Nodes (spacing 3 mm) filling a ball of radius 16 mm with a linear field
+ * (|u| up to ~3.2 mm), sigma 4, taper 0 = auto = max(8, 3 x 3.2) mm on an oblique
+ * LAS grid of 64^3 x 1 mm: (a) exact (< 1e-5 mm) inside r < R - sigma;
+ * (b) |u| <= max nodal |u| everywhere; (c) |u| = 0 beyond
+ * R + sigma + taper + 4.25 mm, and the shell maxima decay monotonically
+ * beyond R + sigma; (d) no folding anywhere (the old extension made
+ * det J ~ -1e5 at the cloud edge in the pipeline).
+ */
+static void test_from_points_ball(void **state)
+{
+	(void)state;
+	fgrid_t g;
+	grid_of(&g, 64, 64, 64, 1.0, 0.2);
+	double cv[3] = { 31.5, 31.5, 31.5 }, c[3];
+	aff_apply(g.v2w, cv, c);
+	int64_t cap = 20000;
+	double *xyz = malloc(sizeof(double) * 3 * cap),
+	       *vec = malloc(sizeof(double) * 3 * cap);
+	int64_t n = lattice(-18, 18, 3.0, c, 1.0, in_ball, xyz, vec, cap);
+	double umax = max_norm3(vec, n);
+	fimg_t u, J;
+	fimg_alloc(&u, &g, 3);
+	fimg_alloc(&J, &g, 1);
+	int64_t nun = -1;
+	assert_int_equal(field_from_points(xyz, vec, n, 4.0, 0, &u, &nun, 2), 0);
+	int64_t nv = fgrid_nvox(&g);
+	double err_in = 0, max_out = 0, max_far = 0, shell[64] = { 0 };
+	for (int64_t e = 0; e < nv; e++) {
+		double w[3];
+		world(&g, e, w);
+		double r = dist3(w, c), un = 0;
+		for (int k = 0; k < 3; k++) {
+			double v = Fb[k];
+			for (int d = 0; d < 3; d++)
+				v += FB[k][d] * (w[d] - c[d]);
+			double f = u.d[e + k * nv];
+			un += f * f;
+			if (r < BALL_R - 4.0)
+				err_in = fmax(err_in, fabs(f - v));
+		}
+		un = sqrt(un);
+		max_out = fmax(max_out, un);
+		/* + jitter 0.75 + coarse-grid (2 mm) trilinear blur 3.5 */
+		if (r > BALL_R + 4.0 + fmax(8.0, 3 * umax) + 4.25)
+			max_far = fmax(max_far, un);
+		int sh = (int)r;
+		if (sh < 64)
+			shell[sh] = fmax(shell[sh], un);
+	}
+	field_jac_stats_t js;
+	assert_int_equal(fimg_jacobian(&u, &J, &js, 2), 0);
+	print_message("from_points ball: %lld nodes, max nodal |u| %.3f mm, "
+		      "inside err %.2e mm, max |u| %.3f mm, max |u| beyond "
+		      "R+sigma+taper %.3g mm, det J [%.3f, %.3f], %lld folded\n",
+		      (long long)n, umax, err_in, max_out, max_far, js.min,
+		      js.max, (long long)js.n_nonpositive);
+	for (int sh = 20; sh < 36; sh++)
+		print_message("  shell r=%d mm: max |u| %.3f\n", sh, shell[sh]);
+	assert_true(err_in < 1e-5);
+	assert_true(max_out <= umax * (1 + 1e-5));
+	assert_float_equal(max_far, 0, 0);
+	for (int sh = (int)(BALL_R + 4.0); sh < 40; sh++)
+		assert_true(shell[sh + 1] <= shell[sh] + 1e-6);
+	assert_true(shell[(int)BALL_R + 6] < 0.9 * umax); /* it does decay */
+	assert_int_equal(js.n_nonpositive, 0);
+	assert_true(js.min > 0.3);
+	free(xyz);
+	free(vec);
+	fimg_free(&u);
+	fimg_free(&J);
+}
+
+/*
+ * One-sided slab of nodes (12 mm thick, spacing 2 mm) whose linear field
+ * u = (0.5, -0.3, 2 + 0.3 dx) grows towards the free face dx = 0 (|u| 2.08
+ * there, 1.7 at the back): a linear extrapolation would reach 3.5 mm at
+ * dx = 5 mm; the field must stay
+ * <= 1.01 x max nodal |u| everywhere, be 0 beyond sigma + taper from the
+ * face, and not fold.  Same with an explicit taper of 12 mm (> 3 sigma,
+ * so the search radius grows to sigma + taper).
+ */
+static void test_from_points_slab(void **state)
+{
+	(void)state;
+	fgrid_t g;
+	grid_of(&g, 56, 48, 40, 1.0, 0.3);
+	double cv[3] = { 27.5, 23.5, 19.5 }, c[3];
+	aff_apply(g.v2w, cv, c);
+	int64_t cap = 40000;
+	double *xyz = malloc(sizeof(double) * 3 * cap),
+	       *vec = malloc(sizeof(double) * 3 * cap);
+	int64_t n = lattice(-34, 34, 2.0, c, 0.0, in_slab, xyz, vec, cap);
+	for (int64_t p = 0; p < n; p++) { /* u = (0.5, -0.3, 2 + 0.3 dx) */
+		vec[3 * p] = 0.5;
+		vec[3 * p + 1] = -0.3;
+		vec[3 * p + 2] = 2 + 0.3 * (xyz[3 * p] - c[0]);
+	}
+	double umax = max_norm3(vec, n);
+	fimg_t u, J;
+	fimg_alloc(&u, &g, 3);
+	fimg_alloc(&J, &g, 1);
+	const double taper[2] = { 0, 12.0 }, sigma = 3.0;
+	for (int it = 0; it < 2; it++) {
+		double tp = taper[it] > 0 ? taper[it] : fmax(2 * sigma, 3 * umax);
+		int64_t nun = -1;
+		assert_int_equal(field_from_points(xyz, vec, n, sigma, taper[it],
+						   &u, &nun, 2), 0);
+		int64_t nv = fgrid_nvox(&g);
+		double max_all = 0, max_far = 0;
+		for (int64_t e = 0; e < nv; e++) {
+			double w[3], un = 0;
+			world(&g, e, w);
+			for (int k = 0; k < 3; k++)
+				un += (double)u.d[e + k * nv] * u.d[e + k * nv];
+			un = sqrt(un);
+			max_all = fmax(max_all, un);
+			double dx = w[0] - c[0]; /* distance past the free face */
+			/* + jitter 0.5 + coarse (1 mm) blur 1.8 */
+			if (dx > sigma + tp + 2.3 || dx < -12 - sigma - tp - 2.3)
+				max_far = fmax(max_far, un);
+		}
+		field_jac_stats_t js;
+		assert_int_equal(fimg_jacobian(&u, &J, &js, 2), 0);
+		print_message("from_points slab (taper %g mm): %lld nodes, max "
+			      "nodal |u| %.3f mm, max |u| %.3f mm (ratio %.4f), "
+			      "beyond taper %.3g mm, det J [%.3f, %.3f], %lld "
+			      "folded\n", tp, (long long)n, umax, max_all,
+			      max_all / umax, max_far, js.min, js.max,
+			      (long long)js.n_nonpositive);
+		assert_true(max_all <= umax * 1.01);
+		assert_float_equal(max_far, 0, 0);
+		assert_int_equal(js.n_nonpositive, 0);
+	}
+	/* negative taper refused */
+	assert_int_equal(field_from_points(xyz, vec, n, sigma, -1, &u, NULL, 2),
+			 ARMSTG_EINVAL);
+	free(xyz);
+	free(vec);
+	fimg_free(&u);
+	fimg_free(&J);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -520,6 +740,8 @@ int main(void)
 		cmocka_unit_test(test_exp),
 		cmocka_unit_test(test_smooth),
 		cmocka_unit_test(test_from_points_linear),
+		cmocka_unit_test(test_from_points_ball),
+		cmocka_unit_test(test_from_points_slab),
 		cmocka_unit_test(test_labels),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);

@@ -302,6 +302,61 @@ static void test_modes(void **state)
 		msg_unref(&ps->base);
 		msg_unref(&ref->base);
 	}
+	/* from_points, field, points (2 mm lattice) only in the slab
+	 * z <= 8.5 mm, sigma 3, taper 3: the constant value where z <= 9
+	 * (nearest point <= 1.5 mm < sigma), exactly 0 beyond
+	 * z = 8.5 + sigma + taper = 14.5 mm (no longer extended as a
+	 * constant), strictly between at z = 12 (3.5 mm > sigma), and voxels
+	 * with z > 8.5 + 3 sigma = 17.5 mm reported unsupported (LPS z = k:
+	 * 12 of 30 slices) */
+	{
+		ps_t *ps = ps_new(27 * 27 * 9);
+		double *u = ps_add_attr(ps, "u", 3);
+		int64_t n = 0;
+		for (int k = -8; k <= 8 && n < ps->n; k += 2)
+			for (int j = -8; j < 46 && n < ps->n; j += 2)
+				for (int i = -8; i < 46 && n < ps->n; i += 2) {
+					ps->xyz[3 * n] = -i;
+					ps->xyz[3 * n + 1] = j;
+					ps->xyz[3 * n + 2] = k + 0.5;
+					u[3 * n] = 1.5;
+					u[3 * n + 1] = -0.5;
+					u[3 * n + 2] = 2;
+					n++;
+				}
+		assert_int_equal(n, ps->n);
+		vol_t *ref = mk_img(A_LPS);
+		const char *p[] = { "mode=from_points", "sigma=3", "taper=3",
+				    "points_are=field", NULL };
+		const msg_t *in[5] = { NULL, NULL, NULL, &ps->base, &ref->base };
+		tab_t *t = run_mode(p, in, out);
+		assert_float_equal(tab_num(t, "unsupported_voxels"),
+				   12.0 * N * N, 0);
+		vol_t *o = (vol_t *)out[OUT_FIELD];
+		int64_t nv = vol_nvox(o);
+		const float *d = o->data;
+		for (int k = 0; k < N; k++)
+			for (int e = k * N * N; e < (k + 1) * N * N; e++) {
+				if (k <= 9) {
+					assert_float_equal(d[e], 1.5, 1e-5);
+					assert_float_equal(d[e + nv], -0.5, 1e-5);
+					assert_float_equal(d[e + 2 * nv], 2, 1e-5);
+				} else if (k >= 15) {
+					assert_float_equal(d[e], 0, 0);
+					assert_float_equal(d[e + 2 * nv], 0, 0);
+				} else { /* taper */
+					assert_true(d[e + 2 * nv] >= 0 &&
+						    d[e + 2 * nv] <= 2 + 1e-5);
+					if (k == 12)
+						assert_true(d[e + 2 * nv] > 0.01 &&
+							    d[e + 2 * nv] < 1.99);
+				}
+			}
+		msg_unref(out[OUT_FIELD]);
+		msg_unref(out[OUT_TABLE]);
+		msg_unref(&ps->base);
+		msg_unref(&ref->base);
+	}
 	msg_unref(&f->base);
 }
 
