@@ -21,7 +21,10 @@
  *                integration point; the values listed in csf_labels are
  *                ventricles/sulci, every other value brain parenchyma.
  *                Without it the material of an integration point is that of
- *                its nearest node (label 2: CSF, else parenchyma).
+ *                its nearest node (label 2: CSF, else parenchyma).  With it
+ *                the integration points are only those inside the brain
+ *                (label > 0 at the nearest voxel, tled_labels.h); without
+ *                it the default domain test of tled_model.c.
  * out  nodes     the input nodes (same order, input attributes kept) with
  *                attribute u (x3, mm: the displacement, reference -> grown)
  *                and the final labels (below)
@@ -34,7 +37,7 @@
  *      stats     one row per growth step: step, layer, iterations,
  *                converged, dt_s, dt_crit_s, kinetic_energy_J,
  *                strain_energy_J, residual_N, err_est_mm, jmin, driven,
- *                swept, contacts, wall_s
+ *                swept, collocated, contacts, integration_points, wall_s
  *
  * Growth replay (thesis section 3.6, in 3-D).  Layers are replayed from the
  * innermost to layer 0.  At the innermost layer of a component the tumour
@@ -64,6 +67,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "tled_labels.h"
 #include "tled_solve.h"
 
 typedef struct priv {
@@ -543,6 +547,22 @@ static int tled_process(armstg_stage_t *st)
 	mo.nthreads = H->threads(st);
 	mo.material = mat_of;
 	mo.material_ctx = &mc;
+	/* with the labels connected, the integration domain is the brain of
+	 * the atlas (label > 0 at the nearest voxel): the default test (near
+	 * the nodes, inner side of the boundary normals) admits background
+	 * cells just outside the brain surface, whose points sample
+	 * extrapolated shape functions and invert first (phantom seeds 2-5,
+	 * bench/tled/results.md) */
+	tled_labctx_t lc;
+	if (lv) {
+		if (tled_labctx_init(&lc, lv)) {
+			rc = H->fail(st, ARMSTG_EINVAL, "input 'labels' has a "
+				     "singular affine");
+			goto out;
+		}
+		mo.inside = tled_labels_inside;
+		mo.inside_ctx = &lc;
+	}
 	/* drive = nodal (default): the legacy driving (nodal parameters of
 	 * fixed and driven nodes prescribed; derivative correction target
 	 * 0).  Stable, but u^h at driven nodes lags the prescribed values, so
@@ -875,6 +895,7 @@ static int tled_process(armstg_stage_t *st)
 		H->tab_set_num(tab, row, "swept", (double)swept);
 		H->tab_set_num(tab, row, "collocated", (double)ncol);
 		H->tab_set_num(tab, row, "contacts", (double)rs.contacts);
+		H->tab_set_num(tab, row, "integration_points", (double)m.nip);
 		H->tab_set_num(tab, row, "wall_s", wall);
 		H->progress(st, (step + 1.0) / (lmax + 1), "growth step %d/%d "
 			    "(layer %d): %d iterations, %lld tumour nodes",

@@ -965,7 +965,35 @@ static int default_inside(const tled_model_t *m, const tled_grid_t *ng,
 		return 0;
 	if (d2 > m->h_mean * m->h_mean)
 		return 0;
-	return !(tled_boundary_side(m, x, NULL) > 0);
+	if (tled_boundary_side(m, x, NULL) > 0)
+		return 0;
+	if (m->nb < 4)
+		return 1;
+	/* tighter than the nearest tangent plane alone (which admits
+	 * points beyond the surface where the nearest boundary node is not
+	 * the one facing x): x must also lie on the inner side of the mean
+	 * tangent plane of its 4 nearest boundary nodes, and within half a
+	 * node spacing outside any single one of them */
+	int64_t bid[4];
+	double bd2[4];
+	int k = tled_grid_knn(&m->bgrid, x, 4, -1, bid, bd2);
+	double mean = 0;
+	for (int i = 0; i < k; i++) {
+		const double *p = m->bX + 3 * bid[i], *nn = m->bn + 3 * bid[i];
+		double sd = (x[0] - p[0]) * nn[0] + (x[1] - p[1]) * nn[1] +
+			    (x[2] - p[2]) * nn[2];
+		if (sd > 0.5 * m->h_mean)
+			return 0;
+		mean += sd / k;
+	}
+	return !(mean > 0);
+}
+
+static int ip_inside(const tled_model_t *m, const tled_grid_t *ng,
+		     const tled_model_opts_t *o, const double x[3])
+{
+	return o->inside ? o->inside(x, o->inside_ctx) != 0
+			 : default_inside(m, ng, x);
 }
 
 int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
@@ -1189,8 +1217,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 				double x[3] = { lo[0] + (i + f[0]) * h,
 						lo[1] + (j + f[1]) * h,
 						lo[2] + (k + f[2]) * h };
-				cnt += o->inside ? o->inside(x, o->inside_ctx) != 0
-						 : default_inside(m, &ng, x);
+				cnt += ip_inside(m, &ng, o, x);
 			}
 			okip[t] = cnt == 9 ? 1 : cnt > 0 ? 2 : 0;
 		}
@@ -1251,8 +1278,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 					double x[3] = { c0[0] + ((sidx & 3) + 0.5) * h / 4,
 							c0[1] + (((sidx >> 2) & 3) + 0.5) * h / 4,
 							c0[2] + ((sidx >> 4) + 0.5) * h / 4 };
-					int in = o->inside ? o->inside(x, o->inside_ctx) != 0
-							   : default_inside(m, &ng, x);
+					int in = ip_inside(m, &ng, o, x);
 					if (in) {
 						for (int d = 0; d < 3; d++)
 							acc[d] += x[d];
@@ -1260,14 +1286,62 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 					}
 				}
 				if (cnt > 0) {
+					double cx[3];
 					for (int d = 0; d < 3; d++)
-						m->ipX[3 * q + d] = acc[d] / cnt;
+						cx[d] = acc[d] / cnt;
+					if (!ip_inside(m, &ng, o, cx)) {
+						/* centroid outside (non-convex
+						 * piece): the inside sub-point
+						 * nearest to it */
+						double best = INFINITY, bx[3] = { 0, 0, 0 };
+						for (int sidx = 0; sidx < 64; sidx++) {
+							double x[3] = { c0[0] + ((sidx & 3) + 0.5) * h / 4,
+									c0[1] + (((sidx >> 2) & 3) + 0.5) * h / 4,
+									c0[2] + ((sidx >> 4) + 0.5) * h / 4 };
+							double dd = (x[0] - cx[0]) * (x[0] - cx[0]) +
+								    (x[1] - cx[1]) * (x[1] - cx[1]) +
+								    (x[2] - cx[2]) * (x[2] - cx[2]);
+							if (dd < best &&
+							    ip_inside(m, &ng, o, x)) {
+								best = dd;
+								memcpy(bx, x, sizeof bx);
+							}
+						}
+						memcpy(cx, bx, sizeof cx);
+					}
+					memcpy(m->ipX + 3 * q, cx, sizeof cx);
 					m->ipV[q] = h * h * h * cnt / 64.0;
 				} else {
-					m->ipV[q] = h * h * h / 64.0;
+					/* no sub-point inside: the cell
+					 * only grazes the domain; dropped
+					 * below (an integration point
+					 * outside the domain would sample
+					 * extrapolated shape functions) */
+					m->ipV[q] = 0;
 				}
 			}
 			free(pid);
+		}
+		/* drop the empty cells */
+		{
+			int64_t q = 0;
+			for (int64_t p2 = 0; p2 < m->nip; p2++)
+				if (m->ipV[p2] > 0) {
+					if (q != p2) {
+						memcpy(m->ipX + 3 * q, m->ipX + 3 * p2,
+						       3 * sizeof(double));
+						m->ipV[q] = m->ipV[p2];
+					}
+					q++;
+				}
+			if (q < 1) {
+				rc = errf(err, errsize, "no integration point "
+					  "falls inside the domain");
+				goto fail;
+			}
+			m->nip = q;
+			for (int64_t p2 = 0; p2 <= q; p2++)
+				m->ipptr[p2] = (int64_t)K * p2;
 		}
 		free(okip);
 		okip = NULL;

@@ -8,6 +8,7 @@
 
 #include <math.h>
 
+#include "../tled_labels.h"
 #include "../tled_model.h"
 #include "tled_synth.h"
 
@@ -409,6 +410,124 @@ static void test_touch_boundary(void **state)
 		      tab_num(g.tb, "contacts", g.tb->nrows - 1));
 }
 
+/* A labels volume whose brain (label 3) is the ball r < Rb, on an LAS grid
+ * of 1.5 mm voxels: with it connected, no integration point lies outside
+ * the brain (nearest voxel label 0: count asserted 0; and none farther
+ * than half a voxel diagonal beyond r = Rb), and the growth succeeds. */
+static vol_t *ball_labels(double Rb, double vx)
+{
+	int n = (int)ceil(2 * (Rb + 8) / vx) + 1;
+	double half = 0.5 * (n - 1) * vx;
+	/* LAS: i runs toward -x */
+	const double A[16] = { -vx, 0, 0, half, 0, vx, 0, -half,
+			       0, 0, vx, -half, 0, 0, 0, 1 };
+	vol_t *v = vol_new(n, n, n, 1, DT_I16, A);
+	assert_non_null(v);
+	int16_t *d = (int16_t *)v->data;
+	for (int k = 0; k < n; k++)
+		for (int j = 0; j < n; j++)
+			for (int i = 0; i < n; i++) {
+				double x = half - i * vx, y = -half + j * vx,
+				       z = -half + k * vx;
+				d[vol_idx(v, i, j, k)] =
+					sqrt(x * x + y * y + z * z) < Rb ? 3 : 0;
+			}
+	return v;
+}
+
+static void test_labels_domain(void **state)
+{
+	(void)state;
+	const double Rb = tled_quick() ? 16 : 20, h = tled_quick() ? 4 : 3,
+		     Rt = 6, vx = 1.5;
+	const int L = 3;
+	memset(g_csf, 0, sizeof g_csf);
+	memset(g_cen, 0, sizeof g_cen);
+	vol_t *lab = ball_labels(Rb, vx);
+	keep(&lab->base);
+	ps_t *nodes = brain_nodes(Rb, h, 11);
+	keep(&nodes->base);
+
+	/* the model the stage builds: labels test vs the default test */
+	tled_labctx_t lc;
+	assert_int_equal(tled_labctx_init(&lc, lab), 0);
+	double *X = malloc((size_t)(3 * nodes->n) * sizeof *X);
+	assert_non_null(X);
+	for (int64_t i = 0; i < 3 * nodes->n; i++)
+		X[i] = nodes->xyz[i] * TLED_MM;
+	int64_t nip[2], nout[2], nfar[2];
+	double vol[2];
+	for (int t = 0; t < 2; t++) {
+		tled_model_opts_t mo;
+		tled_model_opts_default(&mo);
+		if (t == 0) {
+			mo.inside = tled_labels_inside;
+			mo.inside_ctx = &lc;
+		}
+		tled_model_t m;
+		char err[512] = "";
+		int rc = tled_model_build(&m, X, nodes->label, nodes->n, NULL,
+					  NULL, &mo, err, sizeof err);
+		if (rc)
+			print_message("error: %s\n", err);
+		assert_int_equal(rc, 0);
+		nip[t] = m.nip;
+		nout[t] = nfar[t] = 0;
+		vol[t] = 0;
+		for (int64_t p = 0; p < m.nip; p++) {
+			const double *x = m.ipX + 3 * p;
+			double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) /
+				   TLED_MM;
+			nout[t] += tled_label_at(&lc, x) <= 0;
+			nfar[t] += r > Rb + 0.5 * sqrt(3.0) * vx;
+			vol[t] += m.ipV[p] / (TLED_MM * TLED_MM * TLED_MM);
+		}
+		tled_model_free(&m);
+	}
+	free(X);
+	double vb = 4.0 / 3.0 * M_PI * Rb * Rb * Rb;
+	print_message("labels domain: %lld points, %lld outside the brain, "
+		      "%lld beyond r = Rb + %.2f mm, volume %.0f mm^3 (ball "
+		      "%.0f)\n", (long long)nip[0], (long long)nout[0],
+		      (long long)nfar[0], 0.5 * sqrt(3.0) * vx, vol[0], vb);
+	print_message("default domain: %lld points, %lld outside the brain, "
+		      "%lld beyond r = Rb + %.2f mm, volume %.0f mm^3\n",
+		      (long long)nip[1], (long long)nout[1], (long long)nfar[1],
+		      0.5 * sqrt(3.0) * vx, vol[1]);
+	assert_int_equal(nout[0], 0);
+	assert_int_equal(nfar[0], 0);
+	assert_true(nip[0] > 100);
+	/* the integrated volume is the ball's to a voxel shell */
+	assert_true(fabs(vol[0] - vb) < 4 * M_PI * Rb * Rb * vx);
+
+	/* growth through the stage with the labels connected */
+	ps_t *co = sphere_contours(1.5, Rt, L, 1.5);
+	keep(&co->base);
+	msg_freeze(&nodes->base);
+	msg_freeze(&co->base);
+	msg_freeze(&lab->base);
+	const msg_t *in[3] = { &nodes->base, &co->base, &lab->base };
+	grow_out_t g;
+	memset(&g, 0, sizeof g);
+	g.nodes = nodes;
+	char err[1024] = "";
+	const char *params[] = { "tol=0.005", NULL };
+	int rc = tu_run(TU_PLUGIN(), params, in, g.out, err, sizeof err);
+	for (int o = 0; o < 3; o++)
+		keep(g.out[o]);
+	if (rc)
+		print_message("error: %s\n", err);
+	assert_int_equal(rc, 0);
+	g.on = (const ps_t *)g.out[0];
+	g.ot = (const ps_t *)g.out[1];
+	g.tb = (const tab_t *)g.out[2];
+	g.u = attr(g.on, "u");
+	check_common(&g, Rb, L);
+	/* the stage integrated over the labels domain built above */
+	assert_int_equal((int64_t)tab_num(g.tb, "integration_points", 0),
+			 nip[0]);
+}
+
 /* bad inputs: clear errors naming the problem */
 static void test_bad_inputs(void **state)
 {
@@ -445,6 +564,7 @@ int main(void)
 		cmocka_unit_test_teardown(test_grow_collocated, teardown),
 		cmocka_unit_test_teardown(test_soft_ventricles, teardown),
 		cmocka_unit_test_teardown(test_touch_boundary, teardown),
+		cmocka_unit_test_teardown(test_labels_domain, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
