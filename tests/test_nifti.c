@@ -12,13 +12,10 @@
 
 #include "testutil.h"
 
-static char dir[256];
-
 static int setup(void **state)
 {
 	(void)state;
-	snprintf(dir, sizeof dir, "/tmp/armstg-nifti-XXXXXX");
-	if (!mkdtemp(dir))
+	if (tu_tmpdir_make("nifti"))
 		return -1;
 	nifti_set_debug_level(0);
 	return 0;
@@ -27,19 +24,10 @@ static int setup(void **state)
 static int teardown(void **state)
 {
 	(void)state;
-	char cmd[300];
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-	return system(cmd) ? -1 : 0;
+	return tu_tmpdir_remove();
 }
 
-static const char *tmp(const char *name)
-{
-	static char buf[4][512];
-	static int slot;
-	slot = (slot + 1) % 4;
-	snprintf(buf[slot], sizeof buf[slot], "%s/%s", dir, name);
-	return buf[slot];
-}
+#define tmp tu_tmp
 
 static uint64_t rs = 88172645463325252ull;
 static uint64_t rnd(void)
@@ -568,7 +556,7 @@ static void test_errors(void **state)
 {
 	(void)state;
 	expect_read_error(tmp("absent.nii.gz"), "No such file or directory");
-	expect_read_error(dir, "is a folder");
+	expect_read_error(tu_tmpdir(), "is a folder");
 	FILE *f = fopen(tmp("notes.txt"), "w");
 	fputs("hello\n", f);
 	fclose(f);

@@ -59,6 +59,40 @@ static inline const char *tu_data(const char *rel)
 		}                                                             \
 	} while (0)
 
+/* One scratch folder per test program: tu_tmpdir_make("h5") in the group
+ * setup, tu_tmp("a.nii.gz") for paths in it, tu_tmpdir_remove() in the
+ * group teardown. */
+static inline char *tu_tmpdir(void)
+{
+	static char dir[256];
+	return dir;
+}
+
+static inline int tu_tmpdir_make(const char *tag)
+{
+	snprintf(tu_tmpdir(), 256, "/tmp/armstg-%s-XXXXXX", tag);
+	return mkdtemp(tu_tmpdir()) ? 0 : -1;
+}
+
+static inline int tu_tmpdir_remove(void)
+{
+	char cmd[300];
+	if (!tu_tmpdir()[0])
+		return 0;
+	snprintf(cmd, sizeof cmd, "rm -rf '%s'", tu_tmpdir());
+	return system(cmd) ? -1 : 0;
+}
+
+/* path of name inside the scratch folder (4 rotating static buffers) */
+static inline const char *tu_tmp(const char *name)
+{
+	static char buf[4][512];
+	static int slot;
+	slot = (slot + 1) % 4;
+	snprintf(buf[slot], sizeof buf[slot], "%s/%s", tu_tmpdir(), name);
+	return buf[slot];
+}
+
 const armstg_plugin_t *armstg_plugin_entry(const armstg_host_t *host,
 					   const char **errmsg);
 #define TU_PLUGIN() armstg_plugin_entry(rt_host(), NULL)
