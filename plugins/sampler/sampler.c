@@ -64,9 +64,11 @@ static const armstg_param_t params[] = {
 	{ "seeds_per_point", PT_INT, "4", 1, 1000, "",
 	  "seed nodes p placed around each collapse point", NULL,
 	  offsetof(priv_t, seeds_per_point), 0 },
-	{ "seed_sep", PT_DOUBLE, "0.5", 0.001, 100, "mm",
-	  "minimum distance between seed nodes (coincident seeds make RBF "
-	  "systems singular)", NULL, offsetof(priv_t, seed_sep), 0 },
+	{ "seed_sep", PT_DOUBLE, "0", 0, 100, "mm",
+	  "minimum distance between seed nodes; 0 = 2/3 of spacing (a "
+	  "cluster much denser than the other nodes inverted the first "
+	  "TLED growth steps: bench/tled/results.md)", NULL,
+	  offsetof(priv_t, seed_sep), 0 },
 	{ "grade", PT_BOOL, "false", 0, 1, "",
 	  "grade spacing with distance from the tumour and leave out the "
 	  "brain beyond r_far", NULL, offsetof(priv_t, grade), 0 },
@@ -251,7 +253,8 @@ static int smp_process(armstg_stage_t *st)
 		.seed = (uint64_t)pv->seed,
 		.boundary = pv->boundary,
 		.seeds_per_point = pv->seeds_per_point,
-		.seed_sep = pv->seed_sep,
+		.seed_sep = pv->seed_sep > 0 ? pv->seed_sep
+					      : 2.0 / 3.0 * pv->spacing,
 		.grade = pv->grade,
 		.r_near = pv->r_near,
 		.r_far = pv->r_far,

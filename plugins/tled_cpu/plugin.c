@@ -56,7 +56,11 @@
  * then on.  Integration points whose current position lies inside the
  * tumour (by more than half an integration cell) are switched off: the
  * tumour acts as a cavity with a prescribed boundary, so swept tissue
- * carries no stress.
+ * carries no stress; a free node left with no active integration point
+ * is swept too (it would be a zero-energy mode).  Inside/outside a layer:
+ * the offset along the nearest layer point's normal within 2 node
+ * spacings of the layer, the winding number of the layer's oriented
+ * points farther away (layer_side).
  */
 #include <math.h>
 #include <stddef.h>
@@ -270,6 +274,7 @@ typedef struct layer {
 	double *x;    /* 3n, m */
 	double *nrm;  /* 3n, unit outward */
 	double *d;    /* 3n, parent - x, m */
+	double *A;    /* n, surface area per point, m^2 (winding number) */
 	tled_grid_t g;
 	int built;
 } layer_t;
@@ -279,10 +284,37 @@ static void layer_free(layer_t *L)
 	free(L->x);
 	free(L->nrm);
 	free(L->d);
+	free(L->A);
 	tled_grid_free(&L->g);
 }
 
-/* signed distance of y (m) to the layer surface: > 0 outside */
+/* Signed distance of y (m) to the layer surface: > 0 outside.  Near the
+ * surface (nearest layer point within 2 h) it is the offset along that
+ * point's outward normal.  Farther away the normal of the nearest point
+ * says nothing reliable about the side (a small or non-convex layer: far
+ * nodes were classified inside, became tumour and were driven; phantom
+ * seeds 1-8 at 4 mm nodes), so the side comes from the generalised
+ * winding number of the oriented point cloud (Barill, Dickson, Schmidt,
+ * Levin & Jacobson 2018, "Fast winding numbers for soups and clouds",
+ * ACM TOG 37:43, eq. 8),
+ *     w(y) = sum_i A_i (x_i - y) . n_i / (4 pi |x_i - y|^3),
+ * about 1 inside and 0 outside, and the magnitude is the distance to the
+ * nearest layer point. */
+static double layer_winding(const layer_t *L, const double y[3])
+{
+	double w = 0;
+	for (int64_t i = 0; i < L->n; i++) {
+		const double *q = L->x + 3 * i, *nn = L->nrm + 3 * i;
+		double r[3] = { q[0] - y[0], q[1] - y[1], q[2] - y[2] };
+		double d2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+		if (d2 <= 0)
+			continue;
+		w += L->A[i] * (r[0] * nn[0] + r[1] * nn[1] + r[2] * nn[2]) /
+		     (d2 * sqrt(d2));
+	}
+	return w / (4 * M_PI);
+}
+
 static double layer_side(const layer_t *L, const double y[3], double h)
 {
 	int64_t id;
@@ -294,6 +326,8 @@ static double layer_side(const layer_t *L, const double y[3], double h)
 	if (!(nl > 0.25))
 		/* collapsed layer (a point or a curve): a ball of h/2 */
 		return sqrt(d2) - 0.5 * h;
+	if (d2 > 4 * h * h && L->A)
+		return layer_winding(L, y) > 0.5 ? -sqrt(d2) : sqrt(d2);
 	return (y[0] - q[0]) * nn[0] + (y[1] - q[1]) * nn[1] +
 	       (y[2] - q[2]) * nn[2];
 }
@@ -606,6 +640,32 @@ static int tled_process(armstg_stage_t *st)
 	       "integration points, mean spacing %.2f mm, min %.3f mm",
 	       (long long)m.n, (long long)m.n_merged, (long long)m.nip,
 	       m.h_mean / TLED_MM, m.h_min / TLED_MM);
+	/* seed clusters much denser than the other nodes give one-sided,
+	 * extrapolating MLS supports around them: the first growth steps
+	 * then invert integration points (phantom seeds 2 and 5 with seeds
+	 * 2 mm apart among 6 mm nodes; bench/tled/results.md) */
+	{
+		double dmin = INFINITY;
+		for (int64_t a = 0; a < m.n; a++)
+			if (m.label[a] == TL_SEED)
+				for (int64_t b = a + 1; b < m.n; b++)
+					if (m.label[b] == TL_SEED) {
+						double d2 = 0;
+						for (int k = 0; k < 3; k++) {
+							double t = m.X[3 * a + k] -
+								   m.X[3 * b + k];
+							d2 += t * t;
+						}
+						dmin = fmin(dmin, d2);
+					}
+		dmin = sqrt(dmin);
+		if (dmin < 0.5 * m.h_mean)
+			H->log(st, LOG_WARN, "seed nodes %.2f mm apart among "
+			       "nodes %.2f mm apart: dense seed clusters can "
+			       "invert the first growth steps (sampler "
+			       "seed_sep 0 = 2/3 of the spacing)",
+			       dmin / TLED_MM, m.h_mean / TLED_MM);
+	}
 	/* input tumour labels are atlas tissue at the start */
 	for (int64_t a = 0; a < m.n; a++)
 		if (m.label[a] == TL_TUMOUR || m.label[a] == TL_TUMOUR_BND)
@@ -685,6 +745,21 @@ static int tled_process(armstg_stage_t *st)
 			if (tled_grid_build(&L[j].g, L[j].x, L[j].n, m.h_mean))
 				goto oom;
 			L[j].built = 1;
+			/* area per point for the winding number: (sqrt 3 / 2)
+			 * s^2, s the mean distance to the 6 nearest points
+			 * (a hexagonal sampling of spacing s) */
+			L[j].A = malloc((size_t)L[j].n * sizeof(double));
+			if (!L[j].A)
+				goto oom;
+			for (int64_t q = 0; q < L[j].n; q++) {
+				int64_t ids[6];
+				double d2[6], sm = 0;
+				int k = tled_grid_knn(&L[j].g, L[j].x + 3 * q, 6,
+						      q, ids, d2);
+				for (int i = 0; i < k; i++)
+					sm += sqrt(d2[i]) / k;
+				L[j].A[q] = 0.8660254037844386 * sm * sm;
+			}
 		}
 	}
 	int lmax = 0;
@@ -876,6 +951,30 @@ static int tled_process(armstg_stage_t *st)
 				if (layer_side(&L[j], y, h) < -0.5 * m.ip_h)
 					s.ipoff[p] = 1;
 			}
+		}
+		/* a free node none of whose integration points is still on
+		 * (enclosed by the tumour) has no stiffness: left free it would
+		 * be a zero-energy mode that never settles (dynamic relaxation
+		 * oscillated for 10 000 iterations, phantom seed 2 at 4 mm
+		 * nodes).  It is tumour: swept, kept where it is. */
+		for (int64_t a = 0; a < m.n; a++) {
+			if (m.kind[a] != TLED_FREE || dcomp[a] >= 0)
+				continue;
+			int on = 0;
+			for (int64_t q = m.nptr[a]; q < m.nptr[a + 1] && !on; q++)
+				on = !s.ipoff[m.entip[m.nent[q]]];
+			if (on)
+				continue;
+			int c = 0;
+			for (int j = 0; j < nl; j++)
+				if (L[j].layer == l) {
+					c = L[j].comp;
+					break;
+				}
+			dcomp[a] = c;
+			dstep[a] = step;
+			m.kind[a] = TLED_DRIVEN;
+			swept++;
 		}
 		ndriven += swept;
 		int64_t row = H->tab_add_row(tab);

@@ -973,6 +973,34 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		}
 		if (o->contact && (it % 10 == 0))
 			s->contacts += tled_contact(s);
+		/* The tangent stiffness grows as tissue is compressed, so the
+		 * step picked from the state at the start of this call can be
+		 * above the critical one once the driven nodes have arrived:
+		 * the stiffened region then rings for ever (a node by the
+		 * tumour front at 0.7 m/s for 10 000 iterations, phantom seed
+		 * 2 with 4 mm nodes).  Re-estimate omega_max (Lanczos, as in
+		 * tled_solver_pick_dt) at the end of the ramp and every 1000
+		 * iterations after it, and shorten dt to dt_safety x the new
+		 * critical step when needed (automatic dt, or dt_policy
+		 * reduce; reported in st->dt / dt_crit). */
+		if (o->dt_estimate == TLED_DTE_EIGEN &&
+		    (o->dt <= 0 || o->dt_policy == TLED_DT_REDUCE) &&
+		    ((ramp && it == ramp + 1) || (it > ramp + 1 && it % 1000 == 0))) {
+			double lmx, lmn;
+			if (!tled_solver_eigs(s, o, &lmx, &lmn) && lmx > 0) {
+				double dc = 2 / sqrt(lmx);
+				double sf = o->dt_safety > 0 && o->dt_safety <= 1
+						    ? o->dt_safety
+						    : 0.8;
+				if (sf * dc < dt) {
+					dt = sf * dc;
+					s->dt_crit = s->dt_eigen = dc;
+					st->dt = dt;
+					st->dt_crit = st->dt_eigen = dc;
+				}
+			}
+			have_prev = 0; /* eigs used fprev as scratch */
+		}
 		/* convergence (after the ramp) */
 		double om = sqrt(lam > 0 ? lam : 1e-300);
 		err_est = ci.vmax / om;
