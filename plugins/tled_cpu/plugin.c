@@ -59,8 +59,9 @@
  * carries no stress; a free node left with no active integration point
  * is swept too (it would be a zero-energy mode).  Inside/outside a layer:
  * the offset along the nearest layer point's normal within 2 node
- * spacings of the layer, the winding number of the layer's oriented
- * points farther away (layer_side).
+ * spacings of the layer (unless the winding number of the layer's
+ * oriented points clearly disagrees: a wrong normal), the winding number
+ * farther away (layer_side).
  */
 #include <math.h>
 #include <stddef.h>
@@ -326,10 +327,19 @@ static double layer_side(const layer_t *L, const double y[3], double h)
 	if (!(nl > 0.25))
 		/* collapsed layer (a point or a curve): a ball of h/2 */
 		return sqrt(d2) - 0.5 * h;
-	if (d2 > 4 * h * h && L->A)
-		return layer_winding(L, y) > 0.5 ? -sqrt(d2) : sqrt(d2);
-	return (y[0] - q[0]) * nn[0] + (y[1] - q[1]) * nn[1] +
-	       (y[2] - q[2]) * nn[2];
+	if (!L->A)
+		return (y[0] - q[0]) * nn[0] + (y[1] - q[1]) * nn[1] +
+		       (y[2] - q[2]) * nn[2];
+	double w = layer_winding(L, y);
+	if (d2 > 4 * h * h)
+		return w > 0.5 ? -sqrt(d2) : sqrt(d2);
+	/* near: the normal offset, unless the winding number clearly says
+	 * the other side (a wrong normal at the nearest point) */
+	double pr = (y[0] - q[0]) * nn[0] + (y[1] - q[1]) * nn[1] +
+		    (y[2] - q[2]) * nn[2];
+	if ((pr < 0 && w < 0.2) || (pr > 0 && w > 0.8))
+		return w > 0.5 ? -sqrt(d2) : sqrt(d2);
+	return pr;
 }
 
 /* layer-to-layer map at y: IDW of (parent - x) over the 8 nearest points */

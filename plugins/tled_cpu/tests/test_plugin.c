@@ -556,6 +556,68 @@ static void test_bad_inputs(void **state)
 	assert_non_null(strstr(err, "'layer'"));
 }
 
+/*
+ * Inside/outside of a layer away from it.  The side used to be the offset
+ * along the nearest layer point's normal; on a small or irregular layer a
+ * far node whose nearest point has a wrong normal was classified inside,
+ * became tumour at the first step and was driven (phantom seeds 1-8 at
+ * 4 mm nodes: 76 tumour nodes at the first step instead of 15, scattered
+ * over the brain).  Here every 4th normal of the innermost layer points
+ * inward.  Asserted: the run completes, the first step has at most the 4
+ * seeds + 8 tumour nodes (a clean layer gives 4-5), and every tumour
+ * node ends within Rt + h/2 of the centre.
+ */
+static void test_wrong_normals(void **state)
+{
+	(void)state;
+	const double Rb = tled_quick() ? 20 : 24, h = 3, Rt = 8;
+	const int L = 4;
+	memset(g_csf, 0, sizeof g_csf);
+	memset(g_cen, 0, sizeof g_cen);
+	ps_t *nodes = brain_nodes(Rb, h, 11);
+	keep(&nodes->base);
+	ps_t *co = sphere_contours(1.5, Rt, L, 1.5);
+	keep(&co->base);
+	const ps_attr_t *lay = attr(co, "layer");
+	double *nrm = ps_add_attr(co, "normal", 3);
+	assert_non_null(nrm);
+	int64_t nflip = 0;
+	for (int64_t i = 0; i < co->n; i++) {
+		const double *x = co->xyz + 3 * i;
+		double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+		double sg = lround(lay->data[i]) == L && i % 4 == 0 ? -1 : 1;
+		nflip += sg < 0;
+		for (int d = 0; d < 3; d++)
+			nrm[3 * i + d] = sg * x[d] / r;
+	}
+	assert_true(nflip >= 2);
+	msg_freeze(&nodes->base);
+	msg_freeze(&co->base);
+	const msg_t *in[3] = { &nodes->base, &co->base, NULL };
+	msg_t *out[3] = { NULL, NULL, NULL };
+	char err[1024] = "";
+	const char *params[] = { "tol=0.005", NULL };
+	int rc = tu_run(TU_PLUGIN(), params, in, out, err, sizeof err);
+	for (int o = 0; o < 3; o++)
+		keep(out[o]);
+	if (rc)
+		print_message("error: %s\n", err);
+	assert_int_equal(rc, 0);
+	const ps_t *ot = (const ps_t *)out[1];
+	const tab_t *tb = (const tab_t *)out[2];
+	double d1 = tab_num(tb, "driven", 0);
+	double rmax = 0;
+	for (int64_t q = 0; q < ot->n; q++) {
+		const double *y = ot->xyz + 3 * q;
+		rmax = fmax(rmax, sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2]));
+	}
+	print_message("wrong normals (%lld flipped): %g tumour nodes at step "
+		      "1, %lld at the end, farthest %.2f mm from the centre\n",
+		      (long long)nflip, d1, (long long)ot->n, rmax);
+	assert_true(d1 <= 12);
+	assert_true(rmax < Rt + 0.5 * h);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -565,6 +627,7 @@ int main(void)
 		cmocka_unit_test_teardown(test_soft_ventricles, teardown),
 		cmocka_unit_test_teardown(test_touch_boundary, teardown),
 		cmocka_unit_test_teardown(test_labels_domain, teardown),
+		cmocka_unit_test_teardown(test_wrong_normals, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
