@@ -6,6 +6,8 @@
  * bench/tled/run_sweep.sh.  Usage:
  *   cavity_sweep [h=2.5] [K=20] [safety=0.8] [nu=0.49] [a=10] [b=20]
  *                [ebc=1] [corr=2] [steps=1] [ua=0.1] [tol=1e-5] [threads=2]
+ *                [ipf=0 (model default)] [legacy=0 (1: K-nearest supports)]
+ *                [dump=FILE] [lin=0] [jit=0.2] [dil=0] [ha=0] [ramp=100]
  * (key=value, any order); prints one TSV line.
  */
 #include <stdio.h>
@@ -52,25 +54,30 @@ int main(int argc, char **argv)
 		else if (!strcmp(k, "dil")) c.dil = v;
 		else if (!strcmp(k, "ha")) c.ha = v;
 		else if (!strcmp(k, "ramp")) c.ramp = (int)v;
+		else if (!strcmp(k, "legacy")) c.legacy_support = (int)v;
 		else {
 			fprintf(stderr, "unknown key %s\n", k);
 			return 2;
 		}
 	}
+	tled_model_opts_t mo;
+	tled_model_opts_default(&mo);
+	double ipf = c.ip_factor > 0 ? c.ip_factor : mo.ip_factor;
+	const char *sup = c.legacy_support ? "legacy" : "nodal";
 	if (header)
-		printf("h_mm\tK\tsafety\tnu\tebc\tcorr\tnodes\tips\titers\t"
+		printf("support\tipf\th_mm\tK\tsafety\tnu\tebc\tcorr\tnodes\tips\titers\t"
 		       "converged\trms_err\trms_err_interior\tmax_err\t"
 		       "ut_max\tjmin\tdt_s\tdt_crit_s\tcpu_s\twall_s\n");
 	cavity_res_t r;
 	cavity_run(&c, steps, &r);
 	if (r.rc) {
-		printf("%g\t%d\t%g\t%g\t%d\t%d\tERROR: %s\n", c.h, c.K,
+		printf("%s\t%g\t%g\t%d\t%g\t%g\t%d\t%d\tERROR: %s\n", sup, ipf, c.h, c.K,
 		       c.dt_safety, c.nu, c.ebc, c.corr, r.err);
 		return 1;
 	}
-	printf("%g\t%d\t%g\t%g\t%d\t%d\t%lld\t%lld\t%d\t%d\t%.4f\t%.4f\t%.4f\t"
-	       "%.4f\t%.4f\t%.3g\t%.3g\t%.2f\t%.2f\n",
-	       c.h, c.K, c.dt_safety, c.nu, c.ebc, c.corr, (long long)r.n,
+	printf("%s\t%g\t%g\t%d\t%g\t%g\t%d\t%d\t%lld\t%lld\t%d\t%d\t%.4f\t%.4f\t"
+	       "%.4f\t%.4f\t%.4f\t%.3g\t%.3g\t%.2f\t%.2f\n",
+	       sup, ipf, c.h, c.K, c.dt_safety, c.nu, c.ebc, c.corr, (long long)r.n,
 	       (long long)r.nip, r.iters, r.converged, r.rms, r.rms_in, r.max,
 	       r.ut_max, r.jmin, r.dt, r.dt_crit, r.cpu_s, r.wall_s);
 	fprintf(stderr, "correction: %d CG iterations, residual %.3g\n",

@@ -55,6 +55,7 @@ void tled_model_opts_default(tled_model_opts_t *o)
 	o->corr = TLED_CORR_ALL;
 	o->ebc = 1;
 	o->ebc_fixed = 1;
+	o->support_nodal = 1;
 	/* thesis Table 3.1 */
 	tled_material_set(&o->mat[MAT_BRAIN], 3000, 0.49, 1000);
 	tled_material_set(&o->mat[MAT_CSF], 10, 0.1, 1000);
@@ -407,6 +408,87 @@ int tled_mls(const double *X, const int64_t *ids, int k, const double x[3],
 	return 0;
 }
 
+/*
+ * MLS as tled_mls, but every support node a has its own weight radius
+ * Ra[i] (node-based supports): w_a(x) = W(|x - X_a| / R_a).  The shape
+ * functions are then ONE set of smooth functions of x (no dependence of
+ * the support on the evaluation point), and dN is their exact gradient.
+ * Basis p(y) = [1, (y - x)/L].  Nodes with w = 0 get N = dN = 0.
+ */
+int tled_mls_nodal(const double *X, const int64_t *ids, int k,
+		   const double x[3], const double *Ra, double L, double *N,
+		   double *dN, double *w)
+{
+	double M[16] = { 0 }, dM[3][16] = { { 0 } };
+	double pa[4];
+	for (int i = 0; i < k; i++) {
+		const double *q = X + 3 * ids[i];
+		double d[3] = { q[0] - x[0], q[1] - x[1], q[2] - x[2] };
+		double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+		double dwdr, dw[3];
+		w[i] = tled_weight(dist / Ra[i], &dwdr);
+		if (!(w[i] > 0))
+			continue;
+		for (int c = 0; c < 3; c++)
+			dw[c] = dist > 0 ? dwdr * (-d[c]) / (dist * Ra[i]) : 0;
+		pa[0] = 1;
+		for (int c = 0; c < 3; c++)
+			pa[c + 1] = d[c] / L;
+		for (int r = 0; r < 4; r++)
+			for (int s = 0; s < 4; s++) {
+				M[4 * r + s] += w[i] * pa[r] * pa[s];
+				for (int c = 0; c < 3; c++)
+					dM[c][4 * r + s] += dw[c] * pa[r] * pa[s];
+			}
+	}
+	double Mi[16];
+	if (inv4(M, Mi))
+		return -1;
+	double g[4], dg[3][4];
+	for (int r = 0; r < 4; r++)
+		g[r] = Mi[4 * r];
+	for (int c = 0; c < 3; c++) {
+		double t[4];
+		for (int r = 0; r < 4; r++) {
+			double s = (r == c + 1) ? 1 / L : 0;
+			for (int q = 0; q < 4; q++)
+				s -= dM[c][4 * r + q] * g[q];
+			t[r] = s;
+		}
+		for (int r = 0; r < 4; r++) {
+			double s = 0;
+			for (int q = 0; q < 4; q++)
+				s += Mi[4 * r + q] * t[q];
+			dg[c][r] = s;
+		}
+	}
+	for (int i = 0; i < k; i++) {
+		if (!(w[i] > 0)) {
+			N[i] = 0;
+			dN[3 * i] = dN[3 * i + 1] = dN[3 * i + 2] = 0;
+			continue;
+		}
+		const double *q = X + 3 * ids[i];
+		double d[3] = { q[0] - x[0], q[1] - x[1], q[2] - x[2] };
+		double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+		double dwdr;
+		tled_weight(dist / Ra[i], &dwdr);
+		pa[0] = 1;
+		for (int c = 0; c < 3; c++)
+			pa[c + 1] = d[c] / L;
+		double gp = g[0] * pa[0] + g[1] * pa[1] + g[2] * pa[2] +
+			    g[3] * pa[3];
+		N[i] = gp * w[i];
+		for (int c = 0; c < 3; c++) {
+			double dwc = dist > 0 ? dwdr * (-d[c]) / (dist * Ra[i]) : 0;
+			double dgp = dg[c][0] * pa[0] + dg[c][1] * pa[1] +
+				     dg[c][2] * pa[2] + dg[c][3] * pa[3];
+			dN[3 * i + c] = dgp * w[i] + gp * dwc;
+		}
+	}
+	return 0;
+}
+
 /* ------------------------------------------------------------ helpers */
 
 static int label_priority(int32_t l)
@@ -466,6 +548,7 @@ void tled_model_free(tled_model_t *m)
 	free(m->rid);
 	free(m->rN);
 	free(m->bt);
+	free(m->Ra);
 	tled_grid_free(&m->bgrid);
 	memset(m, 0, sizeof *m);
 }
@@ -605,10 +688,133 @@ void tled_model_grad(const tled_model_t *m, const double *u, double *H)
 	}
 }
 
+int tled_model_cover(const tled_model_t *m, const tled_grid_t *g,
+		     const double x[3], int64_t **ids, int *cap)
+{
+	int cnt = 0, lo[3], hi[3];
+	double Rm = m->Ra_max;
+	if (!m->Ra || !(g->cell > 0))
+		return 0;
+	for (int c = 0; c < 3; c++) {
+		double a = floor((x[c] - Rm - g->lo[c]) / g->cell);
+		double b = floor((x[c] + Rm - g->lo[c]) / g->cell);
+		if (!(b >= 0) || !(a <= g->nc[c] - 1))
+			return 0;
+		lo[c] = a < 0 ? 0 : (int)a;
+		hi[c] = b > g->nc[c] - 1 ? g->nc[c] - 1 : (int)b;
+	}
+	for (int k = lo[2]; k <= hi[2]; k++)
+		for (int j = lo[1]; j <= hi[1]; j++)
+			for (int i = lo[0]; i <= hi[0]; i++) {
+				int64_t cid = ((int64_t)k * g->nc[1] + j) * g->nc[0] + i;
+				for (int64_t t = g->start[cid]; t < g->start[cid + 1];
+				     t++) {
+					int64_t a = g->idx[t];
+					const double *q = g->p + 3 * a;
+					double d2 = (q[0] - x[0]) * (q[0] - x[0]) +
+						    (q[1] - x[1]) * (q[1] - x[1]) +
+						    (q[2] - x[2]) * (q[2] - x[2]);
+					if (!(d2 < m->Ra[a] * m->Ra[a]))
+						continue;
+					if (cnt == *cap) {
+						int nc = *cap ? 2 * *cap : 64;
+						int64_t *nb = realloc(*ids, (size_t)nc *
+									    sizeof *nb);
+						if (!nb)
+							return -1;
+						*ids = nb;
+						*cap = nc;
+					}
+					(*ids)[cnt++] = a;
+				}
+			}
+	return cnt;
+}
+
+/* MLS at x over the nodes covering it (node-based supports): ids, N, dN,
+ * w, rr must hold k entries (rr: scratch radii).  *L gets the basis
+ * scale (largest radius).  Returns 0 or -1. */
+static int mls_cover(const tled_model_t *m, const int64_t *ids, int k,
+		     const double x[3], double *N, double *dN, double *w,
+		     double *rr, double *L)
+{
+	double l = 0;
+	for (int i = 0; i < k; i++) {
+		rr[i] = m->Ra[ids[i]];
+		l = fmax(l, rr[i]);
+	}
+	*L = l;
+	if (k < 4)
+		return -1;
+	return tled_mls_nodal(m->X, ids, k, x, rr, l, N, dN, w);
+}
+
+/* R_a = dil * distance to the Kn-th nearest node, Kn = 1.5 K / dil^3
+ * (tled_model.h, support_nodal) */
+static int nodal_radii(tled_model_t *m, const tled_grid_t *ng, int K,
+		       double dil)
+{
+	int64_t n = m->n;
+	int Kn = (int)lround(1.5 * K / (dil * dil * dil));
+	if (Kn > (3 * K) / 2)
+		Kn = (3 * K) / 2;
+	if (Kn < 4)
+		Kn = 4;
+	if (Kn > n - 1)
+		Kn = (int)(n - 1);
+	m->Kn = Kn;
+	m->Ra = malloc((size_t)n * sizeof *m->Ra);
+	if (!m->Ra)
+		return -1;
+	double rmax = 0;
+	int rc = 0;
+#pragma omp parallel num_threads(m->nthreads) reduction(max : rmax)
+	{
+		int64_t *ids = malloc((size_t)(Kn + 1) * sizeof *ids);
+		double *d2 = malloc((size_t)(Kn + 1) * sizeof *d2);
+#pragma omp for schedule(static)
+		for (int64_t a = 0; a < n; a++) {
+			int k = ids && d2 ? tled_grid_knn(ng, m->X + 3 * a, Kn, a,
+							  ids, d2)
+					  : 0;
+			if (k < 1) {
+#pragma omp atomic write
+				rc = -1;
+				m->Ra[a] = 0;
+				continue;
+			}
+			m->Ra[a] = dil * sqrt(d2[k - 1]);
+			rmax = fmax(rmax, m->Ra[a]);
+		}
+		free(ids);
+		free(d2);
+	}
+	m->Ra_max = rmax;
+	return rc;
+}
+
 int tled_model_interp(const tled_model_t *m, const tled_grid_t *ng, int K,
 		      double dil, const double x[3], const double *u,
 		      double out[3])
 {
+	if (m->Ra) {
+		int64_t *ids = NULL;
+		int cap = 0, rc = -1;
+		out[0] = out[1] = out[2] = 0;
+		int k = tled_model_cover(m, ng, x, &ids, &cap);
+		double *buf = k >= 4 ? malloc((size_t)k * 6 * sizeof *buf) : NULL;
+		double L;
+		if (buf && !mls_cover(m, ids, k, x, buf, buf + k, buf + 4 * k,
+				      buf + 5 * k, &L)) {
+			for (int i = 0; i < k; i++)
+				for (int c = 0; c < 3; c++)
+					out[c] += buf[i] * u[3 * ids[i] + c];
+			rc = 0;
+		}
+		free(buf);
+		free(ids);
+		return rc;
+	}
 	int64_t ids[256];
 	double d2[256], N[256], dN[3 * 256], w[256];
 	out[0] = out[1] = out[2] = 0;
@@ -879,9 +1085,20 @@ out:
  * theorem exact for constant and linear fields:
  *     sum_b t_b = 0,     sum_b X_b (x) t_b = V I   (V = sum_ip V_ip).
  * t_b = t0_b + A_b Lambda^T p_b, p_b = [1, (X_b - Xc)/L], a 4x4 solve.
+ *
+ * With Gfit (3n, node-based supports): t0 is instead the boundary
+ * quadrature that best reproduces the given target, the ridge least
+ * squares
+ *     min_t  sum_a |sum_b Phi_a(X_b) t_b - Gfit_a|^2 + eps |t - A n|^2
+ * (conjugate gradients on the normal equations, three right-hand sides),
+ * then the same linear adjustment.  So G = Phi_B^T t keeps the exact
+ * linear patch test (the reactions of the collocated conditions can
+ * balance it) while it follows the accurate fine-quadrature target.
  * Returns 0, -1 on failure (no boundary or singular fit).
  */
-static int boundary_weights(tled_model_t *m)
+static int fit_weights(tled_model_t *m, const double *Gfit, double *t);
+
+static int boundary_weights(tled_model_t *m, const double *Gfit)
 {
 	int64_t nb = m->nb;
 	if (nb < 4)
@@ -914,6 +1131,14 @@ static int boundary_weights(tled_model_t *m)
 		for (int i = 0; i < k; i++)
 			d += sqrt(d2[i]) / k;
 		A[b] = 0.5 * sqrt(3.0) * d * d;
+		for (int c = 0; c < 3; c++)
+			m->bt[3 * b + c] = A[b] * m->bn[3 * b + c];
+	}
+	if (Gfit && fit_weights(m, Gfit, m->bt)) {
+		free(A);
+		return -1;
+	}
+	for (int64_t b = 0; b < nb; b++) {
 		double p[4] = { 1, 0, 0, 0 };
 		for (int c = 0; c < 3; c++)
 			p[c + 1] = (m->bX[3 * b + c] - Xc[c]) / L;
@@ -921,7 +1146,7 @@ static int boundary_weights(tled_model_t *m)
 			for (int q = 0; q < 4; q++)
 				M[4 * r + q] += A[b] * p[r] * p[q];
 			for (int c = 0; c < 3; c++)
-				R[3 * r + c] -= p[r] * A[b] * m->bn[3 * b + c];
+				R[3 * r + c] -= p[r] * m->bt[3 * b + c];
 		}
 	}
 	for (int c = 0; c < 3; c++)
@@ -947,10 +1172,122 @@ static int boundary_weights(tled_model_t *m)
 			double v = 0;
 			for (int r = 0; r < 4; r++)
 				v += Lam[3 * r + c] * p[r];
-			m->bt[3 * b + c] = A[b] * (m->bn[3 * b + c] + v);
+			m->bt[3 * b + c] += A[b] * v;
 		}
 	}
 	free(A);
+	return 0;
+}
+
+/* y = Phi_B Phi_B^T x + eps x over the boundary rows (3 components);
+ * z: 3n scratch */
+static void bb_apply(const tled_model_t *m, const double *x, double eps,
+		     double *z, double *y)
+{
+	int rk = m->rk;
+	memset(z, 0, (size_t)(3 * m->n) * sizeof *z);
+	for (int64_t b = 0; b < m->nb; b++) {
+		int64_t a0 = m->bnode[b];
+		for (int i = 0; i < rk; i++) {
+			int64_t a = m->rid[(int64_t)rk * a0 + i];
+			double N = m->rN[(int64_t)rk * a0 + i];
+			for (int c = 0; c < 3; c++)
+				z[3 * a + c] += N * x[3 * b + c];
+		}
+	}
+	for (int64_t b = 0; b < m->nb; b++) {
+		int64_t a0 = m->bnode[b];
+		double acc[3] = { 0, 0, 0 };
+		for (int i = 0; i < rk; i++) {
+			int64_t a = m->rid[(int64_t)rk * a0 + i];
+			double N = m->rN[(int64_t)rk * a0 + i];
+			for (int c = 0; c < 3; c++)
+				acc[c] += N * z[3 * a + c];
+		}
+		for (int c = 0; c < 3; c++)
+			y[3 * b + c] = acc[c] + eps * x[3 * b + c];
+	}
+}
+
+static int fit_weights(tled_model_t *m, const double *Gfit, double *t)
+{
+	int64_t nb = m->nb, n = m->n;
+	int rk = m->rk;
+	double *z = malloc((size_t)(3 * n) * sizeof *z);
+	double *r = malloc((size_t)(3 * nb) * sizeof *r);
+	double *d = malloc((size_t)(3 * nb) * sizeof *d);
+	double *q = malloc((size_t)(3 * nb) * sizeof *q);
+	double *t0 = malloc((size_t)(3 * nb) * sizeof *t0);
+	if (!z || !r || !d || !q || !t0) {
+		free(z);
+		free(r);
+		free(d);
+		free(q);
+		free(t0);
+		return -1;
+	}
+	/* ridge (toward the A_b n_b start in t): a small fraction of the mean diagonal of Phi_B Phi_B^T */
+	double dg = 0;
+	for (int64_t b = 0; b < nb; b++) {
+		int64_t a0 = m->bnode[b];
+		for (int i = 0; i < rk; i++) {
+			double N = m->rN[(int64_t)rk * a0 + i];
+			dg += N * N;
+		}
+	}
+	double eps = 1e-3 * dg / (double)nb;
+	memcpy(t0, t, (size_t)(3 * nb) * sizeof *t0);
+	/* r = Phi_B Gfit + eps t0 - (Phi_B Phi_B^T + eps) t */
+	for (int64_t b = 0; b < nb; b++) {
+		int64_t a0 = m->bnode[b];
+		double acc[3] = { 0, 0, 0 };
+		for (int i = 0; i < rk; i++) {
+			int64_t a = m->rid[(int64_t)rk * a0 + i];
+			double N = m->rN[(int64_t)rk * a0 + i];
+			for (int c = 0; c < 3; c++)
+				acc[c] += N * Gfit[3 * a + c];
+		}
+		for (int c = 0; c < 3; c++)
+			r[3 * b + c] = acc[c] + eps * t0[3 * b + c];
+	}
+	bb_apply(m, t, eps, z, q);
+	double rr[3] = { 0, 0, 0 }, r0[3];
+	for (int64_t i = 0; i < 3 * nb; i++) {
+		r[i] -= q[i];
+		d[i] = r[i];
+		rr[i % 3] += r[i] * r[i];
+	}
+	for (int c = 0; c < 3; c++)
+		r0[c] = rr[c];
+	for (int it = 0; it < 2000; it++) {
+		int done = 1;
+		for (int c = 0; c < 3; c++)
+			if (rr[c] > 1e-24 * r0[c] && r0[c] > 0)
+				done = 0;
+		if (done)
+			break;
+		bb_apply(m, d, eps, z, q);
+		double dq[3] = { 0, 0, 0 }, rn[3] = { 0, 0, 0 }, al[3];
+		for (int64_t i = 0; i < 3 * nb; i++)
+			dq[i % 3] += d[i] * q[i];
+		for (int c = 0; c < 3; c++)
+			al[c] = dq[c] > 0 ? rr[c] / dq[c] : 0;
+		for (int64_t i = 0; i < 3 * nb; i++) {
+			t[i] += al[i % 3] * d[i];
+			r[i] -= al[i % 3] * q[i];
+			rn[i % 3] += r[i] * r[i];
+		}
+		for (int64_t i = 0; i < 3 * nb; i++)
+			d[i] = r[i] + (rr[i % 3] > 0 ? rn[i % 3] / rr[i % 3] : 0) *
+					      d[i];
+		for (int c = 0; c < 3; c++)
+			rr[c] = rn[c];
+	}
+	free(z);
+	free(r);
+	free(d);
+	free(q);
+	free(t0);
 	return 0;
 }
 
@@ -996,6 +1333,92 @@ static int ip_inside(const tled_model_t *m, const tled_grid_t *ng,
 			 : default_inside(m, ng, x);
 }
 
+/*
+ * Target of the integration-constraint correction with node-based
+ * supports: G_a = integral over the domain of grad N_a (= the boundary
+ * integral of N_a n), by a fine quadrature of each integration cell: 2^3
+ * Gauss points in a whole cell, the inside points of the 4^3 sub-grid in
+ * a cut cell (the same points that gave its volume and centroid).  The
+ * shape functions are smooth, so this is accurate to a small fraction of
+ * |G|; and it is exactly compatible with the correction (sum_a G_a = 0,
+ * sum_a X_a (x) G_a = V I with V = sum_ip V_ip, because MLS reproduces
+ * linear fields at every sub-point).  The one-point ip derivatives are
+ * then corrected to match it (variationally consistent integration, Chen,
+ * Hillman & Rueter 2013, IJNME 95:387, with a domain instead of a boundary
+ * integral).  Returns 0, -1 on a singular sub-point or out of memory.
+ */
+static int fine_target(const tled_model_t *m, const tled_grid_t *ng,
+		       const tled_model_opts_t *o, const double *cellc,
+		       const uint8_t *cellcut, double *G)
+{
+	int64_t n = m->n;
+	int nt = m->nthreads;
+	double h = m->ip_h;
+	double *acc = calloc((size_t)nt * (size_t)(3 * n), sizeof *acc);
+	if (!acc)
+		return -1;
+	int rc = 0;
+	const double g2 = 0.5 / sqrt(3.0);
+#pragma omp parallel num_threads(nt)
+	{
+#ifdef _OPENMP
+		double *gl = acc + (size_t)omp_get_thread_num() * (size_t)(3 * n);
+#else
+		double *gl = acc;
+#endif
+		int64_t *ids = NULL;
+		int cap = 0, bcap = 0;
+		double *buf = NULL;
+#pragma omp for schedule(static)
+		for (int64_t p = 0; p < m->nip; p++) {
+			const double *cc = cellc + 3 * p;
+			int nq = cellcut[p] ? 64 : 8;
+			for (int q = 0; q < nq; q++) {
+				double x[3], wq;
+				if (cellcut[p]) {
+					int f[3] = { q & 3, (q >> 2) & 3, q >> 4 };
+					for (int d = 0; d < 3; d++)
+						x[d] = cc[d] + (f[d] + 0.5 - 2) * h / 4;
+					if (!ip_inside(m, ng, o, x))
+						continue;
+					wq = h * h * h / 64;
+				} else {
+					for (int d = 0; d < 3; d++)
+						x[d] = cc[d] + ((q >> d) & 1 ? g2 : -g2) * h;
+					wq = h * h * h / 8;
+				}
+				int k = tled_model_cover(m, ng, x, &ids, &cap);
+				if (k > bcap) {
+					double *t = realloc(buf, (size_t)k * 6 *
+									 sizeof *t);
+					if (t) {
+						buf = t;
+						bcap = k;
+					}
+				}
+				double L;
+				if (k < 4 || k > bcap ||
+				    mls_cover(m, ids, k, x, buf, buf + k, buf + 4 * k,
+					      buf + 5 * k, &L)) {
+#pragma omp atomic write
+					rc = -1;
+					continue;
+				}
+				for (int i = 0; i < k; i++)
+					for (int d = 0; d < 3; d++)
+						gl[3 * ids[i] + d] += wq * buf[k + 3 * i + d];
+			}
+		}
+		free(ids);
+		free(buf);
+	}
+	for (int t = 0; t < nt; t++)
+		for (int64_t i = 0; i < 3 * n; i++)
+			G[i] += acc[(size_t)t * (size_t)(3 * n) + (size_t)i];
+	free(acc);
+	return rc;
+}
+
 int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		     int64_t nin, const uint8_t *kind0, const uint8_t *constrain,
 		     const tled_model_opts_t *o, char *err, size_t errsize)
@@ -1005,7 +1428,8 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 	int rc = -1;
 	int64_t *par = NULL, *ent_ip = NULL;
 	double *w = NULL, *P = NULL, *Mi = NULL, *R = NULL;
-	uint8_t *con = NULL, *okip = NULL;
+	uint8_t *con = NULL, *okip = NULL, *cellcut = NULL;
+	double *cellc = NULL;
 	tled_grid_t ig = { 0 }, ng = { 0 };
 	int K = o->support_k;
 
@@ -1234,7 +1658,10 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		m->ipV = malloc((size_t)nip * sizeof *m->ipV);
 		m->ipmat = malloc((size_t)nip * sizeof *m->ipmat);
 		m->ipptr = malloc((size_t)(nip + 1) * sizeof *m->ipptr);
-		if (!m->ipX || !m->ipV || !m->ipmat || !m->ipptr)
+		cellc = malloc((size_t)(3 * nip) * sizeof *cellc);
+		cellcut = malloc((size_t)nip);
+		if (!m->ipX || !m->ipV || !m->ipmat || !m->ipptr || !cellc ||
+		    !cellcut)
 			goto oom;
 		int64_t p = 0;
 		for (int64_t t = 0; t < nall; t++)
@@ -1247,6 +1674,9 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 				m->ipX[3 * p + 2] = lo[2] + (k + 0.5) * h;
 				m->ipV[p] = h * h * h;
 				m->ipptr[p] = (int64_t)K * p;
+				memcpy(cellc + 3 * p, m->ipX + 3 * p,
+				       3 * sizeof(double));
+				cellcut[p] = okip[t] == 2;
 				p++;
 			}
 		m->ipptr[nip] = (int64_t)K * nip;
@@ -1330,6 +1760,9 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 					if (q != p2) {
 						memcpy(m->ipX + 3 * q, m->ipX + 3 * p2,
 						       3 * sizeof(double));
+						memcpy(cellc + 3 * q, cellc + 3 * p2,
+						       3 * sizeof(double));
+						cellcut[q] = cellcut[p2];
 						m->ipV[q] = m->ipV[p2];
 					}
 					q++;
@@ -1348,33 +1781,100 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 	}
 
 	/* ---- supports, shape functions ---- */
-	int64_t nip = m->nip, ne = (int64_t)K * nip;
-	m->ipnode = malloc((size_t)ne * sizeof *m->ipnode);
-	m->N = malloc((size_t)ne * sizeof *m->N);
-	m->dN = malloc((size_t)(3 * ne) * sizeof *m->dN);
-	w = malloc((size_t)ne * sizeof *w);
-	P = malloc((size_t)(4 * ne) * sizeof *P);
+	int64_t nip = m->nip, ne;
+	m->support_nodal = o->support_nodal != 0;
+	if (m->support_nodal) {
+		if (nodal_radii(m, &ng, K, o->support_dilation))
+			goto oom;
+		/* variable-size supports: count, then fill */
+		int64_t cfail = -1;
+		m->ipptr[0] = 0;
+#pragma omp parallel num_threads(m->nthreads)
+		{
+			int64_t *buf = NULL;
+			int cap = 0;
+#pragma omp for schedule(dynamic, 256)
+			for (int64_t p = 0; p < nip; p++) {
+				int k = tled_model_cover(m, &ng, m->ipX + 3 * p,
+							 &buf, &cap);
+				if (k < 0) {
+#pragma omp critical
+					cfail = p;
+					k = 0;
+				}
+				m->ipptr[p + 1] = k;
+			}
+			free(buf);
+		}
+		if (cfail >= 0)
+			goto oom;
+		for (int64_t p = 0; p < nip; p++)
+			m->ipptr[p + 1] += m->ipptr[p];
+	}
+	ne = m->ipptr[nip];
+	m->ipnode = malloc((size_t)(ne ? ne : 1) * sizeof *m->ipnode);
+	m->N = malloc((size_t)(ne ? ne : 1) * sizeof *m->N);
+	m->dN = malloc((size_t)(3 * (ne ? ne : 1)) * sizeof *m->dN);
+	w = malloc((size_t)(ne ? ne : 1) * sizeof *w);
+	P = malloc((size_t)(4 * (ne ? ne : 1)) * sizeof *P);
 	Mi = malloc((size_t)(16 * nip) * sizeof *Mi);
 	R = malloc((size_t)nip * sizeof *R);
-	ent_ip = m->entip = malloc((size_t)ne * sizeof *ent_ip);
+	ent_ip = m->entip = malloc((size_t)(ne ? ne : 1) * sizeof *ent_ip);
 	if (!m->ipnode || !m->N || !m->dN || !w || !P || !Mi || !R || !ent_ip)
 		goto oom;
 	int64_t bad = -1;
+	int badk = K;
 #pragma omp parallel num_threads(m->nthreads)
 	{
 		double *kd2 = malloc((size_t)K * sizeof *kd2);
+		int64_t *buf = NULL;
+		int cap = 0;
+		double *rr = NULL;
+		int rcap = 0;
 #pragma omp for schedule(dynamic, 256)
 		for (int64_t p = 0; p < nip; p++) {
 			const double *x = m->ipX + 3 * p;
-			int64_t *sid = m->ipnode + (int64_t)K * p;
-			int k = kd2 ? tled_grid_knn(&ng, x, K, -1, sid, kd2) : 0;
-			int ok = k == K;
+			int64_t e0 = m->ipptr[p];
+			int k = (int)(m->ipptr[p + 1] - e0);
+			int64_t *sid = m->ipnode + e0;
+			int64_t nearest = -1;
+			int ok;
+			if (m->support_nodal) {
+				int k2 = tled_model_cover(m, &ng, x, &buf, &cap);
+				ok = k2 == k && k >= 4;
+				if (ok && k > rcap) {
+					double *t = realloc(rr, (size_t)k * sizeof *t);
+					if (t) {
+						rr = t;
+						rcap = k;
+					}
+				}
+				ok = ok && k <= rcap;
+				if (ok) {
+					memcpy(sid, buf, (size_t)k * sizeof *sid);
+					double dd;
+					ok = tled_grid_knn(&ng, x, 1, -1, &nearest,
+							   &dd) == 1;
+				}
+				ok = ok && !mls_cover(m, sid, k, x, m->N + e0,
+						      m->dN + 3 * e0, w + e0, rr,
+						      &R[p]);
+			} else {
+				k = kd2 ? tled_grid_knn(&ng, x, K, -1, sid, kd2) : 0;
+				ok = k == K;
+				if (ok) {
+					nearest = sid[0];
+					R[p] = o->support_dilation * sqrt(kd2[K - 1]);
+					ok = !tled_mls(m->X, sid, K, x, R[p], m->N + e0,
+						       m->dN + 3 * e0, w + e0);
+				}
+			}
 			if (ok) {
 				/* material: callback, else nearest node */
 				int mat = o->material ? o->material(x, o->material_ctx)
 						      : -1;
 				if (mat < 0 || mat >= MAT_N) {
-					int32_t l = m->label[sid[0]];
+					int32_t l = m->label[nearest];
 					mat = l == TL_CSF ? MAT_CSF
 					      : (l == TL_TUMOUR || l == TL_TUMOUR_BND ||
 						 l == TL_SEED)
@@ -1382,36 +1882,34 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 						      : MAT_BRAIN;
 				}
 				m->ipmat[p] = mat;
-				R[p] = o->support_dilation * sqrt(kd2[K - 1]);
-				int64_t e0 = (int64_t)K * p;
-				ok = !tled_mls(m->X, sid, K, x, R[p], m->N + e0,
-					       m->dN + 3 * e0, w + e0);
-				if (ok) {
-					/* moment matrix inverse for the correction */
-					double M[16] = { 0 };
-					for (int i = 0; i < K; i++) {
-						double *pa = P + 4 * (e0 + i);
-						pa[0] = 1;
-						for (int c = 0; c < 3; c++)
-							pa[c + 1] = (m->X[3 * sid[i] + c] -
-								     x[c]) / R[p];
-						for (int r = 0; r < 4; r++)
-							for (int s = 0; s < 4; s++)
-								M[4 * r + s] += w[e0 + i] *
-										pa[r] * pa[s];
-					}
-					ok = !inv4(M, Mi + 16 * p);
+				/* moment matrix inverse for the correction */
+				double M[16] = { 0 };
+				for (int i = 0; i < k; i++) {
+					double *pa = P + 4 * (e0 + i);
+					pa[0] = 1;
+					for (int c = 0; c < 3; c++)
+						pa[c + 1] = (m->X[3 * sid[i] + c] -
+							     x[c]) / R[p];
+					for (int r = 0; r < 4; r++)
+						for (int s2 = 0; s2 < 4; s2++)
+							M[4 * r + s2] += w[e0 + i] *
+									 pa[r] * pa[s2];
 				}
-				for (int i = 0; i < K; i++)
-					ent_ip[(int64_t)K * p + i] = p;
+				ok = !inv4(M, Mi + 16 * p);
 			}
+			for (int i = 0; i < k; i++)
+				ent_ip[e0 + i] = p;
 			if (!ok) {
 #pragma omp critical
-				if (bad < 0 || p < bad)
+				if (bad < 0 || p < bad) {
 					bad = p;
+					badk = k;
+				}
 			}
 		}
 		free(kd2);
+		free(buf);
+		free(rr);
 	}
 	if (bad >= 0) {
 		const double *x = m->ipX + 3 * bad;
@@ -1419,7 +1917,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 			  "integration point (%.3f, %.3f, %.3f) mm: its %d "
 			  "support nodes are coplanar or coincident (raise "
 			  "support_k or remove duplicate nodes)",
-			  x[0] / TLED_MM, x[1] / TLED_MM, x[2] / TLED_MM, K);
+			  x[0] / TLED_MM, x[1] / TLED_MM, x[2] / TLED_MM, badk);
 		goto fail;
 	}
 
@@ -1463,40 +1961,91 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 	m->ebc = o->ebc != 0;
 	m->ebc_fixed = o->ebc_fixed != 0;
 	m->rk = K;
-	m->rid = malloc((size_t)n * K * sizeof *m->rid);
-	m->rN = malloc((size_t)n * K * sizeof *m->rN);
+	if (m->support_nodal) {
+		/* rows padded to the largest cover (entries: the node itself
+		 * with Phi = 0) */
+		int kmax = 0;
+		int64_t cfail = -1;
+#pragma omp parallel num_threads(m->nthreads) reduction(max : kmax)
+		{
+			int64_t *buf = NULL;
+			int cap = 0;
+#pragma omp for schedule(dynamic, 256)
+			for (int64_t a = 0; a < n; a++) {
+				int k = tled_model_cover(m, &ng, m->X + 3 * a, &buf,
+							 &cap);
+				if (k < 0) {
+#pragma omp critical
+					cfail = a;
+				}
+				kmax = k > kmax ? k : kmax;
+			}
+			free(buf);
+		}
+		if (cfail >= 0)
+			goto oom;
+		m->rk = kmax > 4 ? kmax : 4;
+	}
+	int rk = m->rk;
+	m->rid = malloc((size_t)n * rk * sizeof *m->rid);
+	m->rN = malloc((size_t)n * rk * sizeof *m->rN);
 	if (!m->rid || !m->rN)
 		goto oom;
 	bad = -1;
+	int badr = rk;
 #pragma omp parallel num_threads(m->nthreads)
 	{
-		double *kd2 = malloc((size_t)K * sizeof *kd2);
-		double *dd = malloc((size_t)(4 * K) * sizeof *dd);
+		double *kd2 = malloc((size_t)rk * sizeof *kd2);
+		double *dd = malloc((size_t)(5 * rk) * sizeof *dd);
+		int64_t *buf = NULL;
+		int cap = 0;
 #pragma omp for schedule(dynamic, 256)
 		for (int64_t a = 0; a < n; a++) {
-			int64_t *sid = m->rid + (int64_t)K * a;
-			int k = kd2 && dd ? tled_grid_knn(&ng, m->X + 3 * a, K, -1,
-							  sid, kd2)
-					  : 0;
-			if (k != K || tled_mls(m->X, sid, K, m->X + 3 * a,
-					       o->support_dilation *
-						       sqrt(kd2[K - 1]),
-					       m->rN + (int64_t)K * a, dd,
-					       dd + 3 * K)) {
+			int64_t *sid = m->rid + (int64_t)rk * a;
+			double *rn = m->rN + (int64_t)rk * a;
+			int ok, k = 0;
+			if (m->support_nodal) {
+				k = kd2 && dd ? tled_model_cover(m, &ng, m->X + 3 * a,
+								 &buf, &cap)
+					      : -1;
+				ok = k >= 4 && k <= rk;
+				if (ok) {
+					double L;
+					memcpy(sid, buf, (size_t)k * sizeof *sid);
+					ok = !mls_cover(m, sid, k, m->X + 3 * a, rn, dd,
+							dd + 3 * rk, dd + 4 * rk, &L);
+					for (int i = k; i < rk; i++) {
+						sid[i] = a;
+						rn[i] = 0;
+					}
+				}
+			} else {
+				k = kd2 && dd ? tled_grid_knn(&ng, m->X + 3 * a, K, -1,
+							      sid, kd2)
+					      : 0;
+				ok = k == K && !tled_mls(m->X, sid, K, m->X + 3 * a,
+							 o->support_dilation *
+								 sqrt(kd2[K - 1]),
+							 rn, dd, dd + 3 * K);
+			}
+			if (!ok) {
 #pragma omp critical
-				if (bad < 0 || a < bad)
+				if (bad < 0 || a < bad) {
 					bad = a;
+					badr = k;
+				}
 			}
 		}
 		free(kd2);
 		free(dd);
+		free(buf);
 	}
 	if (bad >= 0) {
 		const double *x = m->X + 3 * bad;
 		rc = errf(err, errsize, "singular MLS moment matrix at node "
 			  "%lld (%.3f, %.3f, %.3f) mm: its %d nearest nodes are "
 			  "coplanar", (long long)bad, x[0] / TLED_MM,
-			  x[1] / TLED_MM, x[2] / TLED_MM, K);
+			  x[1] / TLED_MM, x[2] / TLED_MM, badr);
 		goto fail;
 	}
 
@@ -1508,19 +2057,37 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		for (int64_t a = 0; a < n; a++)
 			con[a] = m->mass[a] > 0 &&
 				 (m->ebc_fixed || m->kind[a] != TLED_FIXED);
-		if (boundary_weights(m) == 0 && m->nb > 0) {
+		double *Gf = NULL;
+		if (m->support_nodal) {
+			Gf = calloc((size_t)(3 * n), sizeof *Gf);
+			if (!Gf)
+				goto oom;
+			if (fine_target(m, &ng, o, cellc, cellcut, Gf)) {
+				free(Gf);
+				rc = errf(err, errsize, "singular MLS moment "
+					  "matrix at a sub-point of the "
+					  "integration cells (support too "
+					  "small: raise support_k)");
+				goto fail;
+			}
+		}
+		if (boundary_weights(m, Gf) == 0 && m->nb > 0) {
+			free(Gf);
+			Gf = NULL;
 			G = calloc((size_t)(3 * n), sizeof *G);
 			if (!G)
 				goto oom;
 			for (int64_t b = 0; b < m->nb; b++) {
 				int64_t a0 = m->bnode[b];
-				for (int i = 0; i < K; i++) {
-					int64_t a = m->rid[(int64_t)K * a0 + i];
-					double N = m->rN[(int64_t)K * a0 + i];
+				for (int i = 0; i < m->rk; i++) {
+					int64_t a = m->rid[(int64_t)m->rk * a0 + i];
+					double N = m->rN[(int64_t)m->rk * a0 + i];
 					for (int c = 0; c < 3; c++)
 						G[3 * a + c] += N * m->bt[3 * b + c];
 				}
 			}
+		} else {
+			G = Gf; /* no boundary nodes: the fine target (or 0) */
 		}
 	}
 	/* only for nodes whose supports stay clear of the domain boundary:
@@ -1575,5 +2142,7 @@ out:
 	free(R);
 	free(con);
 	free(okip);
+	free(cellc);
+	free(cellcut);
 	return rc;
 }

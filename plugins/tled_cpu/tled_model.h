@@ -9,15 +9,20 @@
  * explicit dynamics algorithm for surgical simulation", IJNMBE 26:977):
  *   - nodes carry the unknowns; integration points (ips) sit at the centres of
  *     a regular background grid of cells and are kept where they fall inside
- *     the domain; each ip has its own support domain: its K nearest nodes;
+ *     the domain; supports are node-based (default, support_nodal): node a
+ *     has the weight radius R_a = dilation * distance to its Kn-th nearest
+ *     node, and a point's support is every node whose radius reaches it, so
+ *     the shape functions are one smooth set of functions of x (the legacy
+ *     option takes the K nearest nodes of each evaluation point, which makes
+ *     the approximation depend on where it is evaluated; see support_nodal);
  *   - moving least squares (MLS) shape functions with a linear basis and a
  *     cubic-spline weight (Belytschko et al. 1994), so linear fields are
  *     reproduced exactly;
  *   - the shape-function derivatives at the ips are corrected once so that the
- *     discrete integration constraint  sum_ip V_ip dN_a(x_ip) = 0  holds for
+ *     discrete integration constraint  sum_ip V_ip dN_a(x_ip) = G_a  holds for
  *     every node whose force is used (the linear patch test then passes to
  *     round-off; cf. variationally consistent integration, Chen, Hillman &
- *     Rueter 2013, IJNME 95:387).  The correction is the least-norm one that
+ *     Rueter 2013, IJNME 95:387; G_a: see enum tled_corr).  The correction is the least-norm one that
  *     keeps linear reproduction at every ip, and the SAME derivatives give F
  *     and the forces, so forces stay the exact gradient of a discrete strain
  *     energy (symmetric stiffness, energy-conserving explicit dynamics);
@@ -58,10 +63,17 @@ enum tled_label {
  * evaluated with the brain-boundary nodes (label 1) as quadrature points,
  *   G_a = sum_b Phi_a(X_b) t_b,   t_b ~ A_b n_b,
  * the t_b fitted so that sum_a G_a = 0 and sum_a X_a (x) G_a = V I (the
- * discrete divergence theorem for constant and linear fields); with the
- * essential boundary conditions collocated by Lagrange multipliers
- * (tled_solve.h) the linear patch test is then exact, and the correction
- * is small because the target is the true integral to O(h).
+ * discrete divergence theorem for constant and linear fields).  With
+ * node-based supports (support_nodal, default) the t_b are the boundary
+ * quadrature that best reproduces (ridge least squares) the integral of
+ * grad N_a over the domain computed by a fine quadrature of the
+ * integration cells (2^3 Gauss points per cell, 4^3 sub-points in a cut
+ * cell).  (The A_b n_b start alone kept a bias: cavity h 4, nu 0.49,
+ * ip_factor 0.5, direct solve: RMS 2.8 % of u(a) against 1.6 % with the
+ * fitted target and 1.8 % with no correction; bench/tled/results.md.)
+ * With the essential boundary conditions collocated by Lagrange
+ * multipliers (tled_solve.h) the linear patch test is then exact, because
+ * G stays of the form Phi_B^T t (the reactions can balance it).
  * With ebc = 0 (legacy) the target is 0 for every non-fixed node (ALL):
  * linear patch exact, but free nodes whose shape functions reach the
  * essential boundary get distorted gradients (bench/tled/results.md). */
@@ -83,8 +95,11 @@ typedef struct tled_material {
 int tled_material_set(tled_material_t *m, double E, double nu, double rho);
 
 typedef struct tled_model_opts {
-	int support_k;          /* nodes per ip support domain (K nearest) */
-	double support_dilation;/* weight radius = dilation * distance to K-th */
+	int support_k;          /* nodes per support domain: the K nearest
+	                           (support_nodal = 0), or about 1.5 K on
+	                           average (support_nodal = 1, see below) */
+	double support_dilation;/* weight radius = dilation * distance to the
+	                           K-th (Kn-th with support_nodal) nearest */
 	double ip_factor;       /* ip grid spacing / mean node spacing */
 	double merge_tol;       /* m: nodes closer than this are merged */
 	int corr;               /* tled_corr: integration-constraint correction */
@@ -99,6 +114,27 @@ typedef struct tled_model_opts {
 	                           boundaries, O(h) error there) */
 	tled_material_t mat[MAT_N];
 	int nthreads;           /* OpenMP threads (<=0: runtime default) */
+	int support_nodal;      /* 1 (default): node-based supports.  Node a
+	                           has the weight radius R_a = dilation * the
+	                           distance to its Kn-th nearest node,
+	                           Kn = 1.5 K / dilation^3 (in [4, 1.5 K]), so
+	                           about 1.5 K nodes cover a point (30.6 on
+	                           average in the cavity test, K = 20); the
+	                           support of a point x is
+	                           every node with |x - X_a| < R_a.  The shape
+	                           functions are then one set of smooth
+	                           functions whose exact gradients the ips
+	                           use.  (Covers of about K nodes have 35 %
+	                           fewer entries but gave 2.4 % instead of
+	                           1.6 % RMS on the cavity at h 3 and lower
+	                           det F in large growth; results.md.)
+	                           0 (legacy): the K nearest nodes of each
+	                           evaluation point with a radius depending on
+	                           that point: the ips, the nodal rows and the
+	                           collocation points each see a different
+	                           approximation, which biased the cavity test
+	                           by ~1.5-4 % of u(a) at every node spacing
+	                           (bench/tled/results.md, round 4) */
 	/* Domain test for ip candidates (reference coordinates, m).  NULL: the
 	 * default test (near the node cloud and on the inner side of the brain
 	 * boundary nodes).  Returns 1 inside, 0 outside. */
@@ -171,12 +207,22 @@ typedef struct tled_model {
 	/* essential boundary conditions by collocation (ebc = 1) */
 	int ebc;
 	int ebc_fixed;
-	int rk;             /* entries per nodal row */
+	int rk;             /* entries per nodal row (node-based supports:
+	                       the largest cover; shorter rows are padded
+	                       with Phi = 0 entries) */
 	int64_t *rid;       /* n*rk: support nodes of u^h at X_a */
 	double *rN;         /* n*rk: shape functions Phi_b(X_a) */
 	double *bt;         /* 3*nb: boundary weights t_b ~ A_b n_b (m^2),
 	                       fitted so that the discrete divergence theorem
-	                       holds for constant and linear fields */
+	                       holds for constant and linear fields (node-
+	                       based supports: fitted to the fine-quadrature
+	                       target first, see enum tled_corr) */
+
+	/* node-based supports (support_nodal = 1) */
+	int support_nodal;
+	double *Ra;         /* n weight radii, m (NULL when legacy) */
+	double Ra_max;      /* largest R_a, m */
+	int Kn;             /* neighbour rank defining R_a */
 
 	/* diagnostics of the setup */
 	double corr_rel;    /* |integration-constraint residual| after / before */
@@ -205,6 +251,13 @@ void tled_model_free(tled_model_t *m);
 int tled_mls(const double *X, const int64_t *ids, int k, const double x[3],
 	     double R, double *N, double *dN, double *w);
 
+/* MLS as tled_mls with node-based supports: support node i has its own
+ * weight radius Ra[i] (m), basis scale L (m).  Nodes with zero weight get
+ * N = dN = 0.  Returns 0 or -1 (singular moment matrix). */
+int tled_mls_nodal(const double *X, const int64_t *ids, int k,
+		   const double x[3], const double *Ra, double L, double *N,
+		   double *dN, double *w);
+
 /* cubic spline weight W(r), r = d/R, and dW/dr */
 double tled_weight(double r, double *dwdr);
 
@@ -217,10 +270,18 @@ void tled_model_gradsum(const tled_model_t *m, double *g);
 double tled_boundary_side(const tled_model_t *m, const double y[3],
 			  int64_t *bid);
 
+/* Nodes covering x with node-based supports (m->Ra set): every node a of
+ * the grid g (built over m->X) with |x - X_a| < R_a, written to *ids
+ * (grown with realloc, capacity *cap); returns how many, -1 when out of
+ * memory. */
+int tled_model_cover(const tled_model_t *m, const tled_grid_t *g,
+		     const double x[3], int64_t **ids, int *cap);
+
 /* Approximated displacement u^h(x) = sum_a N_a(x) u_a (u: 3n nodal
  * parameters, m) at a reference point x (m).  Support as at the ips: the
  * K nearest nodes of the grid ng (built over m->X), weight radius
- * dil * distance to the K-th.  MLS does not interpolate, so at a node
+ * dil * distance to the K-th (node-based supports: the nodes covering x,
+ * K and dil unused).  MLS does not interpolate, so at a node
  * u^h(X_a) != u_a in general: outputs must use this.  Returns 0, or -1 when
  * the support is singular (out left at 0). */
 int tled_model_interp(const tled_model_t *m, const tled_grid_t *ng, int K,

@@ -114,6 +114,70 @@ static void test_mls_linear(void **state)
 	assert_int_equal(tled_mls(X, ids, 30, x, 0.02, N, dN, w), -1);
 }
 
+/* MLS with node-based radii (tled_mls_nodal): partition of unity, linear
+ * reproduction of values and gradients, zero outside a node's radius, and
+ * dN is the gradient of N (central differences, 1e-6 relative): the shape
+ * functions do not depend on where they are evaluated */
+static void test_mls_nodal(void **state)
+{
+	(void)state;
+	uint64_t s = 7;
+	double X[3 * 40], Ra[40];
+	int64_t ids[40];
+	for (int i = 0; i < 40; i++) {
+		ids[i] = i;
+		for (int c = 0; c < 3; c++)
+			X[3 * i + c] = 0.01 * synth_rand(&s);
+		Ra[i] = 0.004 + 0.004 * synth_rand(&s);
+	}
+	double x[3] = { 0.005, 0.004, 0.006 }, N[40], dN[120], w[40];
+	assert_int_equal(tled_mls_nodal(X, ids, 40, x, Ra, 0.005, N, dN, w), 0);
+	double s0 = 0, s1[3] = { 0 }, g0[3] = { 0 }, g1[9] = { 0 };
+	int nout = 0;
+	for (int i = 0; i < 40; i++) {
+		double d2 = 0;
+		for (int c = 0; c < 3; c++)
+			d2 += (X[3 * i + c] - x[c]) * (X[3 * i + c] - x[c]);
+		if (d2 >= Ra[i] * Ra[i]) {
+			nout++;
+			assert_true(N[i] == 0 && dN[3 * i] == 0);
+		}
+		s0 += N[i];
+		for (int c = 0; c < 3; c++) {
+			s1[c] += N[i] * X[3 * i + c];
+			g0[c] += dN[3 * i + c];
+			for (int d = 0; d < 3; d++)
+				g1[3 * c + d] += X[3 * i + c] * dN[3 * i + d];
+		}
+	}
+	assert_true(nout > 0 && nout < 36);
+	assert_true(fabs(s0 - 1) < 1e-12);
+	for (int c = 0; c < 3; c++) {
+		assert_true(fabs(s1[c] - x[c]) < 1e-14);
+		assert_true(fabs(g0[c]) < 1e-9);
+		for (int d = 0; d < 3; d++)
+			assert_true(fabs(g1[3 * c + d] - (c == d)) < 1e-10);
+	}
+	/* dN = grad N by central differences */
+	double Np[40], Nm[40], t1[120], t2[40], nmax = 0, emax = 0;
+	const double dl = 1e-7;
+	for (int d = 0; d < 3; d++) {
+		double xp[3] = { x[0], x[1], x[2] }, xm[3] = { x[0], x[1], x[2] };
+		xp[d] += dl;
+		xm[d] -= dl;
+		assert_int_equal(tled_mls_nodal(X, ids, 40, xp, Ra, 0.005, Np,
+						t1, t2), 0);
+		assert_int_equal(tled_mls_nodal(X, ids, 40, xm, Ra, 0.005, Nm,
+						t1, t2), 0);
+		for (int i = 0; i < 40; i++) {
+			double fd = (Np[i] - Nm[i]) / (2 * dl);
+			emax = fmax(emax, fabs(fd - dN[3 * i + d]));
+			nmax = fmax(nmax, fabs(dN[3 * i + d]));
+		}
+	}
+	assert_true(emax < 1e-6 * nmax);
+}
+
 /* Patch test: linear displacement (1% strain, non-symmetric gradient)
  * prescribed on the faces of a jittered cube, reproduced inside to 1e-6 */
 static void test_patch(void **state)
@@ -327,6 +391,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_neohooke),
 		cmocka_unit_test(test_mls_linear),
+		cmocka_unit_test(test_mls_nodal),
 		cmocka_unit_test(test_patch),
 		cmocka_unit_test(test_dt_critical),
 		cmocka_unit_test(test_coincident),

@@ -33,6 +33,8 @@ typedef struct cavity_cfg {
 	double ip_factor; /* ip spacing / mean node spacing (0: model default) */
 	double dil;       /* support dilation (0: model default) */
 	double ha;        /* node spacing on the cavity surface (0: h) */
+	int legacy_support; /* 1: support_nodal = 0 (K nearest of each
+	                       evaluation point; the biased legacy scheme) */
 	double lin;       /* != 0: patch test instead: every boundary node
 	                     driven by u = lin * G X (G a fixed matrix) */
 	const char *dump; /* optional: write r, u_r, exact, |u_t| per node (mm) */
@@ -137,6 +139,8 @@ static inline void cavity_run(const cavity_cfg_t *c, int steps,
 	mo.nthreads = c->nthreads;
 	mo.ebc = c->ebc;
 	mo.corr = c->corr;
+	if (c->legacy_support)
+		mo.support_nodal = 0;
 	if (c->ip_factor > 0)
 		mo.ip_factor = c->ip_factor;
 	if (c->dil > 0)
