@@ -971,8 +971,26 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 				    (long long)ci.node_vmax, p[0], p[1], p[2],
 				    ci.vmax, dt, s->dt_crit);
 		}
-		if (o->contact && (it % 10 == 0))
-			s->contacts += tled_contact(s);
+		if (o->contact) {
+			/* every iteration: projected every 10th, a node pressed
+			 * against the brain boundary drifted out and back for
+			 * ever (10 000 iterations per growth step, phantom) */
+			int64_t nc = tled_contact(s);
+			s->contacts += nc;
+			if (nc > 0) {
+				/* the outward velocity the last step gave a node
+				 * in contact was removed with it: measure the
+				 * distance to equilibrium on what is left */
+				double vm = 0;
+				for (int64_t a = 0; a < n; a++)
+					if (s->dkind[a] == TLED_FREE) {
+						const double *va = s->v + 3 * a;
+						vm = fmax(vm, va[0] * va[0] + va[1] * va[1] +
+								      va[2] * va[2]);
+					}
+				ci.vmax = sqrt(vm);
+			}
+		}
 		/* The tangent stiffness grows as tissue is compressed, so the
 		 * step picked from the state at the start of this call can be
 		 * above the critical one once the driven nodes have arrived:
