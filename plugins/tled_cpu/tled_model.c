@@ -344,68 +344,18 @@ double tled_weight(double r, double *dwdr)
 int tled_mls(const double *X, const int64_t *ids, int k, const double x[3],
 	     double R, double *N, double *dN, double *w)
 {
-	double M[16] = { 0 }, dM[3][16] = { { 0 } };
-	double pa[4], dw[3];
-	for (int i = 0; i < k; i++) {
-		const double *q = X + 3 * ids[i];
-		double d[3] = { q[0] - x[0], q[1] - x[1], q[2] - x[2] };
-		double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-		double dwdr;
-		w[i] = tled_weight(dist / R, &dwdr);
-		/* dw/dx_k = W'(r) * dr/dx_k, r = |x - X_a|/R */
-		for (int c = 0; c < 3; c++)
-			dw[c] = dist > 0 ? dwdr * (-d[c]) / (dist * R) : 0;
-		pa[0] = 1;
-		for (int c = 0; c < 3; c++)
-			pa[c + 1] = d[c] / R;
-		for (int r = 0; r < 4; r++)
-			for (int s = 0; s < 4; s++) {
-				M[4 * r + s] += w[i] * pa[r] * pa[s];
-				for (int c = 0; c < 3; c++)
-					dM[c][4 * r + s] += dw[c] * pa[r] * pa[s];
-			}
-	}
-	double Mi[16];
-	if (inv4(M, Mi))
+	/* one radius for every support node: tled_mls_nodal with R_a = R
+	 * (nodes at r >= 1 contribute nothing either way: W(1) = W'(1) = 0) */
+	double buf[512] = { 0 };
+	double *Ra = k <= 512 ? buf : malloc((size_t)k * sizeof *Ra);
+	if (!Ra)
 		return -1;
-	double g[4], dg[3][4];
-	for (int r = 0; r < 4; r++)
-		g[r] = Mi[4 * r];
-	for (int c = 0; c < 3; c++) {
-		double t[4];
-		for (int r = 0; r < 4; r++) {
-			double s = (r == c + 1) ? 1 / R : 0;
-			for (int q = 0; q < 4; q++)
-				s -= dM[c][4 * r + q] * g[q];
-			t[r] = s;
-		}
-		for (int r = 0; r < 4; r++) {
-			double s = 0;
-			for (int q = 0; q < 4; q++)
-				s += Mi[4 * r + q] * t[q];
-			dg[c][r] = s;
-		}
-	}
-	for (int i = 0; i < k; i++) {
-		const double *q = X + 3 * ids[i];
-		double d[3] = { q[0] - x[0], q[1] - x[1], q[2] - x[2] };
-		double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-		double dwdr;
-		tled_weight(dist / R, &dwdr);
-		pa[0] = 1;
-		for (int c = 0; c < 3; c++)
-			pa[c + 1] = d[c] / R;
-		double gp = g[0] * pa[0] + g[1] * pa[1] + g[2] * pa[2] +
-			    g[3] * pa[3];
-		N[i] = gp * w[i];
-		for (int c = 0; c < 3; c++) {
-			double dwc = dist > 0 ? dwdr * (-d[c]) / (dist * R) : 0;
-			double dgp = dg[c][0] * pa[0] + dg[c][1] * pa[1] +
-				     dg[c][2] * pa[2] + dg[c][3] * pa[3];
-			dN[3 * i + c] = dgp * w[i] + gp * dwc;
-		}
-	}
-	return 0;
+	for (int i = 0; i < k; i++)
+		Ra[i] = R;
+	int rc = tled_mls_nodal(X, ids, k, x, Ra, R, N, dN, w);
+	if (Ra != buf)
+		free(Ra);
+	return rc;
 }
 
 /*
