@@ -1,0 +1,60 @@
+#!/bin/sh
+# The mass effect of the growth simulation alone (bench/pipeline/results.md,
+# "How hard does the growth push?").
+#
+#   sh bench/pipeline/growth_push.sh [--out DIR] [--seeds "1 2 3"] [--set stage.key=value]...
+#
+# For each seed: the default phantom WITHOUT the inter-subject warp
+# (deform_mm 0), noise and bias (so the true field is the mass effect
+# alone); graphs/armstg.ini and graphs/spherical.ini with
+# register.iterations=0 (the total warp is the growth alone); then
+# growth_push.py compares the warp and the nodes with the truth.  --set
+# options go to both graphs (e.g. --set grow.drive=collocated).  Needs
+# bench/.venv (numpy scipy nibabel h5py), installed here when absent.
+set -eu
+cd "$(dirname "$0")/../.."
+. bench/pipeline/lib.sh
+OUT=out/bench-push
+SEEDS="1 2 3"
+SETS=""
+while [ $# -gt 0 ]; do
+	case $1 in
+	--out) OUT=$2; shift 2 ;;
+	--seeds) SEEDS=$2; shift 2 ;;
+	--set) SETS="$SETS --set $2"; shift 2 ;;
+	*) echo "usage: $0 [--out DIR] [--seeds LIST] [--set stage.key=value]..." >&2; exit 2 ;;
+	esac
+done
+if [ ! -x bench/.venv/bin/python ]; then
+	python3 -m venv bench/.venv
+fi
+bench/.venv/bin/python -c "import numpy, scipy, nibabel, h5py" 2>/dev/null ||
+	bench/.venv/bin/pip install -q numpy scipy nibabel h5py
+OUT=$(abspath "$OUT")
+build_all
+mkdir -p "$OUT"
+for seed in $SEEDS; do
+	ph="$OUT/ph$seed"
+	run_graph bench/pipeline/phantom_export.ini "$ph" --set phantom.seed="$seed" \
+		--set phantom.deform_mm=0 --set phantom.noise=0 --set phantom.bias=0 >/dev/null
+	phantom_env "$ph"
+	runs=""
+	for m in armstg sphere; do
+		case $m in
+		armstg) g=graphs/armstg.ini ;;
+		sphere) g=graphs/spherical.ini ;;
+		esac
+		o="$OUT/ph$seed-$m"
+		# shellcheck disable=SC2086
+		if w=$(run_graph "$g" "$o" --set register.iterations=0 $SETS); then
+			echo "seed $seed $m: ${w} s"
+			runs="$runs $o"
+		else
+			echo "seed $seed $m: FAILED (see $o.log)" >&2
+			tail -2 "$o.log" >&2
+		fi
+	done
+	echo "seed $seed"
+	# shellcheck disable=SC2086
+	[ -z "$runs" ] || bench/.venv/bin/python bench/pipeline/growth_push.py "$ph" $runs
+done
