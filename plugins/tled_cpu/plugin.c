@@ -199,7 +199,8 @@ static const armstg_port_t inputs[] = {
 
 static const armstg_port_t outputs[] = {
 	{ "nodes", MSG_POINTSET, 0,
-	  "input nodes with attr u(3) displacement in mm and final labels" },
+	  "input nodes with attr u(3) displacement in mm (drive=nodal: the "
+	  "MLS nodal parameter) and final labels" },
 	{ "tumour", MSG_POINTSET, 0,
 	  "tumour nodes at grown positions (mm): label 3/4/5, attrs u(3), "
 	  "ref(3), step, component" },
@@ -1022,8 +1023,14 @@ static int tled_process(armstg_stage_t *st)
 	}
 
 	/* ---- outputs ---- */
-	/* displacement at the nodes: u^h(X_a), which equals the prescribed
-	 * value at fixed and driven nodes (collocated conditions) */
+	/* displacement at the nodes.  drive = collocated: u^h(X_a), which
+	 * equals the prescribed value at fixed and driven nodes.  drive =
+	 * nodal: the nodal parameter u_a (MLS does not interpolate: u^h(X_a)
+	 * is smoother and, next to the driven front, smaller).  Writing
+	 * u^h here instead was measured on phantom seeds 1-3 (2026-11-22):
+	 * band error +0.04..+0.13 mm for both tumour models (less push:
+	 * bench/pipeline/results.md, "How hard does the growth push?"), so
+	 * the parameter stays, documented. */
 	for (int64_t a = 0; a < m.n; a++) {
 		tled_solver_nodal_u(&s, a, uh + 3 * a);
 		if (m.kind[a] == TLED_FIXED && !m.ebc_fixed)
