@@ -1146,14 +1146,8 @@ static void bb_apply(const tled_model_t *m, const double *x, double eps,
 		}
 	}
 	for (int64_t b = 0; b < m->nb; b++) {
-		int64_t a0 = m->bnode[b];
-		double acc[3] = { 0, 0, 0 };
-		for (int i = 0; i < rk; i++) {
-			int64_t a = m->rid[(int64_t)rk * a0 + i];
-			double N = m->rN[(int64_t)rk * a0 + i];
-			for (int c = 0; c < 3; c++)
-				acc[c] += N * z[3 * a + c];
-		}
+		double acc[3];
+		tled_model_row(m, m->bnode[b], z, acc);
 		for (int c = 0; c < 3; c++)
 			y[3 * b + c] = acc[c] + eps * x[3 * b + c];
 	}
@@ -1189,14 +1183,8 @@ static int fit_weights(tled_model_t *m, const double *Gfit, double *t)
 	memcpy(t0, t, (size_t)(3 * nb) * sizeof *t0);
 	/* r = Phi_B Gfit + eps t0 - (Phi_B Phi_B^T + eps) t */
 	for (int64_t b = 0; b < nb; b++) {
-		int64_t a0 = m->bnode[b];
-		double acc[3] = { 0, 0, 0 };
-		for (int i = 0; i < rk; i++) {
-			int64_t a = m->rid[(int64_t)rk * a0 + i];
-			double N = m->rN[(int64_t)rk * a0 + i];
-			for (int c = 0; c < 3; c++)
-				acc[c] += N * Gfit[3 * a + c];
-		}
+		double acc[3];
+		tled_model_row(m, m->bnode[b], Gfit, acc);
 		for (int c = 0; c < 3; c++)
 			r[3 * b + c] = acc[c] + eps * t0[3 * b + c];
 	}

@@ -292,4 +292,18 @@ int tled_model_interp(const tled_model_t *m, const tled_grid_t *ng, int K,
  * row-major dU_i/dX_j).  Used by tests and diagnostics. */
 void tled_model_grad(const tled_model_t *m, const double *u, double *H);
 
+/* out = sum_i Phi_i(X_a0) v_{rid_i}: the nodal row of node a0 applied to
+ * a 3n vector v (u^h(X_a0) when v holds the nodal parameters) */
+static inline void tled_model_row(const tled_model_t *m, int64_t a0,
+				  const double *v, double out[3])
+{
+	out[0] = out[1] = out[2] = 0;
+	for (int i = 0; i < m->rk; i++) {
+		int64_t a = m->rid[(int64_t)m->rk * a0 + i];
+		double N = m->rN[(int64_t)m->rk * a0 + i];
+		for (int c = 0; c < 3; c++)
+			out[c] += N * v[3 * a + c];
+	}
+}
+
 #endif

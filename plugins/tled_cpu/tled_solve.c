@@ -317,13 +317,7 @@ void tled_solver_nodal_u(const tled_solver_t *s, int64_t a, double out[3])
 			out[i] = s->u[3 * a + i];
 		return;
 	}
-	out[0] = out[1] = out[2] = 0;
-	for (int i = 0; i < m->rk; i++) {
-		int64_t b = m->rid[(int64_t)m->rk * a + i];
-		double N = m->rN[(int64_t)m->rk * a + i];
-		for (int c = 0; c < 3; c++)
-			out[c] += N * s->u[3 * b + c];
-	}
+	tled_model_row(m, a, s->u, out);
 }
 
 /* ------------------------------------------------------ collocation (ebc) */
