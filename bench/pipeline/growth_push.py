@@ -38,12 +38,28 @@ def field(path):
     return a, im.affine
 
 
+def fail(msg):
+    sys.exit("growth_push.py: " + msg)
+
+
 def main():
+    if len(sys.argv) < 2:
+        fail("usage: growth_push.py PHANTOM_DIR [RUN_DIR...]")
     ph, runs = sys.argv[1], sys.argv[2:]
+    import os
+    for need in [ph + "/" + f for f in ("true_field.nii.gz", "patient_tumour.nii.gz",
+                                         "patient_mask.nii.gz")] + \
+            [r + "/" + f for r in runs for f in ("atlas_to_patient_warp.nii.gz", "nodes.h5")]:
+        if not os.path.isfile(need):
+            fail("missing %s (a finished run of bench/pipeline/growth_push.sh?)" % need)
     T, aff = field(ph + "/true_field.nii.gz")
     inv = np.linalg.inv(aff)
     tum = np.asarray(nib.load(ph + "/patient_tumour.nii.gz").dataobj)
     core = np.isin(tum, [1, 3, 4])
+    if not core.any():
+        fail("%s/patient_tumour.nii.gz has no tumour core (labels 1, 3, 4)" % ph)
+    if T.shape[:3] != core.shape or not np.isfinite(T).all():
+        fail("%s/true_field.nii.gz: not a finite 3-vector field on the tumour's grid" % ph)
     mask = np.asarray(nib.load(ph + "/patient_mask.nii.gz").dataobj) > 0
     vox = np.sqrt((aff[:3, :3] ** 2).sum(0))
     dist = ndi.distance_transform_edt(~core, sampling=vox)
