@@ -96,6 +96,10 @@ typedef struct priv {
 	double sweep_margin;
 	const char *csf_labels;
 	int drive;
+	int contact_stick;
+	int front;
+	double push_mm;
+	double push_wall;
 } priv_t;
 
 static const armstg_param_t params[] = {
@@ -165,6 +169,13 @@ static const armstg_param_t params[] = {
 	{ "contact", PT_BOOL, "true", 0, 1, "",
 	  "keep nodes inside the brain boundary (projection on the boundary)",
 	  NULL, offsetof(priv_t, contact), 0 },
+	{ "contact_stick", PT_BOOL, "true", 0, 1, "",
+	  "a node that reaches the brain boundary sticks to it (its last "
+	  "step undone, its velocity zeroed: no-slip, like the fixed boundary "
+	  "nodes) instead of sliding along it; sliding contact never settled "
+	  "under front=push (a limit cycle: 10 000 iterations per step, "
+	  "bench/pipeline/results.md).  Nodal driving only",
+	  NULL, offsetof(priv_t, contact_stick), 0 },
 	{ "corr", PT_ENUM, "all", 0, 0, "",
 	  "integration-constraint correction of the shape-function "
 	  "derivatives (sum V dN = 0): all movable nodes, interior ones, none",
@@ -184,6 +195,26 @@ static const armstg_param_t params[] = {
 	  "(u^h = the layer map at a subset of tumour nodes 0.5 h apart, "
 	  "Lagrange multipliers; experimental: bench/tled/results.md)",
 	  "nodal|collocated", offsetof(priv_t, drive), 0 },
+	{ "front", PT_ENUM, "sweep", 0, 0, "",
+	  "what the tumour front does to the tissue it meets: sweep (legacy: "
+	  "tissue the front overtakes becomes tumour; with nodal driving the "
+	  "front pushes weakly, about 0.1 of the growth distance on the "
+	  "phantom) or push (the tissue at the front stays attached to it "
+	  "and is pushed: the mass effect is the last push_mm of growth; "
+	  "bench/pipeline/results.md)",
+	  "sweep|push", offsetof(priv_t, front), 0 },
+	{ "push_mm", PT_DOUBLE, "6", 0, 1000, "mm",
+	  "front=push: depth of growth that pushes tissue: the tumour starts "
+	  "as the contour layer this deep inside the final tumour (the tissue "
+	  "inside it is infiltrated: tumour from the start) and pushes the "
+	  "tissue over the remaining layers (0: no mass effect; a value "
+	  "above the tumour's depth: the whole growth pushes, as from the "
+	  "seeds)",
+	  NULL, offsetof(priv_t, push_mm), 0 },
+	{ "push_wall", PT_DOUBLE, "0.5", 0, 3, "node spacings",
+	  "front=push: free nodes within this distance outside the front "
+	  "are attached to it (driven by the layer map, kept as tissue)",
+	  NULL, offsetof(priv_t, push_wall), 0 },
 };
 
 static const armstg_port_t inputs[] = {
@@ -402,19 +433,23 @@ static void on_progress(void *ctx, int iter, int max_iter, double err_m)
  * follows from the constrained ones).  Returns the number taken.
  * O(n_tumour^2), fine for the few thousand tumour nodes of a run.
  */
+typedef void (*node_u_fn)(const tled_solver_t *, int64_t, double[3]);
+
 static int64_t select_driven(tled_model_t *m, const tled_solver_t *s,
-			     const int32_t *dcomp, double sep, int64_t *ids,
+			     node_u_fn pos_u, const int32_t *dcomp,
+			     const int32_t *att, double sep, int64_t *ids,
 			     double *y)
 {
 	int64_t nt = 0, nsel = 0;
 	for (int pass = 0; pass < 2; pass++)
 		for (int64_t a = 0; a < m->n; a++)
-			if (dcomp[a] >= 0 && (m->kind[a] == TLED_DRIVEN) == !pass)
+			if ((dcomp[a] >= 0 || att[a]) &&
+			    (m->kind[a] == TLED_DRIVEN) == !pass)
 				ids[nt++] = a;
 	for (int64_t q = 0; q < nt; q++) {
 		int64_t a = ids[q];
 		double *ya = y + 3 * q;
-		tled_solver_nodal_u(s, a, ya);
+		pos_u(s, a, ya);
 		for (int k = 0; k < 3; k++)
 			ya[k] += m->X[3 * a + k];
 		int ok = 1;
@@ -484,6 +519,12 @@ static int tled_process(armstg_stage_t *st)
 	char err[1024] = "";
 	int rc = 0;
 	double t0 = now_s();
+	/* where a node is: front=push reads u^h(X_a), the displacement of
+	 * the material point (MLS shape functions do not interpolate: with
+	 * nodal driving the parameter u_a is not it); front=sweep keeps the
+	 * legacy reading of the parameter (tled_solver_nodal_u: u^h only
+	 * with collocated driving), with which its figures were measured */
+	node_u_fn pos_u = pv->front == 1 ? tled_solver_uh : tled_solver_nodal_u;
 
 	if (!pn || pn->base.type != MSG_POINTSET)
 		return H->fail(st, ARMSTG_EINVAL, "input 'nodes' is not a "
@@ -542,7 +583,7 @@ static int tled_process(armstg_stage_t *st)
 	layer_t *L = NULL;
 	int nl = 0;
 	double *tgt = NULL, *cx = NULL;
-	int32_t *dcomp = NULL, *dstep = NULL, *seedc = NULL;
+	int32_t *dcomp = NULL, *dstep = NULL, *seedc = NULL, *att = NULL;
 	double *uh = NULL, *sely = NULL;
 	int64_t *selid = NULL;
 	tab_t *tab = NULL;
@@ -782,6 +823,49 @@ static int tled_process(armstg_stage_t *st)
 			}
 		}
 	}
+	/* front = push: the growth starts at the layer push_mm deep (depth
+	 * of a layer: the sum of the mean layer-to-layer distances outside
+	 * it, rounded to the nearest layer); deeper layers are dropped */
+	if (pv->front == 1) {
+		int w = 0;
+		for (int j = 0; j < nl;) {
+			int c = L[j].comp, e = j;
+			while (e < nl && L[e].comp == c)
+				e++;
+			/* L[j..e) is component c, layers ascending */
+			double depth = 0;
+			int keep = e;
+			for (int k = j; k < e; k++) {
+				double md = 0;
+				if (L[k].layer > 0 && L[k].n > 0) {
+					for (int64_t q = 0; q < L[k].n; q++) {
+						const double *dd = L[k].d + 3 * q;
+						md += sqrt(dd[0] * dd[0] + dd[1] * dd[1] +
+							   dd[2] * dd[2]);
+					}
+					md /= (double)L[k].n;
+				}
+				if (depth + 0.5 * md > pv->push_mm * TLED_MM &&
+				    L[k].layer > 0) {
+					keep = k;
+					break;
+				}
+				depth += md;
+			}
+			for (int k = j; k < e; k++) {
+				if (k < keep)
+					L[w++] = L[k];
+				else
+					layer_free(&L[k]);
+			}
+			j = e;
+		}
+		if (w < nl)
+			H->log(st, LOG_INFO, "front=push, push_mm %g: %d of %d "
+			       "contour layers kept (deeper ones infiltrated)",
+			       pv->push_mm, w, nl);
+		nl = w;
+	}
 	int lmax = 0;
 	for (int j = 0; j < nl; j++)
 		if (L[j].layer > lmax)
@@ -796,10 +880,11 @@ static int tled_process(armstg_stage_t *st)
 	seedc = malloc((size_t)m.n * sizeof *seedc);
 	uh = malloc((size_t)(3 * m.n) * sizeof *uh);
 	selid = malloc((size_t)m.n * sizeof *selid);
+	att = calloc((size_t)m.n, sizeof *att);
 	sely = malloc((size_t)(3 * m.n) * sizeof *sely);
 	tab = H->tab_new();
 	if (!cx || !tgt || !dcomp || !dstep || !seedc || !uh || !selid ||
-	    !sely || !tab)
+	    !sely || !att || !tab)
 		goto oom;
 	for (int64_t i = 0; i < 3 * npc; i++)
 		cx[i] = pc->xyz[i] * TLED_MM;
@@ -829,6 +914,7 @@ static int tled_process(armstg_stage_t *st)
 	so.ramp_iter = pv->ramp_iter;
 	so.damping = pv->damping;
 	so.contact = pv->contact;
+	so.contact_stick = pv->contact_stick;
 	hook_t hk = { st, 0, lmax + 1 };
 	so.cancelled = on_cancelled;
 	so.progress = on_progress;
@@ -865,7 +951,7 @@ static int tled_process(armstg_stage_t *st)
 					if (m.kind[a] == TLED_FIXED || dcomp[a] >= 0)
 						continue;
 					double y[3];
-					tled_solver_nodal_u(&s, a, y);
+					pos_u(&s, a, y);
 					for (int d = 0; d < 3; d++)
 						y[d] += m.X[3 * a + d];
 					double dd = 0;
@@ -889,18 +975,61 @@ static int tled_process(armstg_stage_t *st)
 				}
 				continue;
 			}
-			/* map every tumour node of c from layer jp to layer j */
+			/* front = push: free tissue at the front (within
+			 * push_wall node spacings outside layer jp) is
+			 * attached to it; tissue already inside is tumour */
+			if (pv->front == 1)
+				for (int64_t a = 0; a < m.n; a++) {
+					if (m.kind[a] != TLED_FREE || dcomp[a] >= 0 ||
+					    att[a])
+						continue;
+					double y[3];
+					pos_u(&s, a, y);
+					for (int k = 0; k < 3; k++)
+						y[k] += m.X[3 * a + k];
+					double sd = layer_side(&L[jp], y, h);
+					if (sd < 0) {
+						dcomp[a] = c;
+						dstep[a] = step;
+					} else if (sd <= pv->push_wall * h) {
+						att[a] = c + 1;
+						m.kind[a] = TLED_DRIVEN;
+					}
+				}
+			/* map every tumour node of c from layer jp to layer j
+			 * (and the tissue attached to the front) */
 			for (int64_t a = 0; a < m.n; a++) {
-				if (dcomp[a] != c)
+				if (dcomp[a] != c && att[a] != c + 1)
 					continue;
-				double y[3], d[3], uh[3];
-				tled_solver_nodal_u(&s, a, uh);
+				double y[3], d[3], uh[3], up[3];
+				pos_u(&s, a, uh);
+				tled_solver_nodal_u(&s, a, up);
 				for (int k = 0; k < 3; k++)
 					y[k] = m.X[3 * a + k] + uh[k];
 				layer_map(&L[jp], y, h, d);
-				/* prescribed value of u^h at the node */
+				/* prescribed value at the node: its parameter
+				 * (nodal driving) or u^h (collocated) moved by
+				 * the layer map */
 				for (int k = 0; k < 3; k++)
-					tgt[3 * a + k] = uh[k] + d[k];
+					tgt[3 * a + k] = up[k] + d[k];
+				/* push: a driven node whose target lies beyond the
+				 * brain boundary (or closer to it than 0.1 h more
+				 * than where the node started) is brought back
+				 * inside: the driver and the contact would fight,
+				 * and the tissue between the wall and the fixed
+				 * boundary inverts (phantom seed 3, semi-spherical
+				 * model, bench/pipeline/results.md) */
+				if (pv->front == 1) {
+					double z[3];
+					for (int k = 0; k < 3; k++)
+						z[k] = y[k] + d[k];
+					int64_t b;
+					double sd = tled_boundary_side(&m, z, &b);
+					double lim = s.s0[a] - 0.1 * h;
+					if (b >= 0 && sd > lim)
+						for (int k = 0; k < 3; k++)
+							tgt[3 * a + k] -= (sd - lim) * m.bn[3 * b + k];
+				}
 				moved = 1;
 			}
 		}
@@ -909,7 +1038,7 @@ static int tled_process(armstg_stage_t *st)
 			ndriven += dcomp[a] >= 0;
 		int64_t ncol = ndriven;
 		if (m.ebc)
-			ncol = select_driven(&m, &s, dcomp, 0.5 * h, selid,
+			ncol = select_driven(&m, &s, pos_u, dcomp, att, 0.5 * h, selid,
 					     sely);
 		else
 			for (int64_t a = 0; a < m.n; a++)
@@ -948,7 +1077,7 @@ static int tled_process(armstg_stage_t *st)
 				if (m.kind[a] != TLED_FREE || dcomp[a] >= 0)
 					continue;
 				double y[3];
-				tled_solver_nodal_u(&s, a, y);
+				pos_u(&s, a, y);
 				for (int k = 0; k < 3; k++)
 					y[k] += m.X[3 * a + k];
 				if (layer_side(&L[j], y, h) < -margin) {
@@ -1013,6 +1142,12 @@ static int tled_process(armstg_stage_t *st)
 		H->tab_set_num(tab, row, "driven", (double)ndriven);
 		H->tab_set_num(tab, row, "swept", (double)swept);
 		H->tab_set_num(tab, row, "collocated", (double)ncol);
+		{
+			int64_t na = 0;
+			for (int64_t a = 0; a < m.n; a++)
+				na += att[a] != 0;
+			H->tab_set_num(tab, row, "attached", (double)na);
+		}
 		H->tab_set_num(tab, row, "contacts", (double)rs.contacts);
 		H->tab_set_num(tab, row, "integration_points", (double)m.nip);
 		H->tab_set_num(tab, row, "wall_s", wall);
@@ -1024,16 +1159,18 @@ static int tled_process(armstg_stage_t *st)
 
 	/* ---- outputs ---- */
 	/* displacement at the nodes.  drive = collocated: u^h(X_a), which
-	 * equals the prescribed value at fixed and driven nodes.  drive =
-	 * nodal: the nodal parameter u_a (MLS does not interpolate: u^h(X_a)
-	 * is smoother and, next to the driven front, smaller).  Writing
-	 * u^h here instead was measured on phantom seeds 1-3 (2026-11-22):
-	 * band error +0.04..+0.13 mm for both tumour models (less push:
-	 * bench/pipeline/results.md, "How hard does the growth push?"), so
-	 * the parameter stays, documented. */
+	 * equals the prescribed value at fixed and driven nodes.  front =
+	 * push: u^h(X_a), the motion of the material point, 0 at the fixed
+	 * boundary (the boundary condition; MLS does not interpolate, so
+	 * u^h there is a small smoothing error of the neighbours' motion).
+	 * front = sweep with drive = nodal: the nodal parameter u_a (u^h is
+	 * smoother and, next to the weakly driven front, smaller: writing
+	 * u^h instead was measured on phantom seeds 1-3, band error
+	 * +0.04..+0.13 mm for both tumour models; bench/pipeline/results.md,
+	 * "How hard does the growth push?"). */
 	for (int64_t a = 0; a < m.n; a++) {
-		tled_solver_nodal_u(&s, a, uh + 3 * a);
-		if (m.kind[a] == TLED_FIXED && !m.ebc_fixed)
+		pos_u(&s, a, uh + 3 * a);
+		if (m.kind[a] == TLED_FIXED && !(m.ebc && m.ebc_fixed))
 			uh[3 * a] = uh[3 * a + 1] = uh[3 * a + 2] = 0;
 	}
 	/* final labels */
@@ -1129,6 +1266,7 @@ out:
 	free(dcomp);
 	free(dstep);
 	free(seedc);
+	free(att);
 	free(uh);
 	free(selid);
 	free(sely);

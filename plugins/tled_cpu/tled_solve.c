@@ -309,6 +309,23 @@ void tled_solver_update_active(tled_solver_t *s)
 	ebc_factor(s);
 }
 
+void tled_solver_uh(const tled_solver_t *s, int64_t a, double out[3])
+{
+	const tled_model_t *m = s->m;
+	if (!m->rid) {
+		for (int i = 0; i < 3; i++)
+			out[i] = s->u[3 * a + i];
+		return;
+	}
+	out[0] = out[1] = out[2] = 0;
+	for (int i = 0; i < m->rk; i++) {
+		int64_t b = m->rid[(int64_t)m->rk * a + i];
+		double N = m->rN[(int64_t)m->rk * a + i];
+		for (int c = 0; c < 3; c++)
+			out[c] += N * s->u[3 * b + c];
+	}
+}
+
 void tled_solver_nodal_u(const tled_solver_t *s, int64_t a, double out[3])
 {
 	const tled_model_t *m = s->m;
@@ -723,7 +740,7 @@ int tled_solver_pick_dt(tled_solver_t *s, const tled_solver_opts_t *o,
 
 /* ------------------------------------------------------------ contact */
 
-int64_t tled_contact(tled_solver_t *s)
+int64_t tled_contact(tled_solver_t *s, double stick_dt)
 {
 	tled_model_t *m = s->m;
 	if (m->nb == 0)
@@ -757,6 +774,25 @@ int64_t tled_contact(tled_solver_t *s)
 		double side = tled_boundary_side(m, y, &b);
 		if (b < 0 || !(side > s->s0[a]))
 			continue;
+		if (stick_dt > 0 && !useh) {
+			/* sticky: the step that carried the node out is
+			 * undone and the node stops (u -= dt v: central
+			 * differences moved it by dt v), then what is still
+			 * beyond is projected */
+			for (int i = 0; i < 3; i++) {
+				double du = stick_dt * s->v[3 * a + i];
+				y[i] -= du;
+				s->u[3 * a + i] -= du;
+				s->v[3 * a + i] = 0;
+			}
+			side = tled_boundary_side(m, y, &b);
+			if (b >= 0 && side > s->s0[a])
+				for (int i = 0; i < 3; i++)
+					s->u[3 * a + i] -= (side - s->s0[a]) *
+							   m->bn[3 * b + i];
+			cnt++;
+			continue;
+		}
 		const double *nb = m->bn + 3 * b;
 		double pen = side - s->s0[a], vn = 0;
 		for (int i = 0; i < 3; i++) {
@@ -969,7 +1005,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			/* every iteration: projected every 10th, a node pressed
 			 * against the brain boundary drifted out and back for
 			 * ever (10 000 iterations per growth step, phantom) */
-			int64_t nc = tled_contact(s);
+			int64_t nc = tled_contact(s, o->contact_stick ? dt : 0);
 			s->contacts += nc;
 			if (nc > 0) {
 				/* the outward velocity the last step gave a node
@@ -1040,7 +1076,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	if (it > o->max_iter)
 		it = o->max_iter;
 	if (o->contact)
-		s->contacts += tled_contact(s);
+		s->contacts += tled_contact(s, 0);
 	/* final state: forces for the residual (ebc: net of the reactions) */
 	ops->forces(m, s->ipact, s->u, s->VP, s->f, &fi);
 	double res = 0;

@@ -76,6 +76,11 @@ typedef struct tled_solver_opts {
 	int ramp_iter;      /* driven displacements ramped over this many */
 	double damping;     /* <0 adaptive 2 omega_min; >=0 fixed c, 1/s */
 	int contact;        /* 1: keep free/driven nodes inside the brain */
+	int contact_stick;  /* 1: a free node that reaches the boundary sticks
+	                       (its step is undone, its velocity zeroed):
+	                       no-slip, as the fixed boundary nodes; 0: it
+	                       slides (normal projection, normal velocity
+	                       removed).  Nodal driving only. */
 	double blowup;      /* energy blow-up factor (default 100) */
 	int lanczos_iter;   /* max Lanczos steps (default 80) */
 	/* optional hooks */
@@ -156,9 +161,17 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	       char *err, size_t errsize);
 /* project nodes that left the brain back onto the boundary tangent plane of
  * the nearest boundary node; returns the number projected */
-int64_t tled_contact(tled_solver_t *s);
+/* contact with the brain boundary: free nodes beyond it are brought back;
+ * stick_dt > 0 (the time step just taken): sticky contact, the node's last
+ * move is undone and it stops (nodal driving only).  Returns the number of
+ * nodes in contact. */
+int64_t tled_contact(tled_solver_t *s, double stick_dt);
 /* displacement of node a (m): u^h(X_a) with ebc, the parameter otherwise */
 void tled_solver_nodal_u(const tled_solver_t *s, int64_t a, double out[3]);
+/* the displacement of node a (m), u^h(X_a) = sum_b Phi_b(X_a) u_b, whatever
+ * the driving (MLS shape functions do not interpolate: the nodal parameter
+ * u_a is not the displacement of the node) */
+void tled_solver_uh(const tled_solver_t *s, int64_t a, double out[3]);
 /* ebc: impose u^h(X_c) = s->cbar at the constrained nodes now (no
  * velocity change); returns the largest remaining violation, m */
 double tled_solver_impose(tled_solver_t *s);

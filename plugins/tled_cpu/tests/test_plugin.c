@@ -294,6 +294,78 @@ static void test_grow_sphere(void **state)
 	assert_int_equal(nseed, 4);
 }
 
+/* front = push: the tissue at the front stays attached to it and is
+ * pushed over the last push_mm of growth (the tumour starts as the layer
+ * that deep).  Same ball as test_grow_sphere, contours 1.5 -> 8 mm in 4
+ * layers of 1.625 mm, push_mm 3: the last 2 layers (3.25 mm) push.
+ * Asserted: every step converges (sticky contact), the tissue at rest at
+ * r 7-10 mm moves out by more than 0.8 mm and at r 10-13 by more than
+ * 0.45 mm (the legacy sweep front: 0.23 mm there), monotonically less
+ * outward, and the push decays like the Lame shell solution (within 25%).
+ * With a fixed wall at 24 mm and nu 0.49 the shell cannot take the whole
+ * 3.25 mm: the rest is compression of the tissue. */
+static void test_grow_push(void **state)
+{
+	(void)state;
+	const double Rb = tled_quick() ? 20 : 24, h = 3, Rt = 8;
+	const int L = 4;
+	grow_out_t g;
+	char err[1024] = "";
+	const char *params[] = { "tol=0.005", "front=push", "push_mm=3",
+				 "push_wall=1", NULL };
+	int rc = grow(Rb, h, Rt, L, params, &g, err, sizeof err);
+	if (rc)
+		print_message("error: %s\n", err);
+	assert_int_equal(rc, 0);
+	assert_int_equal(g.on->n, g.nodes->n);
+	for (int64_t r = 0; r < g.tb->nrows; r++)
+		print_message("  step %g: %g iterations, converged %g, jmin %.3f, "
+			      "%g tumour nodes, %g attached, %g contacts\n",
+			      tab_num(g.tb, "step", r),
+			      tab_num(g.tb, "iterations", r),
+			      tab_num(g.tb, "converged", r),
+			      tab_num(g.tb, "jmin", r),
+			      tab_num(g.tb, "driven", r),
+			      tab_num(g.tb, "attached", r),
+			      tab_num(g.tb, "contacts", r));
+	double ring[4] = { 0 };
+	int nring[4] = { 0 };
+	for (int64_t i = 0; i < g.on->n; i++) {
+		const double *x = g.nodes->xyz + 3 * i, *d = g.u->data + 3 * i;
+		int32_t l = g.on->label[i];
+		if (l == TL_BOUNDARY || l == TL_TUMOUR || l == TL_TUMOUR_BND ||
+		    l == TL_SEED)
+			continue;
+		double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+		double ur = (d[0] * x[0] + d[1] * x[1] + d[2] * x[2]) / r;
+		int k = r < 7 ? -1 : r < 10 ? 0 : r < 13 ? 1 : r < 16 ? 2 : 3;
+		if (k >= 0) {
+			ring[k] += ur;
+			nring[k]++;
+		}
+	}
+	for (int k = 0; k < 4; k++) {
+		ring[k] /= nring[k] ? nring[k] : 1;
+		print_message("push: mean u_r %.3f mm over %d tissue nodes in "
+			      "ring %d\n", ring[k], nring[k], k);
+	}
+	double bf, mm;
+	double lr = lame_ratio(&g, Rb, 10, 13, &bf, &mm);
+	print_message("push: u_r at r 10-13 is %.2f x the Lame profile fitted "
+		      "on r < 10\n", lr);
+	/* measured (24 mm ball / quick 20 mm): rings 1.02/1.06, 0.60/0.59,
+	 * 0.35/0.28, 0.12/0.11 mm; Lame ratio 1.09/1.13.  The legacy sweep
+	 * front gives 0.23 mm at r 10-13 (test_grow_sphere). */
+	for (int64_t r = 0; r < g.tb->nrows; r++)
+		assert_true(tab_num(g.tb, "converged", r) == 1);
+	assert_true(tab_num(g.tb, "attached", g.tb->nrows - 1) > 0);
+	assert_true(ring[0] > 0.8 && ring[0] < 3.25);
+	assert_true(ring[1] > 0.45);
+	assert_true(ring[0] > ring[1] && ring[1] > ring[2] && ring[2] > ring[3]);
+	assert_true(fabs(lr - 1) < 0.25);
+	check_common(&g, Rb, 2);
+}
+
 /* drive = collocated (experimental): u^h at a well-separated subset of the
  * tumour nodes follows the layer map exactly (Lagrange multipliers).
  * 20 mm ball (quick: 16), h 3, tumour 8 mm from 4 seeds in 5 layers.  Asserted: the
@@ -408,6 +480,39 @@ static void test_touch_boundary(void **state)
 	print_message("touching: %lld tumour nodes, %g contacts in the last "
 		      "step\n", (long long)g.ot->n,
 		      tab_num(g.tb, "contacts", g.tb->nrows - 1));
+}
+
+/* The same tangent tumour with front=push: the attached wall is pushed
+ * into the fixed boundary.  Driven targets beyond the boundary are brought
+ * back inside and the nodes that reach it stick: every step converges, no
+ * integration point inverts (check_common: jmin > 0), every node stays
+ * inside, and contacts happen (the test exercises them). */
+static void test_touch_boundary_push(void **state)
+{
+	(void)state;
+	const double Rb = tled_quick() ? 16 : 20, h = tled_quick() ? 4 : 3,
+		     Rt = tled_quick() ? 6 : 7;
+	const int L = 3;
+	memset(g_csf, 0, sizeof g_csf);
+	g_cen[0] = Rb - Rt;
+	g_cen[1] = g_cen[2] = 0;
+	grow_out_t g;
+	char err[1024] = "";
+	const char *params[] = { "tol=0.005", "front=push", "push_mm=3",
+				 "push_wall=1.5", NULL };
+	int rc = grow(Rb, h, Rt, L, params, &g, err, sizeof err);
+	if (rc)
+		print_message("error: %s\n", err);
+	assert_int_equal(rc, 0);
+	check_common(&g, Rb, (int)g.tb->nrows - 1);
+	double nc = 0;
+	for (int64_t r = 0; r < g.tb->nrows; r++) {
+		assert_true(tab_num(g.tb, "converged", r) == 1);
+		nc += tab_num(g.tb, "contacts", r);
+	}
+	print_message("touching, push: %lld tumour nodes, %g contacts\n",
+		      (long long)g.ot->n, nc);
+	assert_true(nc > 0);
 }
 
 /* A labels volume whose brain (label 3) is the ball r < Rb, on an LAS grid
@@ -624,8 +729,10 @@ int main(void)
 		cmocka_unit_test_teardown(test_bad_inputs, teardown),
 		cmocka_unit_test_teardown(test_grow_sphere, teardown),
 		cmocka_unit_test_teardown(test_grow_collocated, teardown),
+		cmocka_unit_test_teardown(test_grow_push, teardown),
 		cmocka_unit_test_teardown(test_soft_ventricles, teardown),
 		cmocka_unit_test_teardown(test_touch_boundary, teardown),
+		cmocka_unit_test_teardown(test_touch_boundary_push, teardown),
 		cmocka_unit_test_teardown(test_labels_domain, teardown),
 		cmocka_unit_test_teardown(test_wrong_normals, teardown),
 	};
