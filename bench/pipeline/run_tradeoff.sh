@@ -8,7 +8,7 @@
 # One factor at a time around the defaults of graphs/armstg.ini (nodes 6 mm,
 # support_k 20, dt_safety 0.8), on one exported phantom; every run is the
 # user-facing graphs/armstg.ini with --set.  The dense-field width follows the
-# spacing (growth.sigma = 1.5 x spacing).  Rows: DIR/tradeoff.tsv; plot:
+# spacing (growth.sigma = 5/6 x spacing, as the graphs at 6 mm).  Rows: DIR/tradeoff.tsv; plot:
 # DIR/tradeoff.png (bench/pipeline/plot_tradeoff.py, needs matplotlib).
 # SPACINGS, SUPPORTS, SAFETIES override the lists ("none": skip the spacing sweep).
 set -eu
@@ -41,7 +41,8 @@ printf 'factor\tspacing_mm\tsupport_k\tdt_safety\tnodes\tgrowth_steps\titeration
 
 one() { # factor spacing k safety
 	o="$OUT/run-$1-$2-$3-$4"
-	sig=$(echo "$2" | awk '{print 1.5 * $1}')
+	# growth.sigma: the graphs' 5 mm at 6 mm nodes, in proportion
+	sig=$(echo "$2" | awk '{print $1 * 5 / 6}')
 	if ! w=$(run_graph graphs/armstg.ini "$o" --set nodes.spacing="$2" \
 		--set growth.sigma="$sig" --set grow.support_k="$3" \
 		--set grow.dt_safety="$4"); then
