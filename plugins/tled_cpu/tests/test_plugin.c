@@ -364,6 +364,18 @@ static void test_grow_push(void **state)
 	assert_true(ring[0] > ring[1] && ring[1] > ring[2] && ring[2] > ring[3]);
 	assert_true(fabs(lr - 1) < 0.25);
 	check_common(&g, Rb, 2);
+	/* the tumour output: nodes inside the outer contour plus its points
+	 * (the outline, at r = Rt) */
+	int nout = 0;
+	for (int64_t q = 0; q < g.ot->n; q++) {
+		const double *y = g.ot->xyz + 3 * q;
+		double ry = sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2]);
+		assert_true(ry < Rt + 0.5 * h);
+		nout += fabs(ry - Rt) < 0.05;
+	}
+	print_message("push: %lld tumour points, %d on the outline\n",
+		      (long long)g.ot->n, nout);
+	assert_true(nout > 20);
 }
 
 /* drive = collocated (experimental): u^h at a well-separated subset of the
