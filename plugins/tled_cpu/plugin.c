@@ -99,7 +99,6 @@ typedef struct priv {
 	int contact_stick;
 	int front;
 	double push_mm;
-	double push_frac;
 	double push_wall;
 } priv_t;
 
@@ -212,12 +211,6 @@ static const armstg_param_t params[] = {
 	  "above the tumour's depth: the whole growth pushes, as from the "
 	  "seeds)",
 	  NULL, offsetof(priv_t, push_mm), 0 },
-	{ "push_frac", PT_DOUBLE, "0", 0, 1, "",
-	  "front=push: when > 0, the depth that pushes is this fraction of "
-	  "each tumour component's own depth (the sum of its layer-to-layer "
-	  "distances) instead of push_mm: a component that is half as deep "
-	  "pushes half as far, as an isotropic expansion (eigenstrain) would",
-	  NULL, offsetof(priv_t, push_frac), 0 },
 	{ "push_wall", PT_DOUBLE, "0.5", 0, 3, "node spacings",
 	  "front=push: free nodes within this distance outside the front "
 	  "are attached to it (driven by the layer map, kept as tissue)",
@@ -390,20 +383,6 @@ static double layer_side(const layer_t *L, const double y[3], double h)
 	if ((pr < 0 && w < 0.2) || (pr > 0 && w > 0.8))
 		return w > 0.5 ? -sqrt(d2) : sqrt(d2);
 	return pr;
-}
-
-/* mean distance (m) from a layer's points to their parents (the next
- * layer out); 0 for the outer layer */
-static double layer_step(const layer_t *L)
-{
-	double md = 0;
-	if (L->layer <= 0 || L->n <= 0)
-		return 0;
-	for (int64_t q = 0; q < L->n; q++) {
-		const double *dd = L->d + 3 * q;
-		md += sqrt(dd[0] * dd[0] + dd[1] * dd[1] + dd[2] * dd[2]);
-	}
-	return md / (double)L->n;
 }
 
 /* layer-to-layer map at y: IDW of (parent - x) over the 8 nearest points */
@@ -847,10 +826,9 @@ static int tled_process(armstg_stage_t *st)
 			}
 		}
 	}
-	/* front = push: the growth starts at the layer push_mm deep (or
-	 * push_frac of the component's depth; depth of a layer: the sum of
-	 * the mean layer-to-layer distances outside it, rounded to the
-	 * nearest layer); deeper layers are dropped */
+	/* front = push: the growth starts at the layer push_mm deep (depth
+	 * of a layer: the sum of the mean layer-to-layer distances outside
+	 * it, rounded to the nearest layer); deeper layers are dropped */
 	if (pv->front == 1) {
 		int w = 0;
 		for (int j = 0; j < nl;) {
@@ -858,15 +836,20 @@ static int tled_process(armstg_stage_t *st)
 			while (e < nl && L[e].comp == c)
 				e++;
 			/* L[j..e) is component c, layers ascending */
-			double depth = 0, total = 0, pd = pv->push_mm * TLED_MM;
+			double depth = 0;
 			int keep = e;
-			for (int k = j; k < e; k++)
-				total += layer_step(&L[k]);
-			if (pv->push_frac > 0)
-				pd = pv->push_frac * total;
 			for (int k = j; k < e; k++) {
-				double md = layer_step(&L[k]);
-				if (depth + 0.5 * md > pd && L[k].layer > 0) {
+				double md = 0;
+				if (L[k].layer > 0 && L[k].n > 0) {
+					for (int64_t q = 0; q < L[k].n; q++) {
+						const double *dd = L[k].d + 3 * q;
+						md += sqrt(dd[0] * dd[0] + dd[1] * dd[1] +
+							   dd[2] * dd[2]);
+					}
+					md /= (double)L[k].n;
+				}
+				if (depth + 0.5 * md > pv->push_mm * TLED_MM &&
+				    L[k].layer > 0) {
 					keep = k;
 					break;
 				}
@@ -881,11 +864,9 @@ static int tled_process(armstg_stage_t *st)
 			j = e;
 		}
 		if (w < nl)
-			H->log(st, LOG_INFO, "front=push, %s %g: %d of %d contour "
-			       "layers kept (deeper ones infiltrated)",
-			       pv->push_frac > 0 ? "push_frac" : "push_mm",
-			       pv->push_frac > 0 ? pv->push_frac : pv->push_mm, w,
-			       nl);
+			H->log(st, LOG_INFO, "front=push, push_mm %g: %d of %d "
+			       "contour layers kept (deeper ones infiltrated)",
+			       pv->push_mm, w, nl);
 		nl = w;
 	}
 	int lmax = 0;
