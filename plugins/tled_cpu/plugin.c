@@ -196,12 +196,13 @@ static const armstg_param_t params[] = {
 	  "Lagrange multipliers; experimental: bench/tled/results.md)",
 	  "nodal|collocated", offsetof(priv_t, drive), 0 },
 	{ "front", PT_ENUM, "sweep", 0, 0, "",
-	  "what the tumour front does to the tissue it meets: sweep (legacy: "
-	  "tissue the front overtakes becomes tumour; with nodal driving the "
-	  "front pushes weakly, about 0.1 of the growth distance on the "
-	  "phantom) or push (the tissue at the front stays attached to it "
-	  "and is pushed: the mass effect is the last push_mm of growth; "
-	  "bench/pipeline/results.md)",
+	  "what the tumour front does to the tissue it meets: sweep (legacy "
+	  "default: tissue the front overtakes becomes tumour; with nodal "
+	  "driving the tissue beside the tumour moved 13-24 % of the "
+	  "phantom's true mass effect) or push (the graphs' setting: the "
+	  "tissue at the front stays attached to it and is pushed over the "
+	  "last push_mm of growth; with nodal driving: collocated driving "
+	  "inverted under the push; bench/pipeline/results.md)",
 	  "sweep|push", offsetof(priv_t, front), 0 },
 	{ "push_mm", PT_DOUBLE, "6", 0, 1000, "mm",
 	  "front=push: depth of growth that pushes tissue: the tumour starts "
