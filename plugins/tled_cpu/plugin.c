@@ -195,11 +195,11 @@ static const armstg_param_t params[] = {
 	  "(u^h = the layer map at a subset of tumour nodes 0.5 h apart, "
 	  "Lagrange multipliers; experimental: bench/tled/results.md)",
 	  "nodal|collocated", offsetof(priv_t, drive), 0 },
-	{ "front", PT_ENUM, "sweep", 0, 0, "",
-	  "what the tumour front does to the tissue it meets: sweep (legacy "
-	  "default: tissue the front overtakes becomes tumour; with nodal "
+	{ "front", PT_ENUM, "push", 0, 0, "",
+	  "what the tumour front does to the tissue it meets: sweep (legacy, "
+	  "the default until 2026-11-22: tissue the front overtakes becomes tumour; with nodal "
 	  "driving the tissue beside the tumour moved 13-24 % of the "
-	  "phantom's true mass effect) or push (the graphs' setting: the "
+	  "phantom's true mass effect) or push (default: the "
 	  "tissue at the front stays attached to it and is pushed over the "
 	  "last push_mm of growth; with nodal driving: collocated driving "
 	  "inverted under the push; bench/pipeline/results.md)",
