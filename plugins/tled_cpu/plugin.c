@@ -212,7 +212,7 @@ static const armstg_param_t params[] = {
 	  "above the tumour's depth: the whole growth pushes, as from the "
 	  "seeds)",
 	  NULL, offsetof(priv_t, push_mm), 0 },
-	{ "push_wall", PT_DOUBLE, "0.5", 0, 3, "node spacings",
+	{ "push_wall", PT_DOUBLE, "1.5", 0, 3, "node spacings",
 	  "front=push: free nodes within this distance outside the front "
 	  "are attached to it (driven by the layer map, kept as tissue)",
 	  NULL, offsetof(priv_t, push_wall), 0 },
