@@ -9,7 +9,8 @@
 # alone); graphs/armstg.ini and graphs/spherical.ini with
 # register.iterations=0 (the total warp is the growth alone); then
 # growth_push.py compares the warp and the nodes with the truth.  --set
-# options go to both graphs (e.g. --set grow.drive=collocated).  Needs
+# options go to both graphs (e.g. --set grow.drive=collocated);
+# PHANTOM_SET="phantom.lobulation=0.9 ..." changes the phantom.  Needs
 # bench/.venv (numpy scipy nibabel h5py), installed here when absent.
 set -eu
 cd "$(dirname "$0")/../.."
@@ -30,13 +31,17 @@ if [ ! -x bench/.venv/bin/python ]; then
 fi
 bench/.venv/bin/python -c "import numpy, scipy, nibabel, h5py" 2>/dev/null ||
 	bench/.venv/bin/pip install -q numpy scipy nibabel h5py
+PSETS=""
+for s in ${PHANTOM_SET:-}; do PSETS="$PSETS --set $s"; done
 OUT=$(abspath "$OUT")
 build_all
 mkdir -p "$OUT"
 for seed in $SEEDS; do
 	ph="$OUT/ph$seed"
+	# shellcheck disable=SC2086
 	run_graph bench/pipeline/phantom_export.ini "$ph" --set phantom.seed="$seed" \
-		--set phantom.deform_mm=0 --set phantom.noise=0 --set phantom.bias=0 >/dev/null
+		--set phantom.deform_mm=0 --set phantom.noise=0 --set phantom.bias=0 \
+		$PSETS >/dev/null
 	phantom_env "$ph"
 	runs=""
 	for m in armstg sphere; do
