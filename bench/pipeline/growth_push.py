@@ -15,7 +15,8 @@ space, mm):
          the mean radial components (about the core's centroid) of the run
          and of the truth (both negative: the pull-back points towards the
          tumour);
-  nodes  the tissue nodes of nodes.h5 (labels 0-2) at their grown positions
+  nodes  the tissue nodes of nodes.h5 (labels 0-2) at their grown positions (runs
+         without nodes.h5, e.g. direct demons: the field lines only)
          q = p + u: the mean radial push u.r and the true one (q minus its
          true atlas origin q + u_true(q)), and the mean error |p - (q +
          u_true(q))| of the node's reference position.
@@ -49,7 +50,7 @@ def main():
     import os
     for need in [ph + "/" + f for f in ("true_field.nii.gz", "patient_tumour.nii.gz",
                                          "patient_mask.nii.gz")] + \
-            [r + "/" + f for r in runs for f in ("atlas_to_patient_warp.nii.gz", "nodes.h5")]:
+            [r + "/atlas_to_patient_warp.nii.gz" for r in runs]:
         if not os.path.isfile(need):
             fail("missing %s (a finished run of bench/pipeline/growth_push.sh?)" % need)
     T, aff = field(ph + "/true_field.nii.gz")
@@ -94,7 +95,8 @@ def main():
                 lo, hi, E[b].mean(), (U[b] * rh[b]).sum(-1).mean(),
                 (T[b] * rh[b]).sum(-1).mean()))
         print("  ".join(out))
-        if run == "(identity)":
+        # a run without nodes (direct demons): the field alone
+        if run == "(identity)" or not os.path.isfile(run + "/nodes.h5"):
             continue
         with h5py.File(run + "/nodes.h5", "r") as f:
             p = f["pointset/xyz"][:]
