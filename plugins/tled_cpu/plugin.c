@@ -197,9 +197,9 @@ static const armstg_param_t params[] = {
 	  "nodal|collocated", offsetof(priv_t, drive), 0 },
 	{ "front", PT_ENUM, "push", 0, 0, "",
 	  "what the tumour front does to the tissue it meets: sweep (legacy, "
-	  "the default until 2026-11-22: tissue the front overtakes becomes tumour; with nodal "
-	  "driving the tissue beside the tumour moved 13-24 % of the "
-	  "phantom's true mass effect) or push (default: the "
+	  "the default until 2026-11-22: tissue the front overtakes becomes "
+	  "tumour; with nodal driving the tissue beside the tumour moved "
+	  "13-24 % of the phantom's true mass effect) or push (default: the "
 	  "tissue at the front stays attached to it and is pushed over the "
 	  "last push_mm of growth; with nodal driving: collocated driving "
 	  "inverted under the push; bench/pipeline/results.md)",
@@ -439,6 +439,15 @@ static void on_progress(void *ctx, int iter, int max_iter, double err_m)
  */
 typedef void (*node_u_fn)(const tled_solver_t *, int64_t, double[3]);
 
+/* where node a is now (m): X_a + its displacement as pos_u reads it */
+static void node_at(const tled_solver_t *s, node_u_fn pos_u, int64_t a,
+		    double y[3])
+{
+	pos_u(s, a, y);
+	for (int k = 0; k < 3; k++)
+		y[k] += s->m->X[3 * a + k];
+}
+
 static int64_t select_driven(tled_model_t *m, const tled_solver_t *s,
 			     node_u_fn pos_u, const int32_t *dcomp,
 			     const int32_t *att, double sep, int64_t *ids,
@@ -453,9 +462,7 @@ static int64_t select_driven(tled_model_t *m, const tled_solver_t *s,
 	for (int64_t q = 0; q < nt; q++) {
 		int64_t a = ids[q];
 		double *ya = y + 3 * q;
-		pos_u(s, a, ya);
-		for (int k = 0; k < 3; k++)
-			ya[k] += m->X[3 * a + k];
+		node_at(s, pos_u, a, ya);
 		int ok = 1;
 		/* nor within sep of a fixed (brain boundary) node: u^h = 0
 		 * there, and two conflicting constraints that close are
@@ -955,9 +962,7 @@ static int tled_process(armstg_stage_t *st)
 					if (m.kind[a] == TLED_FIXED || dcomp[a] >= 0)
 						continue;
 					double y[3];
-					pos_u(&s, a, y);
-					for (int d = 0; d < 3; d++)
-						y[d] += m.X[3 * a + d];
+					node_at(&s, pos_u, a, y);
 					double dd = 0;
 					for (int d = 0; d < 3; d++)
 						dd += (y[d] - cen[d]) * (y[d] - cen[d]);
@@ -988,9 +993,7 @@ static int tled_process(armstg_stage_t *st)
 					    att[a])
 						continue;
 					double y[3];
-					pos_u(&s, a, y);
-					for (int k = 0; k < 3; k++)
-						y[k] += m.X[3 * a + k];
+					node_at(&s, pos_u, a, y);
 					double sd = layer_side(&L[jp], y, h);
 					if (sd < 0) {
 						dcomp[a] = c;
@@ -1086,9 +1089,7 @@ static int tled_process(armstg_stage_t *st)
 				if (m.kind[a] != TLED_FREE || dcomp[a] >= 0)
 					continue;
 				double y[3];
-				pos_u(&s, a, y);
-				for (int k = 0; k < 3; k++)
-					y[k] += m.X[3 * a + k];
+				node_at(&s, pos_u, a, y);
 				if (layer_side(&L[j], y, h) < -margin) {
 					dcomp[a] = L[j].comp;
 					dstep[a] = step;
@@ -1205,7 +1206,8 @@ static int tled_process(armstg_stage_t *st)
 	 * output (label tumour boundary, u 0, ref = the point): the tumour
 	 * nodes alone end up to a node spacing inside it (the tissue at the
 	 * front stays tissue), and a mask drawn around them alone was
-	 * smaller than the tumour (phantom tumour Dice 0.82 -> 0.75) */
+	 * smaller than the tumour (phantom tumour Dice 0.75 without the
+	 * outline, 0.88 with it) */
 	int64_t nouter = 0;
 	if (pv->front == 1)
 		for (int j = 0; j < nl; j++)

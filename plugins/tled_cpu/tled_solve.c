@@ -311,30 +311,22 @@ void tled_solver_update_active(tled_solver_t *s)
 
 void tled_solver_uh(const tled_solver_t *s, int64_t a, double out[3])
 {
-	const tled_model_t *m = s->m;
-	if (!m->rid) {
+	if (!s->m->rid) {
 		for (int i = 0; i < 3; i++)
 			out[i] = s->u[3 * a + i];
 		return;
 	}
-	out[0] = out[1] = out[2] = 0;
-	for (int i = 0; i < m->rk; i++) {
-		int64_t b = m->rid[(int64_t)m->rk * a + i];
-		double N = m->rN[(int64_t)m->rk * a + i];
-		for (int c = 0; c < 3; c++)
-			out[c] += N * s->u[3 * b + c];
-	}
+	tled_model_row(s->m, a, s->u, out);
 }
 
 void tled_solver_nodal_u(const tled_solver_t *s, int64_t a, double out[3])
 {
-	const tled_model_t *m = s->m;
-	if (!m->ebc || !m->rid) {
-		for (int i = 0; i < 3; i++)
-			out[i] = s->u[3 * a + i];
+	if (s->m->ebc) {
+		tled_solver_uh(s, a, out);
 		return;
 	}
-	tled_model_row(m, a, s->u, out);
+	for (int i = 0; i < 3; i++)
+		out[i] = s->u[3 * a + i];
 }
 
 /* ------------------------------------------------------ collocation (ebc) */
@@ -777,8 +769,8 @@ int64_t tled_contact(tled_solver_t *s, double stick_dt)
 		if (stick_dt > 0 && !useh) {
 			/* sticky: the step that carried the node out is
 			 * undone and the node stops (u -= dt v: central
-			 * differences moved it by dt v), then what is still
-			 * beyond is projected */
+			 * differences moved it by dt v); what is still
+			 * beyond is projected as below (v is 0 now) */
 			for (int i = 0; i < 3; i++) {
 				double du = stick_dt * s->v[3 * a + i];
 				y[i] -= du;
@@ -786,12 +778,10 @@ int64_t tled_contact(tled_solver_t *s, double stick_dt)
 				s->v[3 * a + i] = 0;
 			}
 			side = tled_boundary_side(m, y, &b);
-			if (b >= 0 && side > s->s0[a])
-				for (int i = 0; i < 3; i++)
-					s->u[3 * a + i] -= (side - s->s0[a]) *
-							   m->bn[3 * b + i];
-			cnt++;
-			continue;
+			if (b < 0 || !(side > s->s0[a])) {
+				cnt++;
+				continue;
+			}
 		}
 		const double *nb = m->bn + 3 * b;
 		double pen = side - s->s0[a], vn = 0;

@@ -159,9 +159,8 @@ int tled_solver_pick_dt(tled_solver_t *s, const tled_solver_opts_t *o,
 int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	       const double *target, const char *tag, tled_relax_stats_t *st,
 	       char *err, size_t errsize);
-/* project nodes that left the brain back onto the boundary tangent plane of
- * the nearest boundary node; returns the number projected */
-/* contact with the brain boundary: free nodes beyond it are brought back;
+/* contact with the brain boundary: free nodes beyond it are brought back
+ * onto the boundary tangent plane of the nearest boundary node;
  * stick_dt > 0 (the time step just taken): sticky contact, the node's last
  * move is undone and it stops (nodal driving only).  Returns the number of
  * nodes in contact. */

@@ -144,6 +144,17 @@ static int grow(double Rb, double h, double Rt, int L, const char *const *par,
 	return 0;
 }
 
+/* grow() that must succeed (the error printed when it does not) */
+static void grow_ok(double Rb, double h, double Rt, int L,
+		    const char *const *par, grow_out_t *g)
+{
+	char err[1024] = "";
+	int rc = grow(Rb, h, Rt, L, par, g, err, sizeof err);
+	if (rc)
+		print_message("error: %s\n", err);
+	assert_int_equal(rc, 0);
+}
+
 /* every node finite, boundary fixed, every node inside the brain */
 static void check_common(const grow_out_t *g, double Rb, int L)
 {
@@ -166,7 +177,7 @@ static void check_common(const grow_out_t *g, double Rb, int L)
 	for (int64_t r = 0; r < g->tb->nrows; r++) {
 		print_message("  step %g: %g iterations, converged %g, error "
 			      "estimate %.3g mm, jmin %.3f, %g tumour nodes, "
-			      "%g collocated, %g contacts\n",
+			      "%g collocated, %g attached, %g contacts\n",
 			      tab_num(g->tb, "step", r),
 			      tab_num(g->tb, "iterations", r),
 			      tab_num(g->tb, "converged", r),
@@ -174,6 +185,7 @@ static void check_common(const grow_out_t *g, double Rb, int L)
 			      tab_num(g->tb, "jmin", r),
 			      tab_num(g->tb, "driven", r),
 			      tab_num(g->tb, "collocated", r),
+			      tab_num(g->tb, "attached", r),
 			      tab_num(g->tb, "contacts", r));
 		assert_true(tab_num(g->tb, "dt_s", r) > 0);
 		assert_true(tab_num(g->tb, "jmin", r) > 0);
@@ -235,12 +247,8 @@ static void test_grow_sphere(void **state)
 	memset(g_csf, 0, sizeof g_csf);
 	memset(g_cen, 0, sizeof g_cen);
 	grow_out_t g;
-	char err[1024] = "";
 	const char *params[] = { "tol=0.005", "front=sweep", NULL };
-	int rc = grow(Rb, h, Rt, L, params, &g, err, sizeof err);
-	if (rc)
-		print_message("error: %s\n", err);
-	assert_int_equal(rc, 0);
+	grow_ok(Rb, h, Rt, L, params, &g);
 	check_common(&g, Rb, L);
 	double rad_in = 0, rad_out = 0;
 	int nin = 0, nout = 0;
@@ -310,24 +318,11 @@ static void test_grow_push(void **state)
 	const double Rb = tled_quick() ? 20 : 24, h = 3, Rt = 8;
 	const int L = 4;
 	grow_out_t g;
-	char err[1024] = "";
 	const char *params[] = { "tol=0.005", "front=push", "push_mm=3",
 				 "push_wall=1", NULL };
-	int rc = grow(Rb, h, Rt, L, params, &g, err, sizeof err);
-	if (rc)
-		print_message("error: %s\n", err);
-	assert_int_equal(rc, 0);
-	assert_int_equal(g.on->n, g.nodes->n);
-	for (int64_t r = 0; r < g.tb->nrows; r++)
-		print_message("  step %g: %g iterations, converged %g, jmin %.3f, "
-			      "%g tumour nodes, %g attached, %g contacts\n",
-			      tab_num(g.tb, "step", r),
-			      tab_num(g.tb, "iterations", r),
-			      tab_num(g.tb, "converged", r),
-			      tab_num(g.tb, "jmin", r),
-			      tab_num(g.tb, "driven", r),
-			      tab_num(g.tb, "attached", r),
-			      tab_num(g.tb, "contacts", r));
+	grow_ok(Rb, h, Rt, L, params, &g);
+	/* 3 growth steps: the 2 pushing layers and the start */
+	check_common(&g, Rb, 2);
 	double ring[4] = { 0 };
 	int nring[4] = { 0 };
 	for (int64_t i = 0; i < g.on->n; i++) {
@@ -363,7 +358,6 @@ static void test_grow_push(void **state)
 	assert_true(ring[1] > 0.45);
 	assert_true(ring[0] > ring[1] && ring[1] > ring[2] && ring[2] > ring[3]);
 	assert_true(fabs(lr - 1) < 0.25);
-	check_common(&g, Rb, 2);
 	/* the tumour output: nodes inside the outer contour plus its points
 	 * (the outline, at r = Rt) */
 	int nout = 0;
@@ -394,13 +388,9 @@ static void test_grow_collocated(void **state)
 	const double Rb = tled_quick() ? 16 : 20, h = 3, Rt = 8;
 	const int L = 4;
 	grow_out_t g;
-	char err[1024] = "";
 	const char *params[] = { "tol=0.005", "drive=collocated", "front=sweep",
 				 NULL };
-	int rc = grow(Rb, h, Rt, L, params, &g, err, sizeof err);
-	if (rc)
-		print_message("error: %s\n", err);
-	assert_int_equal(rc, 0);
+	grow_ok(Rb, h, Rt, L, params, &g);
 	check_common(&g, Rb, L);
 	for (int64_t r = 0; r < g.tb->nrows; r++) {
 		assert_true(tab_num(g.tb, "converged", r) == 1);
@@ -435,13 +425,9 @@ static void soft_squeeze(const char *front, const char *wall, double *upo,
 	g_csf[1] = g_csf[2] = 0;
 	g_csf[3] = 4.5;
 	grow_out_t g;
-	char err[1024] = "";
 	const char *params[] = { "tol=0.005", "e_csf=10", "e_brain=3000",
 				 front, wall, NULL };
-	int rc = grow(Rb, h, Rt, L, params, &g, err, sizeof err);
-	if (rc)
-		print_message("error: %s\n", err);
-	assert_int_equal(rc, 0);
+	grow_ok(Rb, h, Rt, L, params, &g);
 	check_common(&g, Rb, L);
 	/* radial displacement on the CSF side (x > 0) vs the mirror side */
 	double up = 0, um = 0;
@@ -505,12 +491,8 @@ static void test_touch_boundary(void **state)
 	g_cen[0] = Rb - Rt; /* contour tangent to the brain surface */
 	g_cen[1] = g_cen[2] = 0;
 	grow_out_t g;
-	char err[1024] = "";
 	const char *params[] = { "tol=0.005", "front=sweep", NULL };
-	int rc = grow(Rb, h, Rt, L, params, &g, err, sizeof err);
-	if (rc)
-		print_message("error: %s\n", err);
-	assert_int_equal(rc, 0);
+	grow_ok(Rb, h, Rt, L, params, &g);
 	check_common(&g, Rb, L);
 	print_message("touching: %lld tumour nodes, %g contacts in the last "
 		      "step\n", (long long)g.ot->n,
@@ -532,13 +514,9 @@ static void test_touch_boundary_push(void **state)
 	g_cen[0] = Rb - Rt;
 	g_cen[1] = g_cen[2] = 0;
 	grow_out_t g;
-	char err[1024] = "";
 	const char *params[] = { "tol=0.005", "front=push", "push_mm=3",
 				 "push_wall=1.5", NULL };
-	int rc = grow(Rb, h, Rt, L, params, &g, err, sizeof err);
-	if (rc)
-		print_message("error: %s\n", err);
-	assert_int_equal(rc, 0);
+	grow_ok(Rb, h, Rt, L, params, &g);
 	check_common(&g, Rb, (int)g.tb->nrows - 1);
 	double nc = 0;
 	for (int64_t r = 0; r < g.tb->nrows; r++) {
