@@ -3,6 +3,7 @@
 #include <errno.h>
 #include <ini.h>
 #include <limits.h>
+#include <math.h>
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -37,7 +38,9 @@ typedef struct g_stage {
 	int conn_line[G_MAX_PORTS];
 	rt_stage_t *st;
 	/* run state */
-	int needed, state, nconsumers, consumers_left, rc;
+	int needed, state, consumers_left, rc;
+	int keep;                  /* outputs held across the passes of a
+				      tuning run (not released by consumers) */
 	double wall_s;
 	double rss_mb, out_mb;
 } g_stage_t;
@@ -48,6 +51,35 @@ typedef struct g_node {
 	char endpoint[256];
 } g_node_t;
 
+/* One candidate of a [tune] search, as tune.tsv reports it. */
+typedef struct tune_row {
+	double score;              /* NaN when the candidate failed */
+	double wall_s;
+	int ok, rc;
+	char err[2048];
+} tune_row_t;
+
+/* [tune]: one stage parameter chosen per run by a score (see graph.h). */
+typedef struct g_tune {
+	int present, line;         /* line of the [tune] header */
+	g_kv_t *kv;
+	int nkv;
+	/* resolved by validate_tune */
+	int stage;                 /* tuned stage (index), -1 if unresolved */
+	char key[G_NAME];          /* its parameter */
+	char **values;             /* candidates, in order */
+	int nvalues;
+	int score, score_port;     /* table output read for the score */
+	const char *metric;        /* row selectors (point into kv) */
+	const char *structure;     /* NULL: the first row with metric */
+	int goal_max;
+	int search;                /* 1: try the candidates when running */
+	char why[512];             /* when present but no search: why */
+	/* last run */
+	tune_row_t *rows;
+	int nrows, best;
+} g_tune_t;
+
 struct graph {
 	char file[PATH_MAX];
 	char name[G_NAME];
@@ -57,8 +89,10 @@ struct graph {
 	int nstages;
 	g_node_t nodes[16];
 	int nnodes;
+	g_tune_t tune;
 	/* parse state */
-	int cur_kind;               /* 0 none, 1 graph, 2 stage, 3 node */
+	int cur_kind;               /* 0 none, 1 graph, 2 stage, 3 node,
+				       4 tune */
 	int cur_index;
 	int lineno;
 	int cont;                   /* current raw line is a continuation */
@@ -211,20 +245,27 @@ static g_stage_t *find_stage(graph_t *g, const char *name)
 	return NULL;
 }
 
-static g_kv_t *find_kv(g_stage_t *s, const char *key)
+static g_kv_t *kv_find(g_kv_t *kv, int n, const char *key)
 {
-	for (int i = 0; i < s->nkv; i++)
-		if (!strcmp(s->kv[i].key, key))
-			return &s->kv[i];
+	for (int i = 0; i < n; i++)
+		if (!strcmp(kv[i].key, key))
+			return &kv[i];
 	return NULL;
 }
 
-static int add_kv(graph_t *g, g_stage_t *s, const char *key, const char *val,
-		  int line, int override)
+static g_kv_t *find_kv(g_stage_t *s, const char *key)
 {
-	g_kv_t *kv = find_kv(s, key);
+	return kv_find(s->kv, s->nkv, key);
+}
+
+/* Add or (override) replace key in a key list; stage names the section in
+ * errors (NULL: [tune]). */
+static int kv_add(graph_t *g, g_kv_t **kvs, int *nkv, const char *stage,
+		  const char *key, const char *val, int line, int override)
+{
+	g_kv_t *kv = kv_find(*kvs, *nkv, key);
 	if (kv && !override) {
-		gerr(g, line, s->name, key, "duplicate key (first set on "
+		gerr(g, line, stage, key, "duplicate key (first set on "
 		     "line %d)", kv->line);
 		return -1;
 	}
@@ -237,17 +278,23 @@ static int add_kv(graph_t *g, g_stage_t *s, const char *key, const char *val,
 		kv->line = line;
 		return 0;
 	}
-	g_kv_t *n = realloc(s->kv, (size_t)(s->nkv + 1) * sizeof *n);
+	g_kv_t *n = realloc(*kvs, (size_t)(*nkv + 1) * sizeof *n);
 	if (!n) {
 		free(dup);
 		return -1;
 	}
-	s->kv = n;
-	kv = &s->kv[s->nkv++];
+	*kvs = n;
+	kv = &n[(*nkv)++];
 	snprintf(kv->key, sizeof kv->key, "%s", key);
 	kv->val = dup;
 	kv->line = line;
 	return 0;
+}
+
+static int add_kv(graph_t *g, g_stage_t *s, const char *key, const char *val,
+		  int line, int override)
+{
+	return kv_add(g, &s->kv, &s->nkv, s->name, key, val, line, override);
 }
 
 /* Section headers are tracked by the reader so that empty sections and
@@ -285,6 +332,26 @@ static void on_section(graph_t *g, const char *raw)
 	}
 	if (!strcmp(kind, "graph") && !name[0]) {
 		g->cur_kind = 1;
+		return;
+	}
+	if (!strcmp(kind, "tune")) {
+		if (name[0]) {
+			gerr(g, g->lineno, NULL, NULL,
+			     "section [tune] takes no name (the parameter is "
+			     "its 'param' key)");
+			g->cur_kind = -1;
+			return;
+		}
+		if (g->tune.present) {
+			gerr(g, g->lineno, NULL, NULL,
+			     "section [tune] given twice (first on line %d): "
+			     "a run tunes one parameter", g->tune.line);
+			g->cur_kind = -1;
+			return;
+		}
+		g->tune.present = 1;
+		g->tune.line = g->lineno;
+		g->cur_kind = 4;
 		return;
 	}
 	if (!strcmp(kind, "stage") || !strcmp(kind, "node")) {
@@ -347,8 +414,8 @@ static void on_section(graph_t *g, const char *raw)
 		return;
 	}
 	gerr(g, g->lineno, NULL, NULL,
-	     "unknown section [%s] (expected [graph], [stage NAME] or "
-	     "[node NAME])", s);
+	     "unknown section [%s] (expected [graph], [stage NAME], "
+	     "[node NAME] or [tune])", s);
 	g->cur_kind = -1;
 }
 
@@ -443,6 +510,12 @@ static int handler(void *user, const char *section, const char *key,
 			     "unknown key in [graph] (known: name, "
 			     "description, targets)");
 		}
+		return 1;
+	}
+	if (g->cur_kind == 4) {
+		/* keys are checked in validate_tune (--set may add some) */
+		kv_add(g, &g->tune.kv, &g->tune.nkv, NULL, key, val, g->lineno,
+		       0);
 		return 1;
 	}
 	if (g->cur_kind == 3) {
@@ -717,6 +790,22 @@ static void apply_sets(graph_t *g, const char *const *sets, int nsets)
 		sn[sl] = 0;
 		memcpy(key, dot + 1, kl);
 		key[kl] = 0;
+		/* tune.KEY: a key of the [tune] section (a stage cannot be
+		 * called 'tune' next to one: validate_tune says so) */
+		if (!strcmp(sn, "tune") &&
+		    (g->tune.present || !find_stage(g, sn))) {
+			if (!g->tune.present) {
+				gerr(g, 0, NULL, key, "the graph has no [tune] "
+				     "section (--set tune.KEY changes one of "
+				     "its keys)");
+				continue;
+			}
+			if (expand(g, 0, NULL, key, eq + 1, val, sizeof val))
+				continue;
+			kv_add(g, &g->tune.kv, &g->tune.nkv, NULL, key, val, 0,
+			       1);
+			continue;
+		}
 		g_stage_t *s = find_stage(g, sn);
 		if (!s) {
 			gerr(g, 0, sn, key, "unknown stage '%s'", sn);
@@ -725,6 +814,239 @@ static void apply_sets(graph_t *g, const char *const *sets, int nsets)
 		if (expand(g, 0, sn, key, eq + 1, val, sizeof val))
 			continue;
 		add_kv(g, s, key, val, 0, 1);
+	}
+}
+
+/* 1 when stage v is stage t or reads (transitively) one of its outputs.
+ * memo: -1 unknown; set to 0 on entry so a cycle (refused later) ends. */
+static int depends_on(graph_t *g, int v, int t, signed char *memo)
+{
+	if (v == t)
+		return 1;
+	if (memo[v] >= 0)
+		return memo[v];
+	memo[v] = 0;
+	g_stage_t *s = &g->stages[v];
+	int n = s->loaded ? s->plug.desc->n_inputs : 0;
+	for (int ip = 0; ip < n; ip++)
+		if (s->src[ip] >= 0 && depends_on(g, s->src[ip], t, memo)) {
+			memo[v] = 1;
+			break;
+		}
+	return memo[v];
+}
+
+static const char *const tune_keys[] = { "param", "values", "score", "metric",
+					 "structure", "goal" };
+
+/* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
+ * with an error reported when the list is empty or has an empty item. */
+static int tune_split(graph_t *g, const g_kv_t *vk)
+{
+	g_tune_t *t = &g->tune;
+	int nempty = 0, nitems = 0;
+	for (const char *p = vk->val;; p++) {
+		const char *end = strchr(p, ',');
+		if (!end)
+			end = p + strlen(p);
+		const char *a = p, *b = end;
+		while (a < b && (*a == ' ' || *a == '\t'))
+			a++;
+		while (b > a && (b[-1] == ' ' || b[-1] == '\t'))
+			b--;
+		nitems++;
+		if (a == b) {
+			nempty++;
+		} else {
+			size_t sz = (size_t)(t->nvalues + 1) * sizeof(char *);
+			char **nv = realloc(t->values, sz);
+			char *v = strndup(a, (size_t)(b - a));
+			if (!nv || !v) {
+				free(v);
+				if (nv)
+					t->values = nv;
+				gerr(g, vk->line, NULL, "values",
+				     "out of memory");
+				return -1;
+			}
+			t->values = nv;
+			t->values[t->nvalues++] = v;
+		}
+		p = end;
+		if (!*p)
+			break;
+	}
+	if (nempty == nitems) {
+		gerr(g, vk->line, NULL, "values", "[tune] values: the list is "
+		     "empty (give one or more values separated by commas)");
+		return -1;
+	}
+	if (nempty) {
+		gerr(g, vk->line, NULL, "values", "[tune] values: empty value "
+		     "in '%s' (values are separated by commas)", vk->val);
+		return -1;
+	}
+	return 0;
+}
+
+static int has_param(const armstg_plugin_t *d, const char *key)
+{
+	for (int i = 0; i < d->n_params; i++)
+		if (d->params[i].name && !strcmp(d->params[i].name, key))
+			return 1;
+	return 0;
+}
+
+/* [tune]: resolve the tuned parameter and the score table, check every
+ * candidate with the stage's own parameter parser, and decide whether the
+ * run searches (2+ values and no explicit --set of the parameter). */
+static void validate_tune(graph_t *g)
+{
+	g_tune_t *t = &g->tune;
+	t->stage = t->score = -1;
+	if (!t->present)
+		return;
+	int nerr0 = g->nerr;
+	g_stage_t *clash = find_stage(g, "tune");
+	if (clash)
+		gerr(g, clash->line, clash->name, NULL, "a stage cannot be "
+		     "called 'tune' in a graph with a [tune] section "
+		     "(--set tune.KEY changes the section)");
+	for (int i = 0; i < t->nkv; i++) {
+		g_kv_t *kv = &t->kv[i];
+		int known = 0;
+		for (int k = 0; k < ARMSTG_COUNT(tune_keys); k++)
+			known |= !strcmp(kv->key, tune_keys[k]);
+		if (!known)
+			gerr(g, kv->line, NULL, kv->key, "unknown key in "
+			     "[tune] (known: param, values, score, metric, "
+			     "structure, goal)");
+		else if (!kv->val[0] && strcmp(kv->key, "values"))
+			gerr(g, kv->line, NULL, kv->key, "empty value");
+	}
+	static const struct { const char *key, *what; } need[] = {
+		{ "param", "the parameter tried, STAGE.KEY" },
+		{ "values", "the candidates, separated by commas" },
+		{ "score", "the table output that scores them, STAGE.PORT" },
+		{ "metric", "the row of the score table whose 'metric' column "
+			    "is this" },
+		{ "goal", "max or min" },
+	};
+	for (int k = 0; k < ARMSTG_COUNT(need); k++)
+		if (!kv_find(t->kv, t->nkv, need[k].key))
+			gerr(g, t->line, NULL, NULL, "[tune] needs a '%s' key "
+			     "(%s)", need[k].key, need[k].what);
+	g_kv_t *pk = kv_find(t->kv, t->nkv, "param");
+	g_kv_t *vk = kv_find(t->kv, t->nkv, "values");
+	g_kv_t *sk = kv_find(t->kv, t->nkv, "score");
+	g_kv_t *mk = kv_find(t->kv, t->nkv, "metric");
+	g_kv_t *stk = kv_find(t->kv, t->nkv, "structure");
+	g_kv_t *gk = kv_find(t->kv, t->nkv, "goal");
+	char sn[G_NAME], pn[G_NAME], e[1024];
+	g_stage_t *ts = NULL, *ss = NULL;
+	if (pk && pk->val[0]) {
+		if (parse_conn(pk->val, sn, pn)) {
+			gerr(g, pk->line, NULL, "param", "[tune] param must "
+			     "name <stage>.<parameter>, got '%s'", pk->val);
+		} else if (!(ts = find_stage(g, sn))) {
+			gerr(g, pk->line, NULL, "param", "[tune] param: "
+			     "unknown stage '%s'", sn);
+		} else if (!ts->loaded || !ts->st) {
+			ts = NULL; /* its own error was reported */
+		} else if (!has_param(ts->plug.desc, pn)) {
+			const char *pl = ts->plug.desc->name;
+			gerr(g, pk->line, NULL, "param", "[tune] param: '%s' "
+			     "is not a parameter of plugin '%s' (stage '%s'; "
+			     "see 'armstg describe %s')", pn, pl, sn, pl);
+			ts = NULL;
+		}
+		if (ts) {
+			t->stage = (int)(ts - g->stages);
+			snprintf(t->key, sizeof t->key, "%s", pn);
+		}
+	}
+	if (vk && !tune_split(g, vk) && ts) {
+		/* a scratch stage: the real one keeps the file's value */
+		rt_stage_t *scr = stage_new(ts->plug.desc, ts->name);
+		if (!scr)
+			gerr(g, vk->line, NULL, "values", "out of memory");
+		for (int k = 0; scr && k < t->nvalues; k++)
+			if (stage_set_param(scr, t->key, t->values[k], e,
+					    sizeof e))
+				gerr(g, vk->line, ts->name, t->key,
+				     "[tune] values: %s", e);
+		stage_free(scr);
+	}
+	if (sk && sk->val[0]) {
+		if (parse_conn(sk->val, sn, pn)) {
+			gerr(g, sk->line, NULL, "score", "[tune] score must "
+			     "name <stage>.<output port> of a table, got '%s'",
+			     sk->val);
+		} else if (!(ss = find_stage(g, sn))) {
+			gerr(g, sk->line, NULL, "score", "[tune] score: "
+			     "unknown stage '%s'", sn);
+		} else if (ss->loaded) {
+			const armstg_plugin_t *d = ss->plug.desc;
+			int op = port_index(d->outputs, d->n_outputs, pn);
+			if (op < 0) {
+				char outs[512];
+				port_list(d->outputs, d->n_outputs, outs,
+					  sizeof outs);
+				gerr(g, sk->line, NULL, "score",
+				     "[tune] score: stage '%s' (plugin '%s') "
+				     "has no output port '%s' (outputs: %s)",
+				     sn, d->name, pn, outs);
+			} else if (d->outputs[op].type != MSG_TABLE) {
+				gerr(g, sk->line, NULL, "score",
+				     "[tune] score: '%s.%s' is a %s, not a "
+				     "table", sn, pn,
+				     msg_type_name(d->outputs[op].type));
+			} else {
+				t->score = (int)(ss - g->stages);
+				t->score_port = op;
+			}
+		}
+	}
+	/* only on an otherwise sound graph: unresolved inputs would make
+	 * this a false alarm */
+	if (g->nerr == 0 && t->stage >= 0 && t->score >= 0) {
+		signed char *memo = malloc((size_t)g->nstages);
+		if (memo) {
+			memset(memo, -1, (size_t)g->nstages);
+			if (!depends_on(g, t->score, t->stage, memo))
+				gerr(g, sk->line, NULL, "score",
+				     "[tune] score: stage '%s' does not depend "
+				     "on stage '%s', so every value would "
+				     "score the same", g->stages[t->score].name,
+				     ts->name);
+			free(memo);
+		}
+	}
+	t->metric = mk ? mk->val : NULL;
+	t->structure = stk && stk->val[0] ? stk->val : NULL;
+	if (gk && gk->val[0]) {
+		if (!strcmp(gk->val, "max") || !strcmp(gk->val, "min"))
+			t->goal_max = gk->val[1] == 'a';
+		else
+			gerr(g, gk->line, NULL, "goal", "[tune] goal must be "
+			     "max or min, got '%s'", gk->val);
+	}
+	if (g->nerr != nerr0 || !ts || t->score < 0)
+		return;
+	/* an explicit --set of the parameter wins; one value: no search */
+	g_kv_t *set = find_kv(ts, t->key);
+	if (set && set->line == 0) {
+		snprintf(t->why, sizeof t->why, "%s.%s = %s given with --set "
+			 "wins over [tune]: no search", ts->name, t->key,
+			 set->val);
+	} else if (t->nvalues == 1) {
+		if (stage_set_param(ts->st, t->key, t->values[0], e, sizeof e))
+			gerr(g, vk->line, ts->name, t->key, "[tune] values: %s",
+			     e);
+		snprintf(t->why, sizeof t->why, "one value for %s.%s (%s): no "
+			 "search", ts->name, t->key, t->values[0]);
+	} else {
+		t->search = 1;
 	}
 }
 
@@ -764,6 +1086,7 @@ graph_t *graph_load(const char *path, const char *const *sets, int nsets,
 	for (int i = 0; i < g->nstages; i++)
 		if (g->stages[i].loaded)
 			resolve_conns(g, &g->stages[i]);
+	validate_tune(g);
 	for (int i = 0; i < g->nnodes; i++)
 		if (!g->nodes[i].endpoint[0])
 			gerr(g, g->nodes[i].line, NULL, NULL,
@@ -813,6 +1136,13 @@ void graph_free(graph_t *g)
 		if (s->loaded)
 			plugin_unload(&s->plug);
 	}
+	for (int k = 0; k < g->tune.nkv; k++)
+		free(g->tune.kv[k].val);
+	free(g->tune.kv);
+	for (int k = 0; k < g->tune.nvalues; k++)
+		free(g->tune.values[k]);
+	free(g->tune.values);
+	free(g->tune.rows);
 	free(g->stages);
 	free(g);
 }
@@ -924,14 +1254,15 @@ static void run_one(runner_t *r, g_stage_t *s)
 		rt_log(s->name, LOG_DEBUG, "done in %.2f s", s->wall_s);
 }
 
-/* Drop a producer's outputs once all its consumers have run. */
+/* Drop a producer's outputs once all its consumers have run (unless a
+ * tuning run keeps them for the next candidate). */
 static void release_inputs(graph_t *g, g_stage_t *s)
 {
 	for (int ip = 0; ip < s->plug.desc->n_inputs; ip++) {
 		if (s->src[ip] < 0)
 			continue;
 		g_stage_t *p = &g->stages[s->src[ip]];
-		if (--p->consumers_left == 0)
+		if (--p->consumers_left == 0 && !p->keep)
 			for (int o = 0; o < p->plug.desc->n_outputs; o++)
 				msg_unref(stage_take_output(p->st, o));
 	}
@@ -984,10 +1315,10 @@ static void *worker(void *arg)
 	return NULL;
 }
 
-static const char *state_name(int st)
+static const char *state_name(const g_stage_t *s)
 {
-	switch (st) {
-	case ST_DONE: return "ok";
+	switch (s->state) {
+	case ST_DONE: return s->needed ? "ok" : "tune-only";
 	case ST_FAILED: return "failed";
 	case ST_RUNNING: return "running";
 	case ST_SKIPPED: return "not-needed";
@@ -995,10 +1326,14 @@ static const char *state_name(int st)
 	}
 }
 
+/* run.tsv: the final run, one row per stage it needed (plus the stages a
+ * tuning run needed only for its score, "tune-only"), a row "tune" with
+ * the candidates' total wall time when a search ran, and the total. */
 static void write_run_table(graph_t *g, const run_opts_t *o, double total)
 {
 	char path[PATH_MAX], tmp[PATH_MAX];
 	const char *dir = o->outdir && *o->outdir ? o->outdir : ".";
+	const g_tune_t *t = &g->tune;
 	snprintf(path, sizeof path, "%s/run.tsv", dir);
 	snprintf(tmp, sizeof tmp, "%s/.armstg-tmp-%ld-run.tsv", dir,
 		 (long)getpid());
@@ -1016,23 +1351,74 @@ static void write_run_table(graph_t *g, const run_opts_t *o, double total)
 		       "out_MiB");
 	for (int i = 0; i < g->nstages; i++) {
 		g_stage_t *s = &g->stages[i];
-		if (!s->needed)
+		if (!s->needed && s->state != ST_DONE && s->state != ST_FAILED)
 			continue;
 		fprintf(f, "%s\t%s\t%s\t%.3f\t%.1f\t%.2f\n", s->name,
-			s->plug.desc->name, state_name(s->state), s->wall_s,
+			s->plug.desc->name, state_name(s), s->wall_s,
 			s->rss_mb, s->out_mb);
 		if (!o->quiet)
 			rt_log(NULL, LOG_INFO,
 			       "%-16s %-14s %-10s %9.3f %12.1f %10.2f",
-			       s->name, s->plug.desc->name,
-			       state_name(s->state), s->wall_s, s->rss_mb,
-			       s->out_mb);
+			       s->name, s->plug.desc->name, state_name(s),
+			       s->wall_s, s->rss_mb, s->out_mb);
+	}
+	if (t->nrows) {
+		double tw = 0;
+		for (int k = 0; k < t->nrows; k++)
+			tw += t->rows[k].wall_s;
+		fprintf(f, "tune\t-\t%s\t%.3f\t-\t-\n",
+			t->best >= 0 ? "ok" : "failed", tw);
+		if (!o->quiet)
+			rt_log(NULL, LOG_INFO, "%-16s %-14s %-10s %9.3f",
+			       "tune", "-", t->best >= 0 ? "ok" : "failed",
+			       tw);
 	}
 	fprintf(f, "total\t-\t-\t%.3f\t%.1f\t-\n", total, peak_rss_mb());
 	if (fclose(f) || rename(tmp, path)) {
 		unlink(tmp);
 		rt_log(NULL, LOG_WARN, "cannot write %s", path);
 	}
+}
+
+/* tune.tsv: one row per candidate tried (value, score, wall_s, status,
+ * chosen, error), written like run.tsv: a temporary name, then renamed. */
+static void write_tune_table(graph_t *g, const run_opts_t *o)
+{
+	const g_tune_t *t = &g->tune;
+	char path[PATH_MAX], tmp[PATH_MAX], e[1024];
+	const char *dir = o->outdir && *o->outdir ? o->outdir : ".";
+	snprintf(path, sizeof path, "%s/tune.tsv", dir);
+	snprintf(tmp, sizeof tmp, "%s/.armstg-tmp-%ld-tune.tsv", dir,
+		 (long)getpid());
+	tab_t *tab = tab_new();
+	int bad = !tab || !tab_add_col(tab, "value", TAB_STR) ||
+		  !tab_add_col(tab, "score", TAB_NUM) ||
+		  !tab_add_col(tab, "wall_s", TAB_NUM) ||
+		  !tab_add_col(tab, "status", TAB_STR) ||
+		  !tab_add_col(tab, "chosen", TAB_NUM) ||
+		  !tab_add_col(tab, "error", TAB_STR);
+	for (int k = 0; !bad && k < t->nrows; k++) {
+		const tune_row_t *r = &t->rows[k];
+		int64_t row = tab_add_row(tab);
+		bad = row < 0 || tab_set_str(tab, row, "value", t->values[k]) ||
+		      tab_set_num(tab, row, "score", r->score) ||
+		      tab_set_num(tab, row, "wall_s", r->wall_s) ||
+		      tab_set_str(tab, row, "status",
+				  r->ok ? "ok" : "failed") ||
+		      tab_set_num(tab, row, "chosen", k == t->best) ||
+		      (!r->ok && tab_set_str(tab, row, "error", r->err));
+	}
+	if (bad) {
+		rt_log(NULL, LOG_WARN, "cannot write %s: out of memory", path);
+	} else if (tab_write_file(tmp, tab, e, sizeof e)) {
+		rt_log(NULL, LOG_WARN, "cannot write %s: %s", path, e);
+	} else if (rename(tmp, path)) {
+		rt_log(NULL, LOG_WARN, "cannot write %s: %s", path,
+		       strerror(errno));
+		unlink(tmp);
+	}
+	if (tab)
+		msg_unref(&tab->base);
 }
 
 /* mkdir -p */
@@ -1056,9 +1442,287 @@ static int mkdir_p(const char *dir)
 	return 0;
 }
 
+/* One pass of the scheduler over the stages marked needed.  A stage that
+ * is already ST_DONE (kept from an earlier pass of a tuning run) is not run
+ * again: its outputs feed the others.  Files stay pending: the caller
+ * commits or discards them.  0, or a negative code with err set. */
+static int run_pass(graph_t *g, const run_opts_t *o, char *err,
+		    size_t errsize)
+{
+	runner_t r = { .g = g, .o = o };
+	int nthreads_total = 1;
+#ifdef _OPENMP
+	{
+		long nc = sysconf(_SC_NPROCESSORS_ONLN);
+		nthreads_total = nc > 0 ? (int)nc : 1;
+	}
+#endif
+	int per = nthreads_total / o->jobs;
+	for (int i = 0; i < g->nstages; i++) {
+		g_stage_t *s = &g->stages[i];
+		s->consumers_left = 0;
+		if (s->state == ST_DONE)
+			continue;
+		s->state = s->needed ? ST_WAIT : ST_SKIPPED;
+		s->rc = 0;
+		if (!s->needed)
+			continue;
+		r.remaining++;
+		stage_set_threads(s->st, per > 0 ? per : 1);
+	}
+	for (int i = 0; i < g->nstages; i++) {
+		g_stage_t *s = &g->stages[i];
+		if (s->state != ST_WAIT)
+			continue;
+		for (int ip = 0; ip < s->plug.desc->n_inputs; ip++)
+			if (s->src[ip] >= 0)
+				g->stages[s->src[ip]].consumers_left++;
+	}
+	pthread_mutex_init(&r.mu, NULL);
+	pthread_cond_init(&r.cv, NULL);
+	pthread_t th[64];
+	int nth = o->jobs < 64 ? o->jobs : 64;
+	int started = 0;
+	for (int i = 0; i < nth; i++)
+		if (!pthread_create(&th[i], NULL, worker, &r))
+			started++;
+	if (!started)
+		worker(&r);
+	for (int i = 0; i < started; i++)
+		pthread_join(th[i], NULL);
+	pthread_mutex_destroy(&r.mu);
+	pthread_cond_destroy(&r.cv);
+	if (!r.failed && !rt_interrupted)
+		return 0;
+	int rc = r.failed ? ARMSTG_EINVAL : ARMSTG_ECANCELLED;
+	for (int i = 0; i < g->nstages; i++)
+		if (g->stages[i].rc)
+			rc = g->stages[i].rc;
+	snprintf(err, errsize, "%s", r.failed ? r.err : "interrupted");
+	return rc;
+}
+
+/* Back to "not run" for the stages that depend on the tuned one: outputs
+ * dropped, pending files discarded, fini called so the next init starts
+ * clean. */
+static void tune_reset(graph_t *g, const char *down)
+{
+	for (int i = 0; i < g->nstages; i++) {
+		g_stage_t *s = &g->stages[i];
+		if (!down[i])
+			continue;
+		stage_fini(s->st);
+		for (int o = 0; o < s->plug.desc->n_outputs; o++)
+			msg_unref(stage_take_output(s->st, o));
+		stage_discard_files(s->st);
+		s->state = ST_WAIT;
+		s->rc = 0;
+		s->wall_s = s->rss_mb = s->out_mb = 0;
+	}
+}
+
+/* The score of the candidate just run: 'value' of the first row of the
+ * score table whose 'metric' (and 'structure', when given) match, the
+ * layout of the metrics plugin's table. */
+static int tune_score(graph_t *g, double *score, char *err, size_t errsize)
+{
+	const g_tune_t *t = &g->tune;
+	g_stage_t *s = &g->stages[t->score];
+	const char *port = s->plug.desc->outputs[t->score_port].name;
+	const msg_t *m = stage_output(s->st, t->score_port);
+	if (!msg_valid(m, MSG_TABLE)) {
+		snprintf(err, errsize, "[tune] score: stage '%s' gave no table "
+			 "on its output '%s'", s->name, port);
+		return ARMSTG_EINVAL;
+	}
+	const tab_t *tab = (const tab_t *)m;
+	const tab_col_t *mc = tab_col(tab, "metric");
+	const tab_col_t *sc = tab_col(tab, "structure");
+	const tab_col_t *vc = tab_col(tab, "value");
+	const char *miss = NULL;
+	if (!mc || mc->type != TAB_STR)
+		miss = "a text column 'metric'";
+	else if (t->structure && (!sc || sc->type != TAB_STR))
+		miss = "a text column 'structure'";
+	else if (!vc || vc->type != TAB_NUM)
+		miss = "a number column 'value'";
+	if (miss) {
+		char cols[1024] = "none";
+		size_t o = 0;
+		for (int c = 0; c < tab->ncols && o < sizeof cols; c++)
+			o += (size_t)snprintf(cols + o, sizeof cols - o, "%s%s",
+					      c ? ", " : "", tab->col[c].name);
+		snprintf(err, errsize, "[tune] score: the table of stage '%s' "
+			 "(output '%s') has no %s (columns: %s)", s->name, port,
+			 miss, cols);
+		return ARMSTG_EINVAL;
+	}
+	for (int64_t r = 0; r < tab->nrows; r++) {
+		if (!mc->str[r] || strcmp(mc->str[r], t->metric))
+			continue;
+		if (t->structure && (!sc->str[r] ||
+				     strcmp(sc->str[r], t->structure)))
+			continue;
+		*score = vc->num[r];
+		return 0;
+	}
+	snprintf(err, errsize, "[tune] score: the table of stage '%s' (output "
+		 "'%s') has no row with metric '%s'%s%s%s (%lld rows)", s->name,
+		 port, t->metric, t->structure ? " and structure '" : "",
+		 t->structure ? t->structure : "", t->structure ? "'" : "",
+		 (long long)tab->nrows);
+	return ARMSTG_EINVAL;
+}
+
+/*
+ * The [tune] search, before the final run.  Stages the score needs that do
+ * not depend on the tuned stage run once (pass 0) and keep their outputs
+ * (keep = 1: release_inputs leaves them) for every candidate and for the
+ * final run, their pending files too.  For each candidate: the stages that
+ * depend on the tuned one are reset, the value is set and the score stage's
+ * ancestors run; a failure there (or a NaN score) only drops the candidate.
+ * On return (0) the best value is set, the stages that depend on it are
+ * reset and `needed` is the final run's set again.  tune_s: the candidates'
+ * total wall time.
+ */
+static int tune_run(graph_t *g, const run_opts_t *o, char *err,
+		    size_t errsize)
+{
+	g_tune_t *t = &g->tune;
+	g_stage_t *ts = &g->stages[t->stage];
+	size_t n = (size_t)g->nstages;
+	signed char *memo = malloc(n);
+	char *down = calloc(n, 1), *fin = calloc(n, 1), *cand = calloc(n, 1);
+	int rc = 0, any = 0, nshared = 0, nper = 0, nok = 0, best = -1;
+	t->rows = calloc((size_t)t->nvalues, sizeof *t->rows);
+	if (!memo || !down || !fin || !cand || !t->rows) {
+		snprintf(err, errsize, "[tune] out of memory");
+		rc = ARMSTG_ENOMEM;
+		goto out;
+	}
+	memset(memo, -1, n);
+	for (int i = 0; i < g->nstages; i++) {
+		down[i] = (char)depends_on(g, i, t->stage, memo);
+		fin[i] = (char)g->stages[i].needed;
+		any |= fin[i] && down[i];
+		g->stages[i].needed = 0;
+	}
+	if (!any) {
+		rt_log(NULL, LOG_INFO, "tune: no stage to run depends on stage "
+		       "'%s': no search", ts->name);
+		goto out;
+	}
+	mark_needed(g, t->score);
+	for (int i = 0; i < g->nstages; i++) {
+		g_stage_t *s = &g->stages[i];
+		cand[i] = (char)s->needed;
+		s->needed = s->keep = cand[i] && !down[i];
+		nshared += s->needed;
+		nper += cand[i] && down[i];
+	}
+	char sel[256];
+	snprintf(sel, sizeof sel, "%s%s%s", t->metric,
+		 t->structure ? " " : "", t->structure ? t->structure : "");
+	rt_log(NULL, LOG_INFO, "tune %s.%s: %d values, %s %s of %s.%s; %d "
+	       "stages run once, %d for each value", ts->name, t->key,
+	       t->nvalues, t->goal_max ? "max" : "min", sel,
+	       g->stages[t->score].name,
+	       g->stages[t->score].plug.desc->outputs[t->score_port].name,
+	       nshared, nper);
+	rc = run_pass(g, o, err, errsize);
+	if (rc)
+		goto out;
+	for (int k = 0; k < t->nvalues && !rt_interrupted; k++) {
+		tune_row_t *row = &t->rows[k];
+		tune_reset(g, down);
+		rc = stage_set_param(ts->st, t->key, t->values[k], row->err,
+				     sizeof row->err);
+		if (rc) { /* checked at load: cannot happen */
+			snprintf(err, errsize, "[tune] %s", row->err);
+			goto out;
+		}
+		for (int i = 0; i < g->nstages; i++)
+			g->stages[i].needed = cand[i];
+		double t0 = now_s();
+		row->rc = run_pass(g, o, row->err, sizeof row->err);
+		row->wall_s = now_s() - t0;
+		row->score = NAN;
+		if (rt_interrupted)
+			break;
+		t->nrows = k + 1;
+		if (!row->rc) {
+			rc = tune_score(g, &row->score, err, errsize);
+			if (rc)
+				goto out;
+			if (isfinite(row->score)) {
+				row->ok = 1;
+			} else {
+				row->rc = ARMSTG_ENUMERIC;
+				snprintf(row->err, sizeof row->err,
+					 "score %s is %s", sel,
+					 isnan(row->score) ? "NaN"
+					 : row->score > 0 ? "inf" : "-inf");
+			}
+		}
+		if (row->ok) {
+			nok++;
+			rt_log(NULL, LOG_INFO, "tune %s.%s = %s: %s %.6g "
+			       "(%.1f s)", ts->name, t->key, t->values[k], sel,
+			       row->score, row->wall_s);
+			const tune_row_t *b = best >= 0 ? &t->rows[best] : NULL;
+			/* ties: the earlier value stays */
+			if (!b || (t->goal_max ? row->score > b->score
+					       : row->score < b->score))
+				best = k;
+		} else {
+			rt_log(NULL, LOG_WARN, "tune %s.%s = %s: failed "
+			       "(%.1f s): %s", ts->name, t->key, t->values[k],
+			       row->wall_s, row->err);
+		}
+	}
+	tune_reset(g, down);
+	if (rt_interrupted) {
+		snprintf(err, errsize, "interrupted");
+		rc = ARMSTG_ECANCELLED;
+		goto out;
+	}
+	if (best < 0) {
+		size_t w = (size_t)snprintf(err, errsize, "[tune] every value "
+					    "of %s.%s failed", ts->name,
+					    t->key);
+		for (int k = 0; k < t->nrows && w < errsize; k++)
+			w += (size_t)snprintf(err + w, errsize - w, "%s %s: %s",
+					      k ? ";" : ":", t->values[k],
+					      t->rows[k].err);
+		rc = t->rows[0].rc ? t->rows[0].rc : ARMSTG_EINVAL;
+		goto out;
+	}
+	rc = stage_set_param(ts->st, t->key, t->values[best], err, errsize);
+	if (rc)
+		goto out;
+	t->best = best;
+	rt_log(NULL, LOG_INFO, "tune %s.%s = %s chosen (%s %s %.6g; %d of %d "
+	       "values scored)", ts->name, t->key, t->values[t->best],
+	       t->goal_max ? "max" : "min", sel, t->rows[t->best].score, nok,
+	       t->nvalues);
+out:
+	/* the final run's stages again (run.tsv shows those and the ones
+	 * that ran for the tuning only) */
+	for (int i = 0; fin && i < g->nstages; i++) {
+		g->stages[i].needed = fin[i];
+		g->stages[i].keep = 0;
+	}
+	free(memo);
+	free(down);
+	free(fin);
+	free(cand);
+	return rc;
+}
+
 int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize)
 {
 	run_opts_t opts = *o;
+	g_tune_t *t = &g->tune;
 	if (!opts.outdir || !*opts.outdir)
 		opts.outdir = ".";
 	if (opts.jobs < 1)
@@ -1070,16 +1734,21 @@ int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize)
 	}
 	/* which stages: explicit targets, [graph] targets, or all */
 	for (int i = 0; i < g->nstages; i++) {
-		g->stages[i].needed = 0;
-		g->stages[i].state = ST_WAIT;
-		g->stages[i].wall_s = 0;
+		g_stage_t *s = &g->stages[i];
+		s->needed = s->keep = s->rc = 0;
+		s->state = ST_WAIT;
+		s->wall_s = s->rss_mb = s->out_mb = 0;
 	}
+	free(t->rows);
+	t->rows = NULL;
+	t->nrows = 0;
+	t->best = -1;
 	if (opts.ntargets > 0) {
-		for (int t = 0; t < opts.ntargets; t++) {
-			g_stage_t *s = find_stage(g, opts.targets[t]);
+		for (int k = 0; k < opts.ntargets; k++) {
+			g_stage_t *s = find_stage(g, opts.targets[k]);
 			if (!s) {
 				snprintf(err, errsize, "unknown target stage "
-					 "'%s'", opts.targets[t]);
+					 "'%s'", opts.targets[k]);
 				return ARMSTG_EINVAL;
 			}
 			mark_needed(g, (int)(s - g->stages));
@@ -1087,84 +1756,45 @@ int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize)
 	} else if (g->targets[0]) {
 		char buf[1024];
 		snprintf(buf, sizeof buf, "%s", g->targets);
-		for (char *sv = NULL, *t = strtok_r(buf, ", \t", &sv); t;
-		     t = strtok_r(NULL, ", \t", &sv))
-			mark_needed(g, (int)(find_stage(g, t) - g->stages));
+		for (char *sv = NULL, *tk = strtok_r(buf, ", \t", &sv); tk;
+		     tk = strtok_r(NULL, ", \t", &sv))
+			mark_needed(g, (int)(find_stage(g, tk) - g->stages));
 	} else {
 		for (int i = 0; i < g->nstages; i++)
 			mark_needed(g, i);
 	}
-	runner_t r = { .g = g, .o = &opts };
-	pthread_mutex_init(&r.mu, NULL);
-	pthread_cond_init(&r.cv, NULL);
-	int nthreads_total = 1;
-#ifdef _OPENMP
-	{
-		long nc = sysconf(_SC_NPROCESSORS_ONLN);
-		nthreads_total = nc > 0 ? (int)nc : 1;
-	}
-#endif
-	for (int i = 0; i < g->nstages; i++) {
-		g_stage_t *s = &g->stages[i];
-		s->nconsumers = 0;
-		if (!s->needed) {
-			s->state = ST_SKIPPED;
-			continue;
-		}
-		r.remaining++;
-		int per = nthreads_total / opts.jobs;
-		stage_set_threads(s->st, per > 0 ? per : 1);
-	}
-	for (int i = 0; i < g->nstages; i++) {
-		g_stage_t *s = &g->stages[i];
-		if (!s->needed)
-			continue;
-		for (int ip = 0; ip < s->plug.desc->n_inputs; ip++)
-			if (s->src[ip] >= 0)
-				g->stages[s->src[ip]].nconsumers++;
-	}
+	int nrun = 0;
 	for (int i = 0; i < g->nstages; i++)
-		g->stages[i].consumers_left = g->stages[i].nconsumers;
+		nrun += g->stages[i].needed;
 	rt_log(NULL, LOG_INFO, "graph '%s': %d of %d stages to run, %d at a "
-	       "time, output in %s", g->name, r.remaining, g->nstages,
-	       opts.jobs, opts.outdir);
+	       "time, output in %s", g->name, nrun, g->nstages, opts.jobs,
+	       opts.outdir);
+	if (t->present && !t->search)
+		rt_log(NULL, LOG_INFO, "tune: %s", t->why);
 	double t0 = now_s();
-	pthread_t th[64];
-	int nth = opts.jobs < 64 ? opts.jobs : 64;
-	int started = 0;
-	for (int i = 0; i < nth; i++)
-		if (!pthread_create(&th[i], NULL, worker, &r))
-			started++;
-	if (!started)
-		worker(&r);
-	for (int i = 0; i < started; i++)
-		pthread_join(th[i], NULL);
+	int rc = t->search ? tune_run(g, &opts, err, errsize) : 0;
+	if (!rc)
+		rc = run_pass(g, &opts, err, errsize);
 	double total = now_s() - t0;
-	int rc = 0;
-	if (r.failed || rt_interrupted) {
-		rc = r.failed ? ARMSTG_EINVAL : ARMSTG_ECANCELLED;
-		for (int i = 0; i < g->nstages; i++)
-			if (g->stages[i].rc)
-				rc = g->stages[i].rc;
-		if (!r.failed)
-			snprintf(r.err, sizeof r.err, "interrupted");
+	if (rc) {
 		for (int i = 0; i < g->nstages; i++)
 			stage_discard_files(g->stages[i].st);
-		snprintf(err, errsize, "%s", r.err);
 	} else {
 		char e[1024] = "";
 		for (int i = 0; i < g->nstages; i++) {
 			g_stage_t *s = &g->stages[i];
 			const char **paths;
-			int n = stage_pending_files(s->st, &paths);
+			int n = s->needed ? stage_pending_files(s->st, &paths)
+					  : 0;
 			for (int k = 0; k < n; k++)
 				rt_log(s->name, LOG_INFO, "wrote %s", paths[k]);
-			if (!rc && stage_commit_files(s->st, e, sizeof e)) {
+			/* a stage run only for the tuning writes nothing */
+			if (!rc && s->needed &&
+			    stage_commit_files(s->st, e, sizeof e)) {
 				rc = ARMSTG_EIO;
 				snprintf(err, errsize, "%s", e);
 			}
-			if (rc)
-				stage_discard_files(s->st);
+			stage_discard_files(s->st);
 		}
 	}
 	for (int i = 0; i < g->nstages; i++) {
@@ -1173,7 +1803,7 @@ int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize)
 			msg_unref(stage_take_output(g->stages[i].st, o2));
 	}
 	write_run_table(g, &opts, total);
-	pthread_mutex_destroy(&r.mu);
-	pthread_cond_destroy(&r.cv);
+	if (t->nrows)
+		write_tune_table(g, &opts);
 	return rc;
 }

@@ -6,11 +6,37 @@
  *   [stage NAME]        plugin = PLUGIN, node = NODE (optional),
  *                       <parameter> = value, <input port> = <stage>.<port>
  *   [node NAME]         endpoint = tcp://host:port
+ *   [tune]              param = STAGE.KEY, values = V1, V2, ...,
+ *                       score = STAGE.PORT (a table output), metric = M,
+ *                       structure = S (optional), goal = max | min
  *
  * Values may use ${VAR} and ${VAR:-default} (environment variables; "$$" is a
  * literal '$').  `--set stage.key=value` overrides or adds any key.  Loading
  * validates everything before any stage runs; each error reads
  *     FILE:LINE: stage 'S': key 'K': what is wrong
+ *
+ * [tune] (at most one) chooses one stage parameter per run by a score that
+ * the graph computes.  Every candidate is checked at load by the stage's
+ * own parameter parser.  graph_run tries them in order: it sets the value
+ * and runs only what the score stage needs; stages that do not depend on
+ * the tuned stage run once and keep their outputs for every candidate and
+ * the final run; the others are reset between candidates and what they
+ * write is discarded.  The score is the number column 'value' of the first
+ * row of the table whose 'metric' column is M (and 'structure' is S),
+ * the metrics plugin's layout; a table without those columns or that row
+ * fails the run (an error naming the score stage).  A candidate that fails
+ * in a stage that depends on the tuned one, or scores NaN (or +-inf), is
+ * skipped with a warning; if all fail, the run fails.  Ties keep the
+ * earlier value.  Then
+ * the normal run (all stages or the targets) with the best value: only it
+ * writes files.  OUT/tune.tsv lists the candidates (value, score, wall_s,
+ * status, chosen, error); run.tsv gets a row 'tune' with their total time
+ * (stages run only for the score are listed there as 'tune-only').
+ * No search runs when the targets do not depend on the tuned stage.
+ * Overrides: `--set tune.values=6` (or tune.goal, ...) changes a [tune]
+ * key; a single value means no search, the graph runs with it.  An
+ * explicit `--set grow.push_mm=3` of the tuned parameter wins over [tune]:
+ * no search (the value in the graph file does not count as explicit).
  */
 #ifndef ARMSTG_GRAPH_H
 #define ARMSTG_GRAPH_H
@@ -37,8 +63,11 @@ typedef struct run_opts {
 	int quiet;                   /* no run table on stderr */
 } run_opts_t;
 
-/* Run the stages the targets need.  0 on success; a negative code when a
- * stage failed (its message is logged and copied to err). */
+/* Run the stages the targets need (after the [tune] search, if any).  0 on
+ * success; a negative code when a stage failed (its message is logged and
+ * copied to err), every [tune] candidate failed, or rt_interrupted was set
+ * (ARMSTG_ECANCELLED).  On failure no output file is left: only run.tsv
+ * (and tune.tsv once a candidate has finished). */
 int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize);
 
 const char *graph_name(const graph_t *g);
