@@ -1,0 +1,650 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * [tune] sections: one stage parameter chosen per run by a score, on the
+ * test-only plugins in $BUILD/test-plugins (tp_gen, tp_score, tp_sink).
+ *
+ * The graph below tunes sim.offset over 1..5.  tp_score's table scores x,
+ * the first voxel of its output (here x = the candidate):
+ *     sq near (x - 3.2)^2,  sq far (x - 13.2)^2,  neg near -(x - 3.2)^2
+ * so goal = min of sq picks 3.  base, pre and ref do not depend on sim: they
+ * must run once; pre and ref write files while the tuning runs (pre-0.txt,
+ * ref-0.txt), committed only when the final run needs them.  fit writes
+ * fit-<x>.txt and save writes chosen.txt = x: only the final value's files
+ * may exist.  The *.count files (outside --out) get one line per run of
+ * pre, ref and sim.
+ *
+ * The load errors of [tune] (one file per error, with its line) are in
+ * tests/graphs/bad/tune_*.ini, checked by test_graph's test_bad_graphs;
+ * the --set ones are here.
+ */
+#include <dirent.h>
+#include <fcntl.h>
+#include <math.h>
+#include <pthread.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <time.h>
+
+#include "testutil.h"
+#include "graph.h"
+
+static const char tune_graph[] =
+	"[graph]\nname = tune_test\n"
+	"[stage base]\nplugin = tp_gen\nn = 2\nvalue = 0\n"
+	"[stage pre]\nplugin = tp_score\nvolume = base.volume\n"
+	"path = pre-{}.txt\ncount_file = ${TT_COUNT}/pre.count\n"
+	"[stage ref]\nplugin = tp_score\nvolume = base.volume\n"
+	"path = ref-{}.txt\ncount_file = ${TT_COUNT}/ref.count\n"
+	"[stage sim]\nplugin = tp_score\nvolume = pre.volume\noffset = 9\n"
+	"count_file = ${TT_COUNT}/sim.count\n"
+	"[stage fit]\nplugin = tp_score\nvolume = sim.volume\n"
+	"ref = ref.volume\npath = fit-{}.txt\n"
+	"[stage save]\nplugin = tp_sink\nvolume = sim.volume\n"
+	"path = chosen.txt\n"
+	"[stage side]\nplugin = tp_sink\nvolume = base.volume\n"
+	"path = side.txt\n"
+	"[tune]\n"
+	"param = sim.offset      ; the file's offset = 9 is not a --set\n"
+	"values = 1, 2, 3, 4, 5\n"
+	"score = fit.table\n"
+	"metric = sq\n"
+	"goal = min\n";
+
+static char graph_path[256];
+static char plugdir[1024];
+
+static const char *build_dir(void)
+{
+	const char *b = getenv("BUILD");
+	return b && *b ? b : "build";
+}
+
+static int setup(void **state)
+{
+	(void)state;
+	snprintf(plugdir, sizeof plugdir, "%s/test-plugins", build_dir());
+	setenv("ARMSTG_PLUGIN_PATH", plugdir, 1);
+	snprintf(graph_path, sizeof graph_path, "/tmp/armstg-tune-%d.ini",
+		 (int)getpid());
+	FILE *f = fopen(graph_path, "w");
+	if (!f)
+		return -1;
+	fputs(tune_graph, f);
+	fclose(f);
+	return 0;
+}
+
+static int teardown(void **state)
+{
+	(void)state;
+	unlink(graph_path);
+	return 0;
+}
+
+/* one run: fresh --out and count folders (TT_COUNT) */
+typedef struct trun {
+	char out[64], cnt[64];
+	char err[8192];
+	int rc;
+} trun_t;
+
+static void new_dirs(trun_t *r)
+{
+	snprintf(r->out, sizeof r->out, "/tmp/armstg-tune-out-XXXXXX");
+	snprintf(r->cnt, sizeof r->cnt, "/tmp/armstg-tune-cnt-XXXXXX");
+	assert_non_null(mkdtemp(r->out));
+	assert_non_null(mkdtemp(r->cnt));
+	setenv("TT_COUNT", r->cnt, 1);
+}
+
+static void run_with(trun_t *r, const char *const *sets, int nsets, int jobs,
+		     const char *const *targets, int ntargets)
+{
+	new_dirs(r);
+	graph_t *g = graph_load(graph_path, sets, nsets, r->err, sizeof r->err);
+	if (!g)
+		fail_msg("%s", r->err);
+	run_opts_t o = { .outdir = r->out, .jobs = jobs, .quiet = 1,
+			 .targets = targets, .ntargets = ntargets };
+	r->err[0] = 0;
+	r->rc = graph_run(g, &o, r->err, sizeof r->err);
+	graph_free(g);
+}
+
+static void run_sets(trun_t *r, const char *const *sets, int nsets)
+{
+	run_with(r, sets, nsets, 1, NULL, 0);
+}
+
+static const char *in(const char *dir, const char *name)
+{
+	static char buf[4][512];
+	static int slot;
+	slot = (slot + 1) % 4;
+	snprintf(buf[slot], sizeof buf[slot], "%s/%s", dir, name);
+	return buf[slot];
+}
+
+static int exists(const char *p)
+{
+	return access(p, F_OK) == 0;
+}
+
+static double read_num(const char *path)
+{
+	FILE *f = fopen(path, "r");
+	double x = NAN;
+	if (f) {
+		if (fscanf(f, "%lf", &x) != 1)
+			x = NAN;
+		fclose(f);
+	}
+	return x;
+}
+
+static int count_lines(const char *path)
+{
+	FILE *f = fopen(path, "r");
+	int n = 0, c;
+	if (!f)
+		return 0;
+	while ((c = fgetc(f)) != EOF)
+		n += c == '\n';
+	fclose(f);
+	return n;
+}
+
+/* entries in dir, hidden temporary files included */
+static int count_entries(const char *dir)
+{
+	DIR *d = opendir(dir);
+	int n = 0;
+	struct dirent *de;
+	if (!d)
+		return -1;
+	while ((de = readdir(d)))
+		n += strcmp(de->d_name, ".") && strcmp(de->d_name, "..");
+	closedir(d);
+	return n;
+}
+
+static char *slurp(const char *path)
+{
+	static char buf[16384];
+	FILE *f = fopen(path, "r");
+	buf[0] = 0;
+	if (f) {
+		size_t n = fread(buf, 1, sizeof buf - 1, f);
+		buf[n] = 0;
+		fclose(f);
+	}
+	return buf;
+}
+
+static void rm_rf(const char *dir)
+{
+	char cmd[300];
+	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+	if (system(cmd)) {
+		/* best effort */
+	}
+}
+
+static void done(trun_t *r)
+{
+	if (getenv("ARMSTG_KEEP"))
+		return;
+	rm_rf(r->out);
+	rm_rf(r->cnt);
+}
+
+/* tune.tsv read back with the runtime's table reader */
+typedef struct ttab {
+	tab_t *t;
+	const tab_col_t *value, *score, *wall, *status, *chosen, *error;
+} ttab_t;
+
+static void tune_tsv(const char *out, ttab_t *tt)
+{
+	char e[1024];
+	memset(tt, 0, sizeof *tt);
+	if (tab_read_file(in(out, "tune.tsv"), &tt->t, e, sizeof e))
+		fail_msg("%s", e);
+	tt->value = tab_col(tt->t, "value");
+	tt->score = tab_col(tt->t, "score");
+	tt->wall = tab_col(tt->t, "wall_s");
+	tt->status = tab_col(tt->t, "status");
+	tt->chosen = tab_col(tt->t, "chosen");
+	tt->error = tab_col(tt->t, "error");
+	assert_non_null(tt->value);
+	assert_non_null(tt->score);
+	assert_non_null(tt->wall);
+	assert_non_null(tt->status);
+	assert_non_null(tt->chosen);
+	assert_non_null(tt->error);
+	assert_int_equal(tt->value->type, TAB_NUM);
+	assert_int_equal(tt->score->type, TAB_NUM);
+	assert_int_equal(tt->status->type, TAB_STR);
+	assert_int_equal(tt->chosen->type, TAB_NUM);
+}
+
+/* the value whose chosen column is 1 (NaN if none), checking it is the
+ * only one */
+static double chosen_value(const ttab_t *tt)
+{
+	double v = NAN;
+	int n = 0;
+	for (int64_t r = 0; r < tt->t->nrows; r++)
+		if (tt->chosen->num[r] == 1) {
+			v = tt->value->num[r];
+			n++;
+		} else {
+			assert_true(tt->chosen->num[r] == 0);
+		}
+	assert_true(n <= 1);
+	return v;
+}
+
+static void ttab_free(ttab_t *tt)
+{
+	msg_unref(&tt->t->base);
+}
+
+static void test_min_search_runs_shared_stages_once(void **state)
+{
+	(void)state;
+	trun_t r;
+	run_with(&r, NULL, 0, 2, NULL, 0);
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	/* the final run used the best value */
+	assert_float_equal(read_num(in(r.out, "chosen.txt")), 3.0, 0);
+	assert_float_equal(read_num(in(r.out, "fit-3.txt")), 3.0, 0);
+	/* candidate files were discarded */
+	const char *gone[] = { "fit-1.txt", "fit-2.txt", "fit-4.txt",
+			       "fit-5.txt", "fit-9.txt" };
+	for (int i = 0; i < ARMSTG_COUNT(gone); i++)
+		if (exists(in(r.out, gone[i])))
+			fail_msg("candidate file %s was committed", gone[i]);
+	/* files of the once-run stages, written while tuning, committed */
+	assert_float_equal(read_num(in(r.out, "pre-0.txt")), 0.0, 0);
+	assert_float_equal(read_num(in(r.out, "ref-0.txt")), 0.0, 0);
+	assert_float_equal(read_num(in(r.out, "side.txt")), 0.0, 0);
+	/* exactly: chosen, fit-3, pre-0, ref-0, side, run.tsv, tune.tsv (no
+	 * temporary file left) */
+	assert_int_equal(count_entries(r.out), 7);
+	/* pre and ref ran once; sim once per candidate and once more */
+	assert_int_equal(count_lines(in(r.cnt, "pre.count")), 1);
+	assert_int_equal(count_lines(in(r.cnt, "ref.count")), 1);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 6);
+	/* tune.tsv: every candidate in order, its score, the chosen one */
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	static const double want[] = { 4.84, 1.44, 0.04, 0.64, 3.24 };
+	assert_int_equal(tt.t->nrows, 5);
+	for (int k = 0; k < 5; k++) {
+		assert_float_equal(tt.value->num[k], k + 1, 0);
+		assert_float_equal(tt.score->num[k], want[k], 1e-9);
+		assert_string_equal(tt.status->str[k], "ok");
+		assert_null(tt.error->str[k]);
+		assert_true(tt.wall->num[k] >= 0 && tt.wall->num[k] < 60);
+	}
+	assert_float_equal(chosen_value(&tt), 3.0, 0);
+	ttab_free(&tt);
+	/* run.tsv: the final run, and the candidates' total time */
+	char *rt = slurp(in(r.out, "run.tsv"));
+	assert_non_null(strstr(rt, "\nsim\ttp_score\tok\t"));
+	assert_non_null(strstr(rt, "\npre\ttp_score\tok\t"));
+	assert_non_null(strstr(rt, "\ntune\t-\tok\t"));
+	assert_non_null(strstr(rt, "\ntotal\t"));
+	done(&r);
+}
+
+static double chosen_with(const char *const *sets, int nsets)
+{
+	trun_t r;
+	run_sets(&r, sets, nsets);
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	double v = read_num(in(r.out, "chosen.txt"));
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_float_equal(chosen_value(&tt), v, 0);
+	ttab_free(&tt);
+	done(&r);
+	return v;
+}
+
+static void test_goal_metric_structure(void **state)
+{
+	(void)state;
+	/* max of -(x - 3.2)^2: 3 */
+	const char *a[] = { "tune.metric=neg", "tune.goal=max" };
+	assert_float_equal(chosen_with(a, 2), 3.0, 0);
+	/* max of (x - 3.2)^2 (first 'sq' row, 'near'): 1 (4.84 > 3.24) */
+	const char *b[] = { "tune.goal=max" };
+	assert_float_equal(chosen_with(b, 1), 1.0, 0);
+	/* the 'far' row, (x - 13.2)^2: min at 5 */
+	const char *c[] = { "tune.structure=far" };
+	assert_float_equal(chosen_with(c, 1), 5.0, 0);
+	const char *d[] = { "tune.structure=near" };
+	assert_float_equal(chosen_with(d, 1), 3.0, 0);
+}
+
+static void test_ties_keep_the_earlier_value(void **state)
+{
+	(void)state;
+	/* target 3: 2 and 4 both score 1 */
+	const char *a[] = { "fit.target=3", "tune.values=2,4" };
+	assert_float_equal(chosen_with(a, 2), 2.0, 0);
+	const char *b[] = { "fit.target=3", "tune.values=4, 2" };
+	assert_float_equal(chosen_with(b, 2), 4.0, 0);
+	const char *c[] = { "fit.target=3", "tune.values=4,2",
+			    "tune.goal=max" };
+	assert_float_equal(chosen_with(c, 3), 4.0, 0);
+}
+
+static void test_failed_candidates_are_skipped(void **state)
+{
+	(void)state;
+	trun_t r;
+	/* 3 fails in the tuned stage itself, 4 scores NaN: best of 1, 2, 5
+	 * is 2 */
+	const char *sets[] = { "sim.fail_at=3", "fit.nan_at=4" };
+	run_sets(&r, sets, 2);
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	assert_float_equal(read_num(in(r.out, "chosen.txt")), 2.0, 0);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 6);
+	assert_int_equal(count_lines(in(r.cnt, "pre.count")), 1);
+	assert_false(exists(in(r.out, "fit-4.txt")));
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 5);
+	assert_float_equal(chosen_value(&tt), 2.0, 0);
+	assert_string_equal(tt.status->str[2], "failed");
+	assert_true(isnan(tt.score->num[2]));
+	assert_string_equal(tt.error->str[2], "stage 'sim' (plugin tp_score) "
+			    "failed: asked to fail at 3");
+	assert_string_equal(tt.status->str[3], "failed");
+	assert_true(isnan(tt.score->num[3]));
+	assert_string_equal(tt.error->str[3], "score sq is NaN");
+	int nok = 0;
+	for (int k = 0; k < 5; k++)
+		nok += !strcmp(tt.status->str[k], "ok");
+	assert_int_equal(nok, 3);
+	ttab_free(&tt);
+	done(&r);
+}
+
+static void test_all_candidates_fail(void **state)
+{
+	(void)state;
+	trun_t r;
+	const char *sets[] = { "sim.fail_at=3", "fit.nan_at=4",
+			       "tune.values=3,4" };
+	run_sets(&r, sets, 3);
+	assert_int_equal(r.rc, ARMSTG_ENUMERIC);
+	assert_string_equal(r.err, "[tune] every value of sim.offset failed: "
+			    "3: stage 'sim' (plugin tp_score) failed: asked "
+			    "to fail at 3; 4: score sq is NaN");
+	/* no output file: only the two run tables */
+	assert_int_equal(count_entries(r.out), 2);
+	assert_true(exists(in(r.out, "run.tsv")));
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 2);
+	assert_true(isnan(chosen_value(&tt)));
+	ttab_free(&tt);
+	assert_non_null(strstr(slurp(in(r.out, "run.tsv")),
+			       "\ntune\t-\tfailed\t"));
+	done(&r);
+	/* the command line: exit 1 */
+	char cmd[2048], cnt[] = "/tmp/armstg-tune-cnt-XXXXXX";
+	char out[] = "/tmp/armstg-tune-out-XXXXXX";
+	assert_non_null(mkdtemp(cnt));
+	assert_non_null(mkdtemp(out));
+	snprintf(cmd, sizeof cmd, "TT_COUNT=%s %s/armstg run %s --set "
+		 "sim.fail_at=3 --set fit.nan_at=4 --set tune.values=3,4 "
+		 "--out %s -q >/dev/null 2>&1", cnt, build_dir(), graph_path,
+		 out);
+	int st = system(cmd);
+	assert_true(WIFEXITED(st));
+	assert_int_equal(WEXITSTATUS(st), 1);
+	assert_int_equal(count_entries(out), 2);
+	rm_rf(out);
+	rm_rf(cnt);
+}
+
+static void test_shared_stage_failure_fails_the_run(void **state)
+{
+	(void)state;
+	trun_t r;
+	const char *sets[] = { "pre.fail_at=0" };
+	run_sets(&r, sets, 1);
+	assert_int_equal(r.rc, ARMSTG_ENUMERIC);
+	assert_string_equal(r.err, "stage 'pre' (plugin tp_score) failed: "
+			    "asked to fail at 0");
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 0);
+	assert_false(exists(in(r.out, "tune.tsv")));
+	assert_int_equal(count_entries(r.out), 1); /* run.tsv */
+	done(&r);
+}
+
+static void test_set_rules(void **state)
+{
+	(void)state;
+	trun_t r;
+	/* one value: no search, the graph runs with it */
+	const char *one[] = { "tune.values=4" };
+	run_sets(&r, one, 1);
+	assert_int_equal(r.rc, 0);
+	assert_float_equal(read_num(in(r.out, "chosen.txt")), 4.0, 0);
+	assert_true(exists(in(r.out, "fit-4.txt")));
+	assert_false(exists(in(r.out, "tune.tsv")));
+	assert_null(strstr(slurp(in(r.out, "run.tsv")), "\ntune\t"));
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 1);
+	done(&r);
+	/* an explicit --set of the tuned parameter wins: no search */
+	const char *expl[] = { "sim.offset=2" };
+	run_sets(&r, expl, 1);
+	assert_int_equal(r.rc, 0);
+	assert_float_equal(read_num(in(r.out, "chosen.txt")), 2.0, 0);
+	assert_false(exists(in(r.out, "tune.tsv")));
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 1);
+	done(&r);
+	/* ... even next to --set tune.values */
+	const char *both[] = { "tune.values=1,5", "sim.offset=4" };
+	run_sets(&r, both, 2);
+	assert_int_equal(r.rc, 0);
+	assert_float_equal(read_num(in(r.out, "chosen.txt")), 4.0, 0);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 1);
+	done(&r);
+	/* two values: a search between them, (5 - 3.2)^2 < (1 - 3.2)^2 */
+	const char *two[] = { "tune.values=1,5" };
+	assert_float_equal(chosen_with(two, 1), 5.0, 0);
+	/* --set tune.KEY is checked like the file's keys */
+	struct { const char *set, *err; } bad[] = {
+		{ "tune.goal=best", "key 'goal': [tune] goal must be max or "
+		  "min, got 'best'" },
+		{ "tune.values=1,500", "stage 'sim': key 'offset': [tune] "
+		  "values: parameter 'offset': 500 is out of range [-100, "
+		  "100]" },
+		{ "tune.values=", "key 'values': [tune] values: the list is "
+		  "empty (give one or more values separated by commas)" },
+		{ "tune.steps=3", "key 'steps': unknown key in [tune] (known: "
+		  "param, values, score, metric, structure, goal)" },
+		{ "tune.score=fit.volume", "key 'score': [tune] score: "
+		  "'fit.volume' is a volume, not a table" },
+		{ "tune.param=sim.size", "key 'param': [tune] param: 'size' "
+		  "is not a parameter of plugin 'tp_score' (stage 'sim'; see "
+		  "'armstg describe tp_score')" },
+	};
+	setenv("TT_COUNT", "/tmp", 1);
+	for (int i = 0; i < ARMSTG_COUNT(bad); i++) {
+		char err[4096], want[1024];
+		const char *s[] = { bad[i].set };
+		graph_t *g = graph_load(graph_path, s, 1, err, sizeof err);
+		if (g) {
+			graph_free(g);
+			fail_msg("--set %s was accepted", bad[i].set);
+		}
+		snprintf(want, sizeof want, "%s: --set: %s", graph_path,
+			 bad[i].err);
+		assert_string_equal(err, want);
+	}
+	/* a graph without [tune] */
+	char gp[256], err[4096], want[1024];
+	snprintf(gp, sizeof gp, "/tmp/armstg-tune-plain-%d.ini", (int)getpid());
+	FILE *f = fopen(gp, "w");
+	assert_non_null(f);
+	fputs("[stage gen]\nplugin = tp_gen\n", f);
+	fclose(f);
+	const char *s[] = { "tune.values=3" };
+	assert_null(graph_load(gp, s, 1, err, sizeof err));
+	snprintf(want, sizeof want, "%s: --set: key 'values': the graph has no "
+		 "[tune] section (--set tune.KEY changes one of its keys)", gp);
+	assert_string_equal(err, want);
+	unlink(gp);
+	/* armstg check refuses a bad [tune] with exit 2 */
+	char cmd[1024];
+	snprintf(cmd, sizeof cmd, "TT_COUNT=/tmp %s/armstg check %s --set "
+		 "tune.goal=best >/dev/null 2>&1", build_dir(), graph_path);
+	int st = system(cmd);
+	assert_true(WIFEXITED(st));
+	assert_int_equal(WEXITSTATUS(st), 2);
+}
+
+static void test_targets(void **state)
+{
+	(void)state;
+	trun_t r;
+	/* side does not depend on sim: no search */
+	const char *side[] = { "side" };
+	run_with(&r, NULL, 0, 1, side, 1);
+	assert_int_equal(r.rc, 0);
+	assert_true(exists(in(r.out, "side.txt")));
+	assert_false(exists(in(r.out, "tune.tsv")));
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 0);
+	assert_int_equal(count_entries(r.out), 2);
+	done(&r);
+	/* save depends on sim: a search, then only what save needs; ref ran
+	 * for the score only, so its file is not committed */
+	const char *save[] = { "save" };
+	run_with(&r, NULL, 0, 1, save, 1);
+	assert_int_equal(r.rc, 0);
+	assert_float_equal(read_num(in(r.out, "chosen.txt")), 3.0, 0);
+	assert_true(exists(in(r.out, "pre-0.txt")));
+	assert_false(exists(in(r.out, "ref-0.txt")));
+	assert_false(exists(in(r.out, "fit-3.txt")));
+	assert_int_equal(count_entries(r.out), 4); /* + run.tsv, tune.tsv */
+	assert_int_equal(count_lines(in(r.cnt, "ref.count")), 1);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 6);
+	char *rt = slurp(in(r.out, "run.tsv"));
+	assert_non_null(strstr(rt, "\nref\ttp_score\ttune-only\t"));
+	assert_null(strstr(rt, "\nfit\t"));
+	done(&r);
+}
+
+/* sets rt_interrupted once sim has started its second candidate */
+static void *interrupter(void *arg)
+{
+	const char *count = arg;
+	for (int i = 0; i < 2000 && count_lines(count) < 2; i++) {
+		struct timespec ts = { 0, 5000000 };
+		nanosleep(&ts, NULL);
+	}
+	rt_interrupted = 1;
+	return NULL;
+}
+
+static void no_outputs_after_interrupt(const char *out)
+{
+	DIR *d = opendir(out);
+	struct dirent *de;
+	assert_non_null(d);
+	while ((de = readdir(d)))
+		if (strcmp(de->d_name, ".") && strcmp(de->d_name, "..") &&
+		    strcmp(de->d_name, "run.tsv") &&
+		    strcmp(de->d_name, "tune.tsv"))
+			fail_msg("%s left in %s after an interrupt", de->d_name,
+				 out);
+	closedir(d);
+}
+
+static void test_interrupt(void **state)
+{
+	(void)state;
+	trun_t r;
+	const char *sets[] = { "sim.sleep_ms=150" };
+	new_dirs(&r);
+	graph_t *g = graph_load(graph_path, sets, 1, r.err, sizeof r.err);
+	assert_non_null(g);
+	pthread_t th;
+	char count[128];
+	snprintf(count, sizeof count, "%s/sim.count", r.cnt);
+	assert_int_equal(pthread_create(&th, NULL, interrupter, count), 0);
+	run_opts_t o = { .outdir = r.out, .jobs = 1, .quiet = 1 };
+	int rc = graph_run(g, &o, r.err, sizeof r.err);
+	pthread_join(th, NULL);
+	rt_interrupted = 0;
+	graph_free(g);
+	assert_int_equal(rc, ARMSTG_ECANCELLED);
+	assert_string_equal(r.err, "interrupted");
+	assert_int_equal(count_lines(count), 2);
+	no_outputs_after_interrupt(r.out);
+	/* tune.tsv lists the one candidate that finished, none chosen */
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 1);
+	assert_string_equal(tt.status->str[0], "ok");
+	assert_true(isnan(chosen_value(&tt)));
+	ttab_free(&tt);
+	done(&r);
+	/* the command line: SIGINT while tuning, exit 130 */
+	new_dirs(&r);
+	snprintf(count, sizeof count, "%s/sim.count", r.cnt);
+	char exe[512];
+	snprintf(exe, sizeof exe, "%s/armstg", build_dir());
+	pid_t pid = fork();
+	assert_true(pid >= 0);
+	if (pid == 0) {
+		int fd = open("/dev/null", O_WRONLY);
+		if (fd >= 0) {
+			dup2(fd, 1);
+			dup2(fd, 2);
+		}
+		execl(exe, exe, "run", graph_path, "--set", "sim.sleep_ms=150",
+		      "--out", r.out, "-q", (char *)NULL);
+		_exit(127);
+	}
+	for (int i = 0; i < 2000 && count_lines(count) < 2; i++) {
+		struct timespec ts = { 0, 5000000 };
+		nanosleep(&ts, NULL);
+	}
+	kill(pid, SIGINT);
+	int st;
+	assert_int_equal(waitpid(pid, &st, 0), pid);
+	assert_true(WIFEXITED(st));
+	assert_int_equal(WEXITSTATUS(st), 130);
+	int n = count_lines(count);
+	assert_true(n >= 2 && n < 6);
+	no_outputs_after_interrupt(r.out);
+	done(&r);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_min_search_runs_shared_stages_once),
+		cmocka_unit_test(test_goal_metric_structure),
+		cmocka_unit_test(test_ties_keep_the_earlier_value),
+		cmocka_unit_test(test_failed_candidates_are_skipped),
+		cmocka_unit_test(test_all_candidates_fail),
+		cmocka_unit_test(test_shared_stage_failure_fails_the_run),
+		cmocka_unit_test(test_set_rules),
+		cmocka_unit_test(test_targets),
+		cmocka_unit_test(test_interrupt),
+	};
+	return cmocka_run_group_tests(tests, setup, teardown);
+}
