@@ -13,6 +13,11 @@
  *   tumour          patient tumour mask (non-zero in): tumour overlap and the
  *                   distance band around the tumour for field metrics
  *   atlas_tumour    grown tumour registered into patient space (non-zero in)
+ *   image           patient image (intensity similarity)
+ *   atlas_image     atlas image registered into patient space, on the
+ *                   image's grid
+ *   exclude         voxels left out of the similarity (non-zero in), e.g.
+ *                   tumour + edema
  *
  * Output `table`, one row per number, columns
  *   metric | structure | value | unit
@@ -29,6 +34,14 @@
  *   field: jac_min, jac_max, jac_mean, jac_frac_nonpos, jac_n per region
  *   field + true_field: err_mean, err_median, err_p95, err_max, err_n per
  *     region, err = |u(x) - u_true(x)| in mm
+ *   image + atlas_image: ncc, ncc_n for "mask" (mask != 0, or every voxel)
+ *     and, with tumour, "band" (outside the tumour, within band_mm of it,
+ *     in the mask); exclude removes voxels from both.  ncc is Pearson's
+ *     normalised cross-correlation sum (a - ma)(b - mb) / sqrt(sum (a -
+ *     ma)^2 sum (b - mb)^2) over the region: 1 for any a = s b + o, s > 0.
+ *     The band's ncc chooses the push depth of the growth (graphs/
+ *     armstg.ini [tune]): how well the registered atlas matches the
+ *     patient next to the tumour, where the mass effect is.
  *   regions: "all" (every voxel of the field grid), "mask" (mask != 0),
  *     "band" (within band_mm of the tumour boundary, on the side band_side,
  *     intersected with the mask when one is given).
@@ -63,7 +76,8 @@
 #include "armstg/volmath.h"
 #include "mtx.h"
 
-enum { IN_PL, IN_AL, IN_FIELD, IN_TRUE, IN_MASK, IN_TUM, IN_ATUM, IN_N };
+enum { IN_PL, IN_AL, IN_FIELD, IN_TRUE, IN_MASK, IN_TUM, IN_ATUM, IN_IMG,
+       IN_AIMG, IN_EXCL, IN_N };
 enum { SIDE_OUTSIDE, SIDE_INSIDE, SIDE_BOTH };
 
 typedef struct metrics_priv {
@@ -91,6 +105,13 @@ static const armstg_port_t metrics_inputs[] = {
 	  "distance band of the field metrics" },
 	{ "atlas_tumour", MSG_VOLUME, 1,
 	  "grown tumour registered into patient space (non-zero = tumour)" },
+	{ "image", MSG_VOLUME, 1,
+	  "patient image for the image similarity (ncc)" },
+	{ "atlas_image", MSG_VOLUME, 1,
+	  "atlas image registered into patient space, on the image's grid" },
+	{ "exclude", MSG_VOLUME, 1,
+	  "voxels left out of the image similarity (non-zero), e.g. tumour "
+	  "and edema, whose intensities the atlas cannot have" },
 };
 
 static const armstg_port_t metrics_outputs[] = {
@@ -663,6 +684,127 @@ out:
 	return rc;
 }
 
+/* Pearson's normalised cross-correlation of a and b over sel (two-pass
+ * sums in double).  NaN when fewer than 2 voxels or a constant side. */
+static double ncc_over(const vol_t *a, const vol_t *b, const uint8_t *sel,
+		       int64_t n, int64_t *cnt)
+{
+	double sa = 0, sb = 0;
+	int64_t m = 0;
+	for (int64_t e = 0; e < n; e++)
+		if (sel[e]) {
+			sa += vol_get(a, e);
+			sb += vol_get(b, e);
+			m++;
+		}
+	*cnt = m;
+	if (m < 2)
+		return NAN;
+	double ma = sa / (double)m, mb = sb / (double)m, sab = 0, saa = 0,
+	       sbb = 0;
+	for (int64_t e = 0; e < n; e++)
+		if (sel[e]) {
+			double da = vol_get(a, e) - ma, db = vol_get(b, e) - mb;
+			sab += da * db;
+			saa += da * da;
+			sbb += db * db;
+		}
+	return saa > 0 && sbb > 0 ? sab / sqrt(saa * sbb) : NAN;
+}
+
+static int image_metrics(mctx_t *c)
+{
+	armstg_stage_t *st = c->st;
+	const vol_t *im = in_vol(st, IN_IMG), *at = in_vol(st, IN_AIMG);
+	const int64_t n = vol_nvox(im);
+	int32_t *m = NULL, *t = NULL, *x = NULL;
+	uint8_t *sel = NULL, *feat = NULL;
+	float *d2 = NULL;
+	int rc = 0;
+
+	if (im->nc != 1 || at->nc != 1)
+		return c->h->fail(st, ARMSTG_EINVAL, "image and atlas_image "
+				  "must be scalar volumes (%d and %d "
+				  "components)", im->nc, at->nc);
+	if (!vol_same_grid(im, at, 1e-4))
+		return c->h->fail(st, ARMSTG_EINVAL, "atlas_image is not on "
+				  "the image's grid: resample it there (a warp "
+				  "stage with the image's grid as reference)");
+	sel = malloc((size_t)n);
+	if (!sel) {
+		rc = c->h->fail(st, ARMSTG_ENOMEM, "out of memory");
+		goto out;
+	}
+	if (st->in[IN_MASK] && (rc = labels_on(c, IN_MASK, im, 1, &m)))
+		goto out;
+	if (st->in[IN_EXCL] && (rc = labels_on(c, IN_EXCL, im, 1, &x)))
+		goto out;
+	for (int64_t e = 0; e < n; e++)
+		sel[e] = (uint8_t)((!m || m[e]) && (!x || !x[e]) &&
+				   isfinite(vol_get(im, e)) &&
+				   isfinite(vol_get(at, e)));
+	int64_t cnt;
+	double r = ncc_over(im, at, sel, n, &cnt);
+	if ((rc = row(c, "ncc", "mask", r, "")) ||
+	    (rc = row(c, "ncc_n", "mask", (double)cnt, "voxels")))
+		goto out;
+	if (st->in[IN_TUM] && c->p->band_mm > 0) {
+		double sp[3];
+		if ((rc = mtx_check_orthogonal(im, "image", c->err,
+					       sizeof c->err))) {
+			rc = fail_err(c, rc);
+			goto out;
+		}
+		if ((rc = labels_on(c, IN_TUM, im, 1, &t)))
+			goto out;
+		feat = malloc((size_t)n);
+		d2 = malloc(sizeof(float) * (size_t)n);
+		if (!feat || !d2) {
+			rc = c->h->fail(st, ARMSTG_ENOMEM, "out of memory");
+			goto out;
+		}
+		int64_t ct = 0;
+		for (int64_t e = 0; e < n; e++)
+			ct += feat[e] = (uint8_t)(t[e] != 0);
+		if (!ct) {
+			rc = c->h->fail(st, ARMSTG_EINVAL, "tumour mask is "
+					"empty on the image grid");
+			goto out;
+		}
+		vol_spacing(im, sp);
+		if ((rc = mtx_edt_sq(feat, im->nx, im->ny, im->nz, sp,
+				     c->nthreads, d2))) {
+			rc = c->h->fail(st, rc, "out of memory");
+			goto out;
+		}
+		double b2 = c->p->band_mm * c->p->band_mm;
+		for (int64_t e = 0; e < n; e++)
+			sel[e] &= (uint8_t)(!feat[e] && d2[e] <= b2 * (1 + 1e-6));
+		r = ncc_over(im, at, sel, n, &cnt);
+		if (cnt < 2) {
+			rc = c->h->fail(st, ARMSTG_EINVAL, "ncc: no voxel of "
+					"the band (%g mm around the tumour, in "
+					"the mask, not excluded) to compare",
+					c->p->band_mm);
+			goto out;
+		}
+		if ((rc = row(c, "ncc", "band", r, "")) ||
+		    (rc = row(c, "ncc_n", "band", (double)cnt, "voxels")))
+			goto out;
+	}
+	if (!isfinite(r))
+		c->h->log(st, LOG_WARN, "ncc is not defined: one image is "
+			  "constant over the region");
+out:
+	free(m);
+	free(t);
+	free(x);
+	free(sel);
+	free(feat);
+	free(d2);
+	return rc;
+}
+
 static int metrics_process(armstg_stage_t *st)
 {
 	mctx_t c = { .st = st, .h = st->host, .p = st->priv };
@@ -682,10 +824,20 @@ static int metrics_process(armstg_stage_t *st)
 		return st->host->fail(st, ARMSTG_EINVAL,
 				      "true_field given without the estimated "
 				      "field to compare with");
-	if (in[IN_MASK] && !in[IN_FIELD])
+	if (in[IN_MASK] && !in[IN_FIELD] && !in[IN_IMG])
 		return st->host->fail(st, ARMSTG_EINVAL,
-				      "mask restricts the field metrics, but "
-				      "no field is connected");
+				      "mask restricts the field and image "
+				      "metrics, but neither a field nor an "
+				      "image is connected");
+	if (!in[IN_IMG] != !in[IN_AIMG])
+		return st->host->fail(st, ARMSTG_EINVAL,
+				      "image similarity needs both image and "
+				      "atlas_image (only %s is connected)",
+				      in[IN_IMG] ? "image" : "atlas_image");
+	if (in[IN_EXCL] && !in[IN_IMG])
+		return st->host->fail(st, ARMSTG_EINVAL,
+				      "exclude is for the image similarity, "
+				      "but no image is connected");
 	if (c.p->ventricles && !(in[IN_PL] && in[IN_AL]))
 		return st->host->fail(st, ARMSTG_EINVAL,
 				      "ventricles is set, but the metric S "
@@ -718,11 +870,17 @@ static int metrics_process(armstg_stage_t *st)
 			goto fail;
 		did = 1;
 	}
+	if (in[IN_IMG]) {
+		if ((rc = image_metrics(&c)))
+			goto fail;
+		did = 1;
+	}
 	if (!did) {
 		rc = st->host->fail(st, ARMSTG_EINVAL,
 				    "nothing to measure: connect "
 				    "patient_labels + atlas_labels, tumour + "
-				    "atlas_tumour, or field (+ true_field)");
+				    "atlas_tumour, field (+ true_field) or "
+				    "image + atlas_image");
 		goto fail;
 	}
 	st->host->progress(st, 1.0, "%lld metrics", (long long)c.t->nrows);

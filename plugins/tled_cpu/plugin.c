@@ -333,6 +333,32 @@ static void layer_free(layer_t *L)
 	tled_grid_free(&L->g);
 }
 
+/* The layer's search grid and its area per point for the winding number:
+ * (sqrt 3 / 2) s^2, s the mean distance to the 6 nearest points (a
+ * hexagonal sampling of spacing s).  -1: out of memory. */
+static int layer_index(layer_t *L, double h)
+{
+	tled_grid_free(&L->g);
+	free(L->A);
+	L->A = NULL;
+	L->built = 0;
+	if (tled_grid_build(&L->g, L->x, L->n, h))
+		return -1;
+	L->built = 1;
+	L->A = malloc((size_t)(L->n > 0 ? L->n : 1) * sizeof(double));
+	if (!L->A)
+		return -1;
+	for (int64_t q = 0; q < L->n; q++) {
+		int64_t ids[6];
+		double d2[6], sm = 0;
+		int k = tled_grid_knn(&L->g, L->x + 3 * q, 6, q, ids, d2);
+		for (int i = 0; i < k; i++)
+			sm += sqrt(d2[i]) / k;
+		L->A[q] = 0.8660254037844386 * sm * sm;
+	}
+	return 0;
+}
+
 /* Signed distance of y (m) to the layer surface: > 0 outside.  Near the
  * surface (nearest layer point within 2 h) it is the offset along that
  * point's outward normal.  Farther away the normal of the nearest point
@@ -814,29 +840,17 @@ static int tled_process(armstg_stage_t *st)
 							nn > 0 ? v[d] / nn : 0;
 				}
 			}
-			if (tled_grid_build(&L[j].g, L[j].x, L[j].n, m.h_mean))
+			if (layer_index(&L[j], m.h_mean))
 				goto oom;
-			L[j].built = 1;
-			/* area per point for the winding number: (sqrt 3 / 2)
-			 * s^2, s the mean distance to the 6 nearest points
-			 * (a hexagonal sampling of spacing s) */
-			L[j].A = malloc((size_t)L[j].n * sizeof(double));
-			if (!L[j].A)
-				goto oom;
-			for (int64_t q = 0; q < L[j].n; q++) {
-				int64_t ids[6];
-				double d2[6], sm = 0;
-				int k = tled_grid_knn(&L[j].g, L[j].x + 3 * q, 6,
-						      q, ids, d2);
-				for (int i = 0; i < k; i++)
-					sm += sqrt(d2[i]) / k;
-				L[j].A[q] = 0.8660254037844386 * sm * sm;
-			}
 		}
 	}
-	/* front = push: the growth starts at the layer push_mm deep (depth
-	 * of a layer: the sum of the mean layer-to-layer distances outside
-	 * it, rounded to the nearest layer); deeper layers are dropped */
+	/* front = push: the growth starts push_mm deep.  Depth of a layer:
+	 * the sum of the mean layer-to-layer distances outside it.  The
+	 * layer k whose depth first exceeds push_mm is moved out along its
+	 * map to depth push_mm (x += f d, d *= 1 - f, f = (D_k - push_mm) /
+	 * md_k: linear between layer k and its parent) and becomes the
+	 * innermost; deeper layers are dropped.  (Until 2026-11 the depth was
+	 * rounded to whole layers: push_mm 2-4 all gave 3 mm.) */
 	if (pv->front == 1) {
 		int w = 0;
 		for (int j = 0; j < nl;) {
@@ -856,9 +870,21 @@ static int tled_process(armstg_stage_t *st)
 					}
 					md /= (double)L[k].n;
 				}
-				if (depth + 0.5 * md > pv->push_mm * TLED_MM &&
-				    L[k].layer > 0) {
-					keep = k;
+				double pm = pv->push_mm * TLED_MM;
+				if (L[k].layer > 0 && depth + md > pm) {
+					double f = md > 0 ? (depth + md - pm) / md : 1;
+					if (f > 0.999) {
+						/* layer k - 1 is push_mm deep */
+						keep = k;
+						break;
+					}
+					for (int64_t q = 0; q < 3 * L[k].n; q++) {
+						L[k].x[q] += f * L[k].d[q];
+						L[k].d[q] *= 1 - f;
+					}
+					if (layer_index(&L[k], m.h_mean))
+						goto oom;
+					keep = k + 1;
 					break;
 				}
 				depth += md;

@@ -8,7 +8,7 @@
 #include "mtest.h"
 #include "../mtx.h"
 
-enum { PL, AL, FIELD, TRUE_F, MASK, TUM, ATUM, NIN };
+enum { PL, AL, FIELD, TRUE_F, MASK, TUM, ATUM, IMG, AIMG, EXCL, NIN };
 
 static tab_t *run_ok(const char *const *params, msg_t *const in[NIN])
 {
@@ -529,6 +529,152 @@ static void test_tumour_overlap(void **state)
 	unref_all(in);
 }
 
+/* ---- image similarity (ncc) ---- */
+
+static double f_img(const double w[3], void *u)
+{
+	(void)u;
+	return 100 + 40 * sin(0.3 * w[0]) + 25 * cos(0.2 * w[1]) +
+	       0.5 * w[2] * w[2];
+}
+
+/* a deterministic "garbage" value per world point, uncorrelated with f_img */
+static double garbage(const double w[3])
+{
+	double x = sin(12.9898 * w[0] + 78.233 * w[1] + 37.719 * w[2]) *
+		   43758.5453;
+	return 1000 * (x - floor(x));
+}
+
+/* the reference NCC of two arrays over sel */
+static double ncc_ref(const double *a, const double *b, const uint8_t *sel,
+		      int64_t n)
+{
+	double sa = 0, sb = 0, m = 0;
+	for (int64_t e = 0; e < n; e++)
+		if (sel[e]) {
+			sa += a[e];
+			sb += b[e];
+			m++;
+		}
+	double ma = sa / m, mb = sb / m, sab = 0, saa = 0, sbb = 0;
+	for (int64_t e = 0; e < n; e++)
+		if (sel[e]) {
+			sab += (a[e] - ma) * (b[e] - mb);
+			saa += (a[e] - ma) * (a[e] - ma);
+			sbb += (b[e] - mb) * (b[e] - mb);
+		}
+	return sab / sqrt(saa * sbb);
+}
+
+/*
+ * 21^3 grid of 1 mm, LPS; the tumour is the single centre voxel (world
+ * 0,0,0), so the band of band_mm = 5 is exactly the voxels whose centre is
+ * 0 < |w| <= 5 mm (514 of them).  Asserted: ncc 1 for an affine copy
+ * (2a + 5) and -1 for the negative, to 1e-12; the band's ncc 1 when the
+ * atlas matches only there (the rest garbage) while the whole grid's is
+ * below 0.5; the excluded voxels (x > 6) do not count; the band's ncc
+ * equals a reference computation for a = b + garbage / 10; the mask is
+ * resampled from another orientation (LAS) through world coordinates.
+ */
+static void test_image_ncc(void **state)
+{
+	(void)state;
+	const int n[3] = { 21, 21, 21 };
+	const double h[3] = { 1, 1, 1 }, c0[3] = { 0, 0, 0 };
+	ball_t one = { { 0, 0, 0 }, 0.1, 1 };
+	vol_t *im = mt_vol_fn("LPS", n, h, c0, f_img, NULL, DT_F32);
+	vol_t *at = mt_vol_fn("LPS", n, h, c0, f_img, NULL, DT_F32);
+	int64_t nv = vol_nvox(im);
+	double *a = malloc(sizeof(double) * (size_t)nv);
+	double *b = malloc(sizeof(double) * (size_t)nv);
+	uint8_t *sel = malloc((size_t)nv);
+	double *wx = malloc(sizeof(double) * 3 * (size_t)nv);
+	assert_non_null(a);
+	assert_non_null(b);
+	assert_non_null(sel);
+	assert_non_null(wx);
+	for (int k = 0; k < n[2]; k++)
+		for (int j = 0; j < n[1]; j++)
+			for (int i = 0; i < n[0]; i++) {
+				int64_t e = vol_idx(im, i, j, k);
+				vol_to_world(im, i, j, k, wx + 3 * e);
+				a[e] = vol_get(im, e);
+			}
+	msg_t *in[NIN] = { 0 };
+	in[IMG] = &im->base;
+	in[AIMG] = &at->base;
+
+	/* affine copy, negative */
+	for (int64_t e = 0; e < nv; e++)
+		vol_set(at, e, 2 * a[e] + 5);
+	tab_t *t = run_ok(NULL, in);
+	assert_double_equal(mt_get(t, "ncc", "mask"), 1, 1e-12);
+	assert_double_equal(mt_get(t, "ncc_n", "mask"), (double)nv, 0);
+	assert_false(mt_has(t, "ncc", "band"));
+	msg_unref(&t->base);
+	for (int64_t e = 0; e < nv; e++)
+		vol_set(at, e, -a[e]);
+	t = run_ok(NULL, in);
+	assert_double_equal(mt_get(t, "ncc", "mask"), -1, 1e-12);
+	msg_unref(&t->base);
+
+	/* matches in the band only */
+	in[TUM] = &mt_vol_fn("LPS", n, h, c0, f_ball, &one, DT_U8)->base;
+	int64_t nb = 0;
+	for (int64_t e = 0; e < nv; e++) {
+		const double *w = wx + 3 * e;
+		double r = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+		sel[e] = r > 0 && r <= 5 + 1e-9;
+		nb += sel[e];
+		b[e] = sel[e] ? 3 * a[e] - 1 : garbage(w);
+		vol_set(at, e, b[e]);
+	}
+	const char *p5[] = { "band_mm=5", NULL };
+	t = run_ok(p5, in);
+	assert_int_equal(nb, 514);
+	assert_double_equal(mt_get(t, "ncc_n", "band"), (double)nb, 0);
+	assert_double_equal(mt_get(t, "ncc", "band"), 1, 1e-9);
+	assert_true(mt_get(t, "ncc", "mask") < 0.5);
+	msg_unref(&t->base);
+
+	/* a noisy copy: the band's value against the reference; garbage at
+	 * x > 6 is excluded (LAS mask: world geometry, not voxel order) */
+	box_t ex = { { 6, -99, -99 }, { 99, 99, 99 }, 1, 0, 0 };
+	in[EXCL] = &mt_vol_fn("LAS", n, h, c0, f_box, &ex, DT_U8)->base;
+	for (int64_t e = 0; e < nv; e++) {
+		const double *w = wx + 3 * e;
+		vol_set(at, e, w[0] > 6 ? garbage(w) : a[e] + 0.1 * garbage(w));
+		b[e] = vol_get(at, e); /* as stored (f32) */
+	}
+	t = run_ok(p5, in);
+	assert_double_equal(mt_get(t, "ncc", "band"),
+			    ncc_ref(a, b, sel, nv), 1e-9);
+	for (int64_t e = 0; e < nv; e++)
+		sel[e] = wx[3 * e] <= 6;
+	assert_double_equal(mt_get(t, "ncc", "mask"),
+			    ncc_ref(a, b, sel, nv), 1e-9);
+	assert_true(mt_get(t, "ncc", "mask") < 0.999);
+	msg_unref(&t->base);
+
+	/* errors: atlas_image alone, and on another grid */
+	msg_t *keep = in[IMG];
+	in[IMG] = NULL;
+	run_bad(p5, in, "needs both image and atlas_image");
+	in[IMG] = keep;
+	const int n2[3] = { 20, 21, 21 };
+	msg_t *keep2 = in[AIMG];
+	in[AIMG] = &mt_vol_fn("LPS", n2, h, c0, f_img, NULL, DT_F32)->base;
+	run_bad(p5, in, "not on the image's grid");
+	msg_unref(in[AIMG]);
+	in[AIMG] = keep2;
+	free(a);
+	free(b);
+	free(sel);
+	free(wx);
+	unref_all(in);
+}
+
 /* ---- bad inputs ---- */
 
 static void test_bad_inputs(void **state)
@@ -622,6 +768,7 @@ int main(void)
 		cmocka_unit_test(test_disp_error_constant),
 		cmocka_unit_test(test_disp_error_band),
 		cmocka_unit_test(test_tumour_overlap),
+		cmocka_unit_test(test_image_ncc),
 		cmocka_unit_test(test_bad_inputs),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);

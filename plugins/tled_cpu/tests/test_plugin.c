@@ -91,7 +91,7 @@ static double tab_num(const tab_t *t, const char *col, int64_t row)
 /* every message a test makes or receives is registered here and released
  * by the teardown, so nothing leaks when an assertion fails (cmocka runs
  * the teardown after a failed test too) */
-static msg_t *g_keep[32];
+static msg_t *g_keep[64];
 static int g_nkeep;
 
 static void keep(msg_t *m)
@@ -305,29 +305,23 @@ static void test_grow_sphere(void **state)
 /* front = push: the tissue at the front stays attached to it and is
  * pushed over the last push_mm of growth (the tumour starts as the layer
  * that deep).  Same ball as test_grow_sphere, contours 1.5 -> 8 mm in 4
- * layers of 1.625 mm, push_mm 3: the last 2 layers (3.25 mm) push.
+ * layers of 1.625 mm, push_mm 3.25: the last 2 layers push.
  * Asserted: every step converges (sticky contact), the tissue at rest at
  * r 7-10 mm moves out by more than 0.8 mm and at r 10-13 by more than
  * 0.45 mm (the legacy sweep front: 0.23 mm there), monotonically less
  * outward, and the push decays like the Lame shell solution (within 25%).
  * With a fixed wall at 24 mm and nu 0.49 the shell cannot take the whole
  * 3.25 mm: the rest is compression of the tissue. */
-static void test_grow_push(void **state)
+/* mean radial displacement (mm) of the tissue nodes (not tumour, not the
+ * boundary) at rest in the rings r 7-10, 10-13, 13-16 and 16+ mm */
+static void push_rings(const grow_out_t *g, double ring[4])
 {
-	(void)state;
-	const double Rb = tled_quick() ? 20 : 24, h = 3, Rt = 8;
-	const int L = 4;
-	grow_out_t g;
-	const char *params[] = { "tol=0.005", "front=push", "push_mm=3",
-				 "push_wall=1", NULL };
-	grow_ok(Rb, h, Rt, L, params, &g);
-	/* 3 growth steps: the 2 pushing layers and the start */
-	check_common(&g, Rb, 2);
-	double ring[4] = { 0 };
 	int nring[4] = { 0 };
-	for (int64_t i = 0; i < g.on->n; i++) {
-		const double *x = g.nodes->xyz + 3 * i, *d = g.u->data + 3 * i;
-		int32_t l = g.on->label[i];
+	for (int k = 0; k < 4; k++)
+		ring[k] = 0;
+	for (int64_t i = 0; i < g->on->n; i++) {
+		const double *x = g->nodes->xyz + 3 * i, *d = g->u->data + 3 * i;
+		int32_t l = g->on->label[i];
 		if (l == TL_BOUNDARY || l == TL_TUMOUR || l == TL_TUMOUR_BND ||
 		    l == TL_SEED)
 			continue;
@@ -344,6 +338,21 @@ static void test_grow_push(void **state)
 		print_message("push: mean u_r %.3f mm over %d tissue nodes in "
 			      "ring %d\n", ring[k], nring[k], k);
 	}
+}
+
+static void test_grow_push(void **state)
+{
+	(void)state;
+	const double Rb = tled_quick() ? 20 : 24, h = 3, Rt = 8;
+	const int L = 4;
+	grow_out_t g;
+	const char *params[] = { "tol=0.005", "front=push", "push_mm=3.25",
+				 "push_wall=1", NULL };
+	grow_ok(Rb, h, Rt, L, params, &g);
+	/* 3 growth steps: the 2 pushing layers and the start */
+	check_common(&g, Rb, 2);
+	double ring[4];
+	push_rings(&g, ring);
 	double bf, mm;
 	double lr = lame_ratio(&g, Rb, 10, 13, &bf, &mm);
 	print_message("push: u_r at r 10-13 is %.2f x the Lame profile fitted "
@@ -370,6 +379,41 @@ static void test_grow_push(void **state)
 	print_message("push: %lld tumour points, %d on the outline\n",
 		      (long long)g.ot->n, nout);
 	assert_true(nout > 20);
+}
+
+/* push_mm between layers: the starting layer is moved out along its map
+ * to the requested depth, so the push is continuous in push_mm.  Same
+ * ball as test_grow_push, layers 1.625 mm apart: push_mm 1.625 (one
+ * layer), 2.4 (between) and 3.25 (two layers).  Asserted: every run
+ * converges with 1 + the layers kept steps (2, 3, 3), the push at
+ * r 7-10 mm grows with push_mm and the 2.4 mm run lies strictly between
+ * (measured 24 mm ball / quick 20 mm: 0.60 / 0.83 / 1.06 mm and
+ * 0.60 / 0.80 / 1.02 mm). */
+static void test_push_depth(void **state)
+{
+	(void)state;
+	const double Rb = tled_quick() ? 20 : 24, h = 3, Rt = 8;
+	const char *depth[] = { "push_mm=1.625", "push_mm=2.4",
+				"push_mm=3.25" };
+	const int steps[] = { 1, 2, 2 };
+	double r0[3];
+	for (int k = 0; k < 3; k++) {
+		grow_out_t g;
+		const char *params[] = { "tol=0.005", "front=push", depth[k],
+					 "push_wall=1", NULL };
+		grow_ok(Rb, h, Rt, 4, params, &g);
+		check_common(&g, Rb, steps[k]);
+		for (int64_t r = 0; r < g.tb->nrows; r++)
+			assert_true(tab_num(g.tb, "converged", r) == 1);
+		double ring[4];
+		push_rings(&g, ring);
+		r0[k] = ring[0];
+		print_message("%s: u_r %.3f mm at r 7-10\n", depth[k], r0[k]);
+	}
+	double span = r0[2] - r0[0];
+	assert_true(span > 0.2);
+	assert_true(r0[1] > r0[0] + 0.15 * span);
+	assert_true(r0[1] < r0[2] - 0.15 * span);
 }
 
 /* drive = collocated (experimental): u^h at a well-separated subset of the
@@ -514,7 +558,7 @@ static void test_touch_boundary_push(void **state)
 	g_cen[0] = Rb - Rt;
 	g_cen[1] = g_cen[2] = 0;
 	grow_out_t g;
-	const char *params[] = { "tol=0.005", "front=push", "push_mm=3",
+	const char *params[] = { "tol=0.005", "front=push", "push_mm=4",
 				 "push_wall=1.5", NULL };
 	grow_ok(Rb, h, Rt, L, params, &g);
 	check_common(&g, Rb, (int)g.tb->nrows - 1);
@@ -743,6 +787,7 @@ int main(void)
 		cmocka_unit_test_teardown(test_grow_sphere, teardown),
 		cmocka_unit_test_teardown(test_grow_collocated, teardown),
 		cmocka_unit_test_teardown(test_grow_push, teardown),
+		cmocka_unit_test_teardown(test_push_depth, teardown),
 		cmocka_unit_test_teardown(test_soft_ventricles, teardown),
 		cmocka_unit_test_teardown(test_touch_boundary, teardown),
 		cmocka_unit_test_teardown(test_touch_boundary_push, teardown),
