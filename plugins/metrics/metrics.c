@@ -35,7 +35,7 @@
  *   field + true_field: err_mean, err_median, err_p95, err_max, err_n per
  *     region, err = |u(x) - u_true(x)| in mm
  *   image + atlas_image: ncc, ncc_n for "mask" (mask != 0, or every voxel)
- *     and, with tumour, "band" (outside the tumour, within band_mm of it,
+ *     and, with tumour, "band" (outside the tumour, within ncc_band_mm of it,
  *     in the mask); exclude removes voxels from both.  ncc is Pearson's
  *     normalised cross-correlation sum (a - ma)(b - mb) / sqrt(sum (a -
  *     ma)^2 sum (b - mb)^2) over the region: 1 for any a = s b + o, s > 0.
@@ -85,6 +85,7 @@ typedef struct metrics_priv {
 	const char *ventricles;
 	const char *patient_ventricles;
 	double band_mm;
+	double ncc_band_mm;
 	int band_side;
 	int surface;
 } metrics_priv_t;
@@ -134,6 +135,10 @@ static const armstg_param_t metrics_params[] = {
 	{ "band_mm", PT_DOUBLE, "15", 0, 1000, "mm",
 	  "width of the band around the tumour boundary for field metrics "
 	  "(0 = no band)", NULL, P(band_mm), 0 },
+	{ "ncc_band_mm", PT_DOUBLE, "25", 0, 1000, "mm",
+	  "width of the band outside the tumour for the image similarity "
+	  "(wider than band_mm: the mass effect reaches farther, and more "
+	  "voxels make the score steadier)", NULL, P(ncc_band_mm), 0 },
 	{ "band_side", PT_ENUM, "outside", 0, 0, "",
 	  "side of the tumour boundary the band covers", "outside|inside|both",
 	  P(band_side), 0 },
@@ -748,7 +753,7 @@ static int image_metrics(mctx_t *c)
 	if ((rc = row(c, "ncc", "mask", r, "")) ||
 	    (rc = row(c, "ncc_n", "mask", (double)cnt, "voxels")))
 		goto out;
-	if (st->in[IN_TUM] && c->p->band_mm > 0) {
+	if (st->in[IN_TUM] && c->p->ncc_band_mm > 0) {
 		double sp[3];
 		if ((rc = mtx_check_orthogonal(im, "image", c->err,
 					       sizeof c->err))) {
@@ -777,7 +782,7 @@ static int image_metrics(mctx_t *c)
 			rc = c->h->fail(st, rc, "out of memory");
 			goto out;
 		}
-		double b2 = c->p->band_mm * c->p->band_mm;
+		double b2 = c->p->ncc_band_mm * c->p->ncc_band_mm;
 		for (int64_t e = 0; e < n; e++)
 			sel[e] &= (uint8_t)(!feat[e] && d2[e] <= b2 * (1 + 1e-6));
 		r = ncc_over(im, at, sel, n, &cnt);
@@ -785,7 +790,7 @@ static int image_metrics(mctx_t *c)
 			rc = c->h->fail(st, ARMSTG_EINVAL, "ncc: no voxel of "
 					"the band (%g mm around the tumour, in "
 					"the mask, not excluded) to compare",
-					c->p->band_mm);
+					c->p->ncc_band_mm);
 			goto out;
 		}
 		if ((rc = row(c, "ncc", "band", r, "")) ||

@@ -39,7 +39,7 @@ static void test_sri24_brats_pair(void **state)
 					x != 0);
 				vol_set(naive, vol_idx(naive, i, j, k), x != 0);
 			}
-	msg_t *in[7] = { 0 }, *out[1] = { 0 };
+	msg_t *in[10] = { 0 }, *out[1] = { 0 }; /* the plugin's 10 inputs */
 	in[5] = &ot->base;     /* tumour: BraTS grid, LPS */
 	in[6] = &mapped->base; /* atlas_tumour: SRI24 grid, LAS */
 	int rc = tu_run(TU_PLUGIN(), NULL, (const msg_t *const *)in, out, err,

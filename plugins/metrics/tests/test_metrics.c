@@ -569,7 +569,7 @@ static double ncc_ref(const double *a, const double *b, const uint8_t *sel,
 
 /*
  * 21^3 grid of 1 mm, LPS; the tumour is the single centre voxel (world
- * 0,0,0), so the band of band_mm = 5 is exactly the voxels whose centre is
+ * 0,0,0), so the band of ncc_band_mm = 5 is exactly the voxels whose centre is
  * 0 < |w| <= 5 mm (514 of them).  Asserted: ncc 1 for an affine copy
  * (2a + 5) and -1 for the negative, to 1e-12; the band's ncc 1 when the
  * atlas matches only there (the rest garbage) while the whole grid's is
@@ -630,7 +630,7 @@ static void test_image_ncc(void **state)
 		b[e] = sel[e] ? 3 * a[e] - 1 : garbage(w);
 		vol_set(at, e, b[e]);
 	}
-	const char *p5[] = { "band_mm=5", NULL };
+	const char *p5[] = { "ncc_band_mm=5", NULL };
 	t = run_ok(p5, in);
 	assert_int_equal(nb, 514);
 	assert_double_equal(mt_get(t, "ncc_n", "band"), (double)nb, 0);
