@@ -2,7 +2,8 @@
 """Collect metrics tables of the bench/pipeline runs (stdlib only).
 
   collect.py row KEY METHOD WALL_S EVAL_TSV [RUN_METRICS_TSV]
-      one TSV row: the numbers of the metrics plugin's long tables
+      one TSV row: the numbers of the metrics plugin's long tables, and the
+      push depth [tune] chose (tune.tsv beside RUN_METRICS_TSV; "-": none)
   collect.py trade FACTOR SPACING K SAFETY WALL_S RUN_DIR
       one row of bench/pipeline/run_tradeoff.sh
   collect.py summary ROWS_TSV
@@ -10,6 +11,7 @@
 """
 import csv
 import math
+import os
 import sys
 
 
@@ -38,6 +40,7 @@ COLS = [
     ("dice_ventricles", "dice", "ventricles"),
     ("dice_tumour", "dice", "tumour"),
     ("jac_min", "jac_min", "mask"),
+    ("ncc_band", "ncc", "band"),
 ]
 
 
@@ -55,7 +58,12 @@ def row(args):
         for k, v in run.items():
             m.setdefault(k, v)
     vals = [fmt(m.get((a, b), math.nan)) for _, a, b in COLS]
-    print("\t".join([key, method] + vals + [wall]))
+    push = "-"
+    if len(args) > 4:  # the push depth the run's [tune] chose
+        for r in read_rows(os.path.join(os.path.dirname(args[4]), "tune.tsv")):
+            if r.get("chosen") == "1":
+                push = r["value"]
+    print("\t".join([key, method] + vals + [push, wall]))
 
 
 def read_rows(path):

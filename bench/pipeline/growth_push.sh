@@ -10,7 +10,8 @@
 # register.iterations=0 (the total warp is the growth alone); then
 # growth_push.py compares the warp and the nodes with the truth.  --set
 # options go to both graphs (e.g. --set grow.drive=collocated);
-# PHANTOM_SET="phantom.lobulation=0.9 ..." changes the phantom.  Needs
+# PHANTOM_SET="phantom.lobulation=0.9 ..." changes the phantom; PUSH_MM
+# the push depth (6).  Needs
 # bench/.venv (numpy scipy nibabel h5py), installed here when absent.
 set -eu
 cd "$(dirname "$0")/../.."
@@ -51,7 +52,10 @@ for seed in $SEEDS; do
 		esac
 		o="$OUT/ph$seed-$m"
 		# shellcheck disable=SC2086
-		if w=$(run_graph "$g" "$o" --set register.iterations=0 $SETS); then
+		# the push depth: PUSH_MM (6; [tune] scores the registration,
+		# which this diagnostic switches off)
+		if w=$(run_graph "$g" "$o" --set register.iterations=0 \
+			--set grow.push_mm="${PUSH_MM:-6}" $SETS); then
 			echo "seed $seed $m: ${w} s"
 			runs="$runs $o"
 		else

@@ -34,7 +34,7 @@ OUT=$(abspath "$OUT")
 build_all
 mkdir -p "$OUT"
 TSV="$OUT/phantom.tsv"
-printf 'seed\tmethod\terr_band_mean_mm\terr_band_median_mm\terr_band_p95_mm\terr_brain_mean_mm\tS_mm\tS_mean_mm\tdice_ventricles\tdice_tumour\tjac_min\twall_s\n' >"$TSV"
+printf 'seed\tmethod\terr_band_mean_mm\terr_band_median_mm\terr_band_p95_mm\terr_brain_mean_mm\tS_mm\tS_mean_mm\tdice_ventricles\tdice_tumour\tjac_min\tncc_band\tpush_mm\twall_s\n' >"$TSV"
 PSETS=""
 for s in ${PHANTOM_SET:-}; do PSETS="$PSETS --set $s"; done
 for seed in $SEEDS; do

@@ -44,7 +44,7 @@ mkdir -p "$OUT"
 # shellcheck disable=SC2086
 bench/.venv/bin/python bench/pipeline/ventricles.py --data "$DATA" --out "$OUT/ventricles" $CASES
 TSV="$OUT/real.tsv"
-printf 'case\tmethod\terr_band_mean_mm\terr_band_median_mm\terr_band_p95_mm\terr_brain_mean_mm\tS_mm\tS_mean_mm\tdice_ventricles\tdice_tumour\tjac_min\twall_s\n' >"$TSV"
+printf 'case\tmethod\terr_band_mean_mm\terr_band_median_mm\terr_band_p95_mm\terr_brain_mean_mm\tS_mm\tS_mean_mm\tdice_ventricles\tdice_tumour\tjac_min\tncc_band\tpush_mm\twall_s\n' >"$TSV"
 for c in $CASES; do
 	brats_env "$c" "$DATA"
 	for m in ${METHODS:-armstg direct plain sphere}; do

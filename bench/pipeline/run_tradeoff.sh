@@ -8,7 +8,9 @@
 # One factor at a time around the defaults of graphs/armstg.ini (nodes 6 mm,
 # support_k 20, dt_safety 0.8), on one exported phantom; every run is the
 # user-facing graphs/armstg.ini with --set.  The dense-field width follows the
-# spacing (growth.sigma = 5/6 x spacing, as the graphs at 6 mm).  Rows: DIR/tradeoff.tsv; plot:
+# spacing (growth.sigma = 5/6 x spacing, as the graphs at 6 mm).  The push
+# depth is held at PUSH_MM (6 mm; the graph's [tune] search would otherwise
+# run each row 6 times and mix the depth into the factors).  Rows: DIR/tradeoff.tsv; plot:
 # DIR/tradeoff.png (bench/pipeline/plot_tradeoff.py, needs matplotlib).
 # SPACINGS, SUPPORTS, SAFETIES override the lists ("none": skip the spacing sweep).
 set -eu
@@ -45,7 +47,7 @@ one() { # factor spacing k safety
 	sig=$(echo "$2" | awk '{print $1 * 5 / 6}')
 	if ! w=$(run_graph graphs/armstg.ini "$o" --set nodes.spacing="$2" \
 		--set growth.sigma="$sig" --set grow.support_k="$3" \
-		--set grow.dt_safety="$4"); then
+		--set grow.dt_safety="$4" --set grow.push_mm="${PUSH_MM:-6}"); then
 		echo "$1 spacing $2 k $3 safety $4: FAILED (see $o.log)" >&2
 		tail -2 "$o.log" >&2
 		printf '%s\t%s\t%s\t%s\tfailed\n' "$1" "$2" "$3" "$4" >>"$TSV"
