@@ -576,7 +576,7 @@ static void test_interrupt(void **state)
 {
 	(void)state;
 	trun_t r;
-	const char *sets[] = { "sim.sleep_ms=150" };
+	const char *sets[] = { "sim.sleep_ms=1000" };
 	new_dirs(&r);
 	graph_t *g = graph_load(graph_path, sets, 1, r.err, sizeof r.err);
 	assert_non_null(g);
@@ -614,7 +614,7 @@ static void test_interrupt(void **state)
 			dup2(fd, 1);
 			dup2(fd, 2);
 		}
-		execl(exe, exe, "run", graph_path, "--set", "sim.sleep_ms=150",
+		execl(exe, exe, "run", graph_path, "--set", "sim.sleep_ms=1000",
 		      "--out", r.out, "-q", (char *)NULL);
 		_exit(127);
 	}
