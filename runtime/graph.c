@@ -73,6 +73,12 @@ typedef struct g_tune {
 	const char *metric;        /* row selectors (point into kv) */
 	const char *structure;     /* NULL: the first row with metric */
 	int goal_max;
+	/* require = METRIC [STRUCTURE] OP NUMBER: a candidate whose row
+	 * fails it is dropped like a failed one */
+	int has_req;
+	char req_metric[G_NAME], req_structure[G_NAME]; /* "": any */
+	char req_op[3];            /* ">", ">=", "<", "<=" */
+	double req_value;
 	int search;                /* 1: try the candidates when running */
 	char why[512];             /* when present but no search: why */
 	/* last run */
@@ -837,7 +843,7 @@ static int depends_on(graph_t *g, int v, int t, signed char *memo)
 }
 
 static const char *const tune_keys[] = { "param", "values", "score", "metric",
-					 "structure", "goal" };
+					 "structure", "goal", "require" };
 
 /* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
  * with an error reported when the list is empty or has an empty item. */
@@ -920,7 +926,7 @@ static void validate_tune(graph_t *g)
 		if (!known)
 			gerr(g, kv->line, NULL, kv->key, "unknown key in "
 			     "[tune] (known: param, values, score, metric, "
-			     "structure, goal)");
+			     "structure, goal, require)");
 		else if (!kv->val[0] && strcmp(kv->key, "values"))
 			gerr(g, kv->line, NULL, kv->key, "empty value");
 	}
@@ -1030,6 +1036,47 @@ static void validate_tune(graph_t *g)
 		else
 			gerr(g, gk->line, NULL, "goal", "[tune] goal must be "
 			     "max or min, got '%s'", gk->val);
+	}
+	g_kv_t *rk = kv_find(t->kv, t->nkv, "require");
+	if (rk && rk->val[0]) {
+		/* METRIC [STRUCTURE] OP NUMBER, blank separated */
+		char tok[5][G_NAME];
+		int nt = 0, bad = 0;
+		for (const char *p = rk->val; *p && !bad;) {
+			while (*p == ' ' || *p == '\t')
+				p++;
+			if (!*p)
+				break;
+			size_t l = strcspn(p, " \t");
+			if (nt == 5 || l >= G_NAME)
+				bad = 1;
+			else
+				snprintf(tok[nt++], G_NAME, "%.*s", (int)l, p);
+			p += l;
+		}
+		char *end = NULL;
+		const char *op = nt >= 3 ? tok[nt - 2] : "";
+		if (!bad && (nt == 3 || nt == 4)) {
+			t->req_value = strtod(tok[nt - 1], &end);
+			bad = !*tok[nt - 1] || *end || !isfinite(t->req_value) ||
+			      (strcmp(op, ">") && strcmp(op, ">=") &&
+			       strcmp(op, "<") && strcmp(op, "<="));
+		} else {
+			bad = 1;
+		}
+		if (bad) {
+			gerr(g, rk->line, NULL, "require", "[tune] require "
+			     "must read METRIC [STRUCTURE] OP NUMBER with OP "
+			     "one of > >= < <= (e.g. 'jac_min mask > 0'), got "
+			     "'%s'", rk->val);
+		} else {
+			t->has_req = 1;
+			snprintf(t->req_metric, sizeof t->req_metric, "%s",
+				 tok[0]);
+			snprintf(t->req_structure, sizeof t->req_structure,
+				 "%s", nt == 4 ? tok[1] : "");
+			snprintf(t->req_op, sizeof t->req_op, "%s", op);
+		}
 	}
 	if (g->nerr != nerr0 || !ts || t->score < 0)
 		return;
@@ -1524,7 +1571,8 @@ static void tune_reset(graph_t *g, const char *down)
 /* The score of the candidate just run: 'value' of the first row of the
  * score table whose 'metric' (and 'structure', when given) match, the
  * layout of the metrics plugin's table. */
-static int tune_score(graph_t *g, double *score, char *err, size_t errsize)
+static int tune_lookup(graph_t *g, const char *metric, const char *structure,
+		       double *score, char *err, size_t errsize)
 {
 	const g_tune_t *t = &g->tune;
 	g_stage_t *s = &g->stages[t->score];
@@ -1542,7 +1590,7 @@ static int tune_score(graph_t *g, double *score, char *err, size_t errsize)
 	const char *miss = NULL;
 	if (!mc || mc->type != TAB_STR)
 		miss = "a text column 'metric'";
-	else if (t->structure && (!sc || sc->type != TAB_STR))
+	else if (structure && (!sc || sc->type != TAB_STR))
 		miss = "a text column 'structure'";
 	else if (!vc || vc->type != TAB_NUM)
 		miss = "a number column 'value'";
@@ -1558,20 +1606,52 @@ static int tune_score(graph_t *g, double *score, char *err, size_t errsize)
 		return ARMSTG_EINVAL;
 	}
 	for (int64_t r = 0; r < tab->nrows; r++) {
-		if (!mc->str[r] || strcmp(mc->str[r], t->metric))
+		if (!mc->str[r] || strcmp(mc->str[r], metric))
 			continue;
-		if (t->structure && (!sc->str[r] ||
-				     strcmp(sc->str[r], t->structure)))
+		if (structure && (!sc->str[r] ||
+				     strcmp(sc->str[r], structure)))
 			continue;
 		*score = vc->num[r];
 		return 0;
 	}
 	snprintf(err, errsize, "[tune] score: the table of stage '%s' (output "
 		 "'%s') has no row with metric '%s'%s%s%s (%lld rows)", s->name,
-		 port, t->metric, t->structure ? " and structure '" : "",
-		 t->structure ? t->structure : "", t->structure ? "'" : "",
+		 port, metric, structure ? " and structure '" : "",
+		 structure ? structure : "", structure ? "'" : "",
 		 (long long)tab->nrows);
 	return ARMSTG_EINVAL;
+}
+
+static int tune_score(graph_t *g, double *score, char *err, size_t errsize)
+{
+	return tune_lookup(g, g->tune.metric, g->tune.structure, score, err,
+			   errsize);
+}
+
+/* 1 when the candidate just run meets [tune] require (or there is none),
+ * 0 with the reason in why; < 0: the row is missing (a graph error). */
+static int tune_require(graph_t *g, char *why, size_t whysize, char *err,
+			size_t errsize)
+{
+	const g_tune_t *t = &g->tune;
+	if (!t->has_req)
+		return 1;
+	double v;
+	int rc = tune_lookup(g, t->req_metric,
+			     t->req_structure[0] ? t->req_structure : NULL, &v,
+			     err, errsize);
+	if (rc)
+		return rc; /* the ARMSTG_E* codes are negative */
+	const char *op = t->req_op;
+	int ok = !strcmp(op, ">") ? v > t->req_value
+		 : !strcmp(op, ">=") ? v >= t->req_value
+		 : !strcmp(op, "<") ? v < t->req_value
+		 : v <= t->req_value; /* NaN meets nothing */
+	if (!ok)
+		snprintf(why, whysize, "require %s%s%s %s %g not met: %.6g",
+			 t->req_metric, t->req_structure[0] ? " " : "",
+			 t->req_structure, op, t->req_value, v);
+	return ok;
 }
 
 /*
@@ -1654,7 +1734,18 @@ static int tune_run(graph_t *g, const run_opts_t *o, char *err,
 			rc = tune_score(g, &row->score, err, errsize);
 			if (rc)
 				goto out;
-			if (isfinite(row->score)) {
+			int req = isfinite(row->score)
+					  ? tune_require(g, row->err,
+							 sizeof row->err, err,
+							 errsize)
+					  : 1;
+			if (req < 0) {
+				rc = req;
+				goto out;
+			}
+			if (!req) {
+				row->rc = ARMSTG_ENUMERIC;
+			} else if (isfinite(row->score)) {
 				row->ok = 1;
 			} else {
 				row->rc = ARMSTG_ENUMERIC;

@@ -8,7 +8,8 @@
  *   [node NAME]         endpoint = tcp://host:port
  *   [tune]              param = STAGE.KEY, values = V1, V2, ...,
  *                       score = STAGE.PORT (a table output), metric = M,
- *                       structure = S (optional), goal = max | min
+ *                       structure = S (optional), goal = max | min,
+ *                       require = M2 [S2] OP NUMBER (optional)
  *
  * Values may use ${VAR} and ${VAR:-default} (environment variables; "$$" is a
  * literal '$').  `--set stage.key=value` overrides or adds any key.  Loading
@@ -25,7 +26,8 @@
  * row of the table whose 'metric' column is M (and 'structure' is S),
  * the metrics plugin's layout; a table without those columns or that row
  * fails the run (an error naming the score stage).  A candidate that fails
- * in a stage that depends on the tuned one, or scores NaN (or +-inf), is
+ * in a stage that depends on the tuned one, or scores NaN (or +-inf), or
+ * whose row M2 (S2) of the same table fails `require` (OP: > >= < <=), is
  * skipped with a warning; if all fail, the run fails.  Ties keep the
  * earlier value.  Then
  * the normal run (all stages or the targets) with the best value: only it

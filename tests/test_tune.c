@@ -331,6 +331,44 @@ static void test_goal_metric_structure(void **state)
 	assert_float_equal(chosen_with(d, 1), 3.0, 0);
 }
 
+/* require: sq near of 1..5 (target 3.2) is 4.84 1.44 0.04 0.64 3.24 and sq
+ * far (x - 13.2)^2 148.84 125.44 104.04 84.64 67.24: "sq far < 100" leaves 4
+ * and 5 (min of sq near: 4), "<= 104.04" also 3 (chosen); the rows that fail
+ * it are listed as failed with the reason and their score; a requirement no
+ * candidate meets fails the run; a row the table lacks is a graph error */
+static void test_require(void **state)
+{
+	(void)state;
+	const char *a[] = { "tune.require=sq far < 100" };
+	assert_float_equal(chosen_with(a, 1), 4.0, 0);
+	const char *b[] = { "tune.require=sq far <= 104.04" };
+	assert_float_equal(chosen_with(b, 1), 3.0, 0);
+	trun_t r;
+	run_sets(&r, a, 1);
+	assert_int_equal(r.rc, 0);
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 5);
+	assert_string_equal(tt.status->str[2], "failed");
+	assert_float_equal(tt.score->num[2], 0.04, 1e-9);
+	assert_string_equal(tt.error->str[2],
+			    "require sq far < 100 not met: 104.04");
+	assert_string_equal(tt.status->str[3], "ok");
+	ttab_free(&tt);
+	done(&r);
+	const char *c[] = { "tune.require=neg > 0" };
+	run_sets(&r, c, 1);
+	assert_int_not_equal(r.rc, 0);
+	assert_non_null(strstr(r.err, "require neg > 0 not met: -4.84"));
+	done(&r);
+	const char *d[] = { "tune.require=nope mask > 0" };
+	run_sets(&r, d, 1);
+	assert_int_equal(r.rc, ARMSTG_EINVAL);
+	assert_non_null(strstr(r.err, "has no row with metric 'nope' and "
+				      "structure 'mask'"));
+	done(&r);
+}
+
 static void test_ties_keep_the_earlier_value(void **state)
 {
 	(void)state;
@@ -473,7 +511,7 @@ static void test_set_rules(void **state)
 		{ "tune.values=", "key 'values': [tune] values: the list is "
 		  "empty (give one or more values separated by commas)" },
 		{ "tune.steps=3", "key 'steps': unknown key in [tune] (known: "
-		  "param, values, score, metric, structure, goal)" },
+		  "param, values, score, metric, structure, goal, require)" },
 		{ "tune.score=fit.volume", "key 'score': [tune] score: "
 		  "'fit.volume' is a volume, not a table" },
 		{ "tune.param=sim.size", "key 'param': [tune] param: 'size' "
@@ -640,6 +678,7 @@ int main(void)
 		cmocka_unit_test(test_goal_metric_structure),
 		cmocka_unit_test(test_ties_keep_the_earlier_value),
 		cmocka_unit_test(test_failed_candidates_are_skipped),
+		cmocka_unit_test(test_require),
 		cmocka_unit_test(test_all_candidates_fail),
 		cmocka_unit_test(test_shared_stage_failure_fails_the_run),
 		cmocka_unit_test(test_set_rules),
