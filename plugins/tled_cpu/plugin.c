@@ -206,11 +206,12 @@ static const armstg_param_t params[] = {
 	  "sweep|push", offsetof(priv_t, front), 0 },
 	{ "push_mm", PT_DOUBLE, "6", 0, 1000, "mm",
 	  "front=push: depth of growth that pushes tissue: the tumour starts "
-	  "as the contour layer this deep inside the final tumour (the tissue "
-	  "inside it is infiltrated: tumour from the start) and pushes the "
-	  "tissue over the remaining layers (0: no mass effect; a value "
-	  "above the tumour's depth: the whole growth pushes, as from the "
-	  "seeds)",
+	  "as the surface this deep inside the final tumour (a contour "
+	  "layer, or between two: interpolated along the layer map; the "
+	  "tissue inside it is infiltrated: tumour from the start) and "
+	  "pushes the tissue over the remaining depth (0: no mass effect; a "
+	  "value above the tumour's depth: the whole growth pushes, as from "
+	  "the seeds).  graphs/armstg.ini chooses it per case ([tune])",
 	  NULL, offsetof(priv_t, push_mm), 0 },
 	{ "push_wall", PT_DOUBLE, "1.5", 0, 3, "node spacings",
 	  "front=push: free nodes within this distance outside the front "
