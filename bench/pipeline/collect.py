@@ -57,7 +57,9 @@ def row(args):
         run = read_metrics(args[4])
         for k, v in run.items():
             m.setdefault(k, v)
-    vals = [fmt(m.get((a, b), math.nan)) for _, a, b in COLS]
+    # the ncc differs between push depths in the 4th digit: 6 decimals
+    vals = [("%.6f" % m.get((a, b), math.nan)) if a == "ncc" else
+            fmt(m.get((a, b), math.nan)) for _, a, b in COLS]
     push = "-"
     if len(args) > 4:  # the push depth the run's [tune] chose
         for r in read_rows(os.path.join(os.path.dirname(args[4]), "tune.tsv")):
