@@ -657,6 +657,20 @@ static void test_image_ncc(void **state)
 	assert_true(mt_get(t, "ncc", "mask") < 0.999);
 	msg_unref(&t->base);
 
+	/* bad input: an atlas image of NaN leaves no voxel to compare (an
+	 * error, no table); a vector volume as the image is refused */
+	for (int64_t e = 0; e < nv; e++)
+		vol_set(at, e, NAN);
+	run_bad(p5, in, "no voxel of the band");
+	double Av[16];
+	mt_affine(Av, "LPS", n, h, c0);
+	vol_t *vec = vol_new(n[0], n[1], n[2], 3, DT_F32, Av);
+	msg_t *keep0 = in[IMG];
+	in[IMG] = &vec->base;
+	run_bad(p5, in, "must be scalar volumes");
+	in[IMG] = keep0;
+	msg_unref(&vec->base);
+
 	/* errors: atlas_image alone, and on another grid */
 	msg_t *keep = in[IMG];
 	in[IMG] = NULL;
