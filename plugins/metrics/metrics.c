@@ -530,6 +530,63 @@ static int region_rows(mctx_t *c, const char *prefix, const char *region,
 	return 0;
 }
 
+/* sel[e] = 1 for the voxels of grid g within band_mm of the tumour
+ * boundary on side `side` (outside: distance to the nearest tumour voxel;
+ * inside: to the nearest non-tumour voxel; voxel centres, mm); what names
+ * the grid in errors. */
+static int band_select(mctx_t *c, const vol_t *g, const char *what, int side,
+		       double band_mm, uint8_t *sel)
+{
+	armstg_stage_t *st = c->st;
+	const int64_t n = vol_nvox(g);
+	int32_t *t = NULL;
+	uint8_t *feat = NULL;
+	float *d2 = NULL;
+	double sp[3];
+	int rc;
+	if ((rc = mtx_check_orthogonal(g, what, c->err, sizeof c->err)))
+		return fail_err(c, rc);
+	if ((rc = labels_on(c, IN_TUM, g, 1, &t)))
+		goto out;
+	feat = malloc((size_t)n);
+	d2 = malloc(sizeof(float) * (size_t)n);
+	if (!feat || !d2) {
+		rc = c->h->fail(st, ARMSTG_ENOMEM, "out of memory");
+		goto out;
+	}
+	int64_t ct = 0;
+	for (int64_t e = 0; e < n; e++)
+		ct += t[e];
+	if (!ct) {
+		rc = c->h->fail(st, ARMSTG_EINVAL, "tumour mask is empty on the "
+				"%s grid", what);
+		goto out;
+	}
+	vol_spacing(g, sp);
+	double b2 = band_mm * band_mm;
+	for (int sd = 0; sd < 2; sd++) {
+		if ((sd == 0 && side == SIDE_INSIDE) ||
+		    (sd == 1 && side == SIDE_OUTSIDE))
+			continue;
+		for (int64_t e = 0; e < n; e++)
+			feat[e] = (uint8_t)(sd == 0 ? t[e] != 0 : t[e] == 0);
+		if ((rc = mtx_edt_sq(feat, g->nx, g->ny, g->nz, sp, c->nthreads,
+				     d2))) {
+			rc = c->h->fail(st, rc, "out of memory");
+			goto out;
+		}
+		for (int64_t e = 0; e < n; e++)
+			if (!feat[e] && d2[e] <= b2 * (1 + 1e-6))
+				sel[e] = 1;
+	}
+	rc = 0;
+out:
+	free(t);
+	free(feat);
+	free(d2);
+	return rc;
+}
+
 static int field_metrics(mctx_t *c)
 {
 	armstg_stage_t *st = c->st;
@@ -537,9 +594,8 @@ static int field_metrics(mctx_t *c)
 	const int64_t n = vol_nvox(f);
 	float *u = NULL, *ut = NULL;
 	double *x = NULL;
-	int32_t *m = NULL, *t = NULL;
-	uint8_t *selm = NULL, *selb = NULL, *feat = NULL;
-	float *d2 = NULL;
+	int32_t *m = NULL;
+	uint8_t *selm = NULL, *selb = NULL;
 	int rc, res;
 	int64_t nout;
 
@@ -573,50 +629,14 @@ static int field_metrics(mctx_t *c)
 		}
 	}
 	if (st->in[IN_TUM] && c->p->band_mm > 0) {
-		double sp[3];
-		if ((rc = mtx_check_orthogonal(f, "field", c->err,
-					       sizeof c->err))) {
-			rc = fail_err(c, rc);
-			goto out;
-		}
-		if ((rc = labels_on(c, IN_TUM, f, 1, &t)))
-			goto out;
 		selb = calloc((size_t)n, 1);
-		feat = malloc((size_t)n);
-		d2 = malloc(sizeof(float) * (size_t)n);
-		if (!selb || !feat || !d2) {
+		if (!selb) {
 			rc = c->h->fail(st, ARMSTG_ENOMEM, "out of memory");
 			goto out;
 		}
-		int64_t ct = 0;
-		for (int64_t e = 0; e < n; e++)
-			ct += t[e];
-		if (!ct) {
-			rc = c->h->fail(st, ARMSTG_EINVAL,
-					"tumour mask is empty on the field "
-					"grid");
+		if ((rc = band_select(c, f, "field", c->p->band_side,
+				      c->p->band_mm, selb)))
 			goto out;
-		}
-		vol_spacing(f, sp);
-		double b2 = c->p->band_mm * c->p->band_mm;
-		/* outside: distance to the nearest tumour voxel; inside: to
-		 * the nearest non-tumour voxel (both voxel centres, mm) */
-		for (int side = 0; side < 2; side++) {
-			if ((side == 0 && c->p->band_side == SIDE_INSIDE) ||
-			    (side == 1 && c->p->band_side == SIDE_OUTSIDE))
-				continue;
-			for (int64_t e = 0; e < n; e++)
-				feat[e] = (uint8_t)(side == 0 ? t[e] != 0
-							      : t[e] == 0);
-			if ((rc = mtx_edt_sq(feat, f->nx, f->ny, f->nz, sp,
-					     c->nthreads, d2))) {
-				rc = c->h->fail(st, rc, "out of memory");
-				goto out;
-			}
-			for (int64_t e = 0; e < n; e++)
-				if (!feat[e] && d2[e] <= b2 * (1 + 1e-6))
-					selb[e] = 1;
-		}
 		if (selm)
 			for (int64_t e = 0; e < n; e++)
 				selb[e] &= selm[e];
@@ -681,11 +701,8 @@ out:
 	free(ut);
 	free(x);
 	free(m);
-	free(t);
 	free(selm);
 	free(selb);
-	free(feat);
-	free(d2);
 	return rc;
 }
 
@@ -722,9 +739,8 @@ static int image_metrics(mctx_t *c)
 	armstg_stage_t *st = c->st;
 	const vol_t *im = in_vol(st, IN_IMG), *at = in_vol(st, IN_AIMG);
 	const int64_t n = vol_nvox(im);
-	int32_t *m = NULL, *t = NULL, *x = NULL;
+	int32_t *m = NULL, *x = NULL;
 	uint8_t *sel = NULL, *feat = NULL;
-	float *d2 = NULL;
 	int rc = 0;
 
 	if (im->nc != 1 || at->nc != 1)
@@ -754,37 +770,16 @@ static int image_metrics(mctx_t *c)
 	    (rc = row(c, "ncc_n", "mask", (double)cnt, "voxels")))
 		goto out;
 	if (st->in[IN_TUM] && c->p->ncc_band_mm > 0) {
-		double sp[3];
-		if ((rc = mtx_check_orthogonal(im, "image", c->err,
-					       sizeof c->err))) {
-			rc = fail_err(c, rc);
-			goto out;
-		}
-		if ((rc = labels_on(c, IN_TUM, im, 1, &t)))
-			goto out;
-		feat = malloc((size_t)n);
-		d2 = malloc(sizeof(float) * (size_t)n);
-		if (!feat || !d2) {
+		feat = calloc((size_t)n, 1);
+		if (!feat) {
 			rc = c->h->fail(st, ARMSTG_ENOMEM, "out of memory");
 			goto out;
 		}
-		int64_t ct = 0;
-		for (int64_t e = 0; e < n; e++)
-			ct += feat[e] = (uint8_t)(t[e] != 0);
-		if (!ct) {
-			rc = c->h->fail(st, ARMSTG_EINVAL, "tumour mask is "
-					"empty on the image grid");
+		if ((rc = band_select(c, im, "image", SIDE_OUTSIDE,
+				      c->p->ncc_band_mm, feat)))
 			goto out;
-		}
-		vol_spacing(im, sp);
-		if ((rc = mtx_edt_sq(feat, im->nx, im->ny, im->nz, sp,
-				     c->nthreads, d2))) {
-			rc = c->h->fail(st, rc, "out of memory");
-			goto out;
-		}
-		double b2 = c->p->ncc_band_mm * c->p->ncc_band_mm;
 		for (int64_t e = 0; e < n; e++)
-			sel[e] &= (uint8_t)(!feat[e] && d2[e] <= b2 * (1 + 1e-6));
+			sel[e] &= feat[e];
 		r = ncc_over(im, at, sel, n, &cnt);
 		if (cnt < 2) {
 			rc = c->h->fail(st, ARMSTG_EINVAL, "ncc: no voxel of "
@@ -802,11 +797,9 @@ static int image_metrics(mctx_t *c)
 			  "constant over the region");
 out:
 	free(m);
-	free(t);
 	free(x);
 	free(sel);
 	free(feat);
-	free(d2);
 	return rc;
 }
 
