@@ -93,13 +93,6 @@ static int dir_empty(const char *d)
 	return n == 0;
 }
 
-static void rm_rf(const char *d)
-{
-	char cmd[4200];
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", d);
-	if (system(cmd)) {
-	}
-}
 
 /* Set params: hints file first, then dummies for required ones. */
 static int setup_params(rt_stage_t *s, const armstg_plugin_t *d,
@@ -306,7 +299,8 @@ static const char *checks[] = { "load", "params", "init-fini",
 				"inputs-untouched", "roundtrip" };
 #define NCHECKS (int)(sizeof checks / sizeof checks[0])
 
-static int child_check(const char *so, const char *hints, int c)
+static int child_check(const char *so, const char *hints, int c,
+		       const char *outdir)
 {
 	rt_plugin_t p;
 	char e[1024];
@@ -315,11 +309,6 @@ static int child_check(const char *so, const char *hints, int c)
 		return 1;
 	}
 	const armstg_plugin_t *d = p.desc;
-	char outdir[] = "/tmp/armstg-contract-XXXXXX";
-	if (!mkdtemp(outdir)) {
-		snprintf(child_msg, sizeof child_msg, "mkdtemp failed");
-		return 1;
-	}
 	int bad = 0;
 	switch (c) {
 	case 0:
@@ -365,7 +354,6 @@ static int child_check(const char *so, const char *hints, int c)
 		bad = run_process(d, hints, 1, outdir, 0, 1);
 		break;
 	}
-	rm_rf(outdir);
 	return bad;
 }
 
@@ -380,8 +368,15 @@ int contract_run(const char *so, const char *hints, char *report,
 		char errpath[64];
 		snprintf(errpath, sizeof errpath, "/tmp/armstg-contract-%d.err",
 			 (int)getpid());
-		if (pipe(fd))
+		/* the parent makes and removes the child's output folder:
+		 * a child that crashes or hangs cannot remove it */
+		char outdir[] = "/tmp/armstg-contract-XXXXXX";
+		if (!mkdtemp(outdir))
 			return -1;
+		if (pipe(fd)) {
+			tu_rm_rf(outdir);
+			return -1;
+		}
 		fflush(NULL);
 		pid_t pid = fork();
 		if (pid == 0) {
@@ -402,7 +397,7 @@ int contract_run(const char *so, const char *hints, char *report,
 				if (efd >= 0)
 					dup2(efd, 2);
 			}
-			int bad = child_check(so, hints, c);
+			int bad = child_check(so, hints, c, outdir);
 			if (bad && write(fd[1], child_msg, strlen(child_msg))) {
 			}
 			_exit(bad ? 1 : 0);
@@ -447,6 +442,7 @@ int contract_run(const char *so, const char *hints, char *report,
 			why = buf;
 		}
 		unlink(errpath);
+		tu_rm_rf(outdir);
 		if (why) {
 			fails++;
 			o += (size_t)snprintf(report + o, o < reportsize

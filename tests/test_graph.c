@@ -183,6 +183,7 @@ static void test_run_and_expansion(void **state)
 		 "stage.key=value", gp);
 	assert_string_equal(err, want);
 	unlink(gp);
+	tu_cleanup(base);
 }
 
 static void test_targets_run_only_needed(void **state)
@@ -212,6 +213,7 @@ static void test_targets_run_only_needed(void **state)
 	assert_null(strstr(buf, "\ngen\t"));
 	graph_free(g);
 	unlink(gp);
+	tu_cleanup(out);
 }
 
 static double run_time(const char *text, int jobs)
@@ -229,6 +231,7 @@ static double run_time(const char *text, int jobs)
 	clock_gettime(CLOCK_MONOTONIC, &b);
 	graph_free(g);
 	unlink(gp);
+	tu_cleanup(out);
 	return (b.tv_sec - a.tv_sec) + (b.tv_nsec - a.tv_nsec) * 1e-9;
 }
 
@@ -275,20 +278,23 @@ static void test_failure_leaves_no_files(void **state)
 	assert_int_equal(count_files(out2), 1);
 	graph_free(g);
 	unlink(gp);
+	tu_cleanup(out);
+	tu_cleanup(out2);
 }
 
 static void test_cli(void **state)
 {
 	(void)state;
 	const char *b = getenv("BUILD");
-	char cmd[2048], gp[256];
+	char cmd[2048], gp[256], out[] = "/tmp/armstg-cli-XXXXXX";
 	write_tmp(good, gp, sizeof gp);
+	assert_non_null(mkdtemp(out));
 	struct { const char *args; int code; } cases[] = {
 		{ "--version", 0 },
 		{ "--help", 0 },
 		{ "check %s", 0 },
 		{ "check tests/graphs/bad/cycle.ini", 2 },
-		{ "run %s --set add.fail=true --out /tmp/armstg-cli-out -q", 1 },
+		{ "run %s --set add.fail=true --out %s -q", 1 },
 		{ "run %s --jobs 0", 2 },
 		{ "run", 2 },
 		{ "frobnicate", 2 },
@@ -297,7 +303,7 @@ static void test_cli(void **state)
 	};
 	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
 		char args[512];
-		snprintf(args, sizeof args, cases[i].args, gp);
+		snprintf(args, sizeof args, cases[i].args, gp, out);
 		snprintf(cmd, sizeof cmd, "%s/armstg %s >/dev/null 2>&1",
 			 b && *b ? b : "build", args);
 		int st = system(cmd);
@@ -307,6 +313,7 @@ static void test_cli(void **state)
 				 WEXITSTATUS(st), cases[i].code);
 	}
 	unlink(gp);
+	tu_cleanup(out);
 }
 
 static void test_fuzz_entry_rejects_garbage(void **state)

@@ -114,22 +114,12 @@ static int setup(void **state)
 	return 0;
 }
 
-static void rm_rf(const char *dir)
-{
-	char cmd[1200];
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-	if (system(cmd)) {
-		/* best effort */
-	}
-}
 
 static int teardown(void **state)
 {
 	(void)state;
-	if (!getenv("ARMSTG_KEEP")) {
-		rm_rf(out_armstg);
-		rm_rf(out_direct);
-	}
+	tu_cleanup(out_armstg);
+	tu_cleanup(out_direct);
 	return 0;
 }
 
@@ -359,7 +349,7 @@ static void test_no_tumour_fails_cleanly(void **state)
 	assert_true(rc < 0 && rc != -1000);
 	assert_non_null(strcasestr(err, "empty"));
 	assert_int_equal(count_files(out), 0);
-	rm_rf(out);
+	tu_cleanup(out);
 }
 
 int main(void)

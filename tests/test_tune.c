@@ -181,21 +181,11 @@ static char *slurp(const char *path)
 	return buf;
 }
 
-static void rm_rf(const char *dir)
-{
-	char cmd[300];
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-	if (system(cmd)) {
-		/* best effort */
-	}
-}
 
 static void done(trun_t *r)
 {
-	if (getenv("ARMSTG_KEEP"))
-		return;
-	rm_rf(r->out);
-	rm_rf(r->cnt);
+	tu_cleanup(r->out);
+	tu_cleanup(r->cnt);
 }
 
 /* tune.tsv read back with the runtime's table reader */
@@ -450,8 +440,8 @@ static void test_all_candidates_fail(void **state)
 	assert_true(WIFEXITED(st));
 	assert_int_equal(WEXITSTATUS(st), 1);
 	assert_int_equal(count_entries(out), 2);
-	rm_rf(out);
-	rm_rf(cnt);
+	tu_rm_rf(out);
+	tu_rm_rf(cnt);
 }
 
 static void test_shared_stage_failure_fails_the_run(void **state)

@@ -19,6 +19,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <ftw.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -74,13 +75,34 @@ static inline int tu_tmpdir_make(const char *tag)
 	return mkdtemp(tu_tmpdir()) ? 0 : -1;
 }
 
+/* remove a folder and everything in it (a missing one is fine); tests call
+ * it on their scratch folders unless ARMSTG_KEEP is set */
+static inline int tu_rm_rf_one(const char *path, const struct stat *st, int flag,
+				      struct FTW *ftw)
+{
+	(void)st;
+	(void)ftw;
+	return (flag == FTW_DP ? rmdir(path) : unlink(path)) ? -1 : 0;
+}
+
+static inline int tu_rm_rf(const char *dir)
+{
+	struct stat st;
+	if (!dir || !dir[0] || lstat(dir, &st))
+		return 0;
+	return nftw(dir, tu_rm_rf_one, 16, FTW_DEPTH | FTW_PHYS) ? -1 : 0;
+}
+
+/* tu_rm_rf(dir) unless ARMSTG_KEEP is set (to look at a test's outputs) */
+static inline void tu_cleanup(const char *dir)
+{
+	if (!getenv("ARMSTG_KEEP"))
+		tu_rm_rf(dir);
+}
+
 static inline int tu_tmpdir_remove(void)
 {
-	char cmd[300];
-	if (!tu_tmpdir()[0])
-		return 0;
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", tu_tmpdir());
-	return system(cmd) ? -1 : 0;
+	return tu_tmpdir()[0] ? tu_rm_rf(tu_tmpdir()) : 0;
 }
 
 /* path of name inside the scratch folder (4 rotating static buffers) */
