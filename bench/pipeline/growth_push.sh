@@ -18,44 +18,26 @@ cd "$(dirname "$0")/../.."
 . bench/pipeline/lib.sh
 OUT=out/bench-push
 SEEDS="1 2 3"
-SETS=""
-while [ $# -gt 0 ]; do
-	case $1 in
-	--out) OUT=$2; shift 2 ;;
-	--seeds) SEEDS=$2; shift 2 ;;
-	--set) SETS="$SETS --set $2"; shift 2 ;;
-	*) echo "usage: $0 [--out DIR] [--seeds LIST] [--set stage.key=value]..." >&2; exit 2 ;;
-	esac
-done
-if [ ! -x bench/.venv/bin/python ]; then
-	python3 -m venv bench/.venv
-fi
-bench/.venv/bin/python -c "import numpy, scipy, nibabel, h5py" 2>/dev/null ||
-	bench/.venv/bin/pip install -q numpy scipy nibabel h5py
-PSETS=""
-for s in ${PHANTOM_SET:-}; do PSETS="$PSETS --set $s"; done
+OPTS="out seeds set"
+USAGE="[--out DIR] [--seeds LIST] [--set stage.key=value]..."
+parse_args "$@"
+need_venv numpy scipy nibabel h5py
 OUT=$(abspath "$OUT")
 build_all
 mkdir -p "$OUT"
 for seed in $SEEDS; do
 	ph="$OUT/ph$seed"
-	# shellcheck disable=SC2086
-	run_graph bench/pipeline/phantom_export.ini "$ph" --set phantom.seed="$seed" \
-		--set phantom.deform_mm=0 --set phantom.noise=0 --set phantom.bias=0 \
-		$PSETS >/dev/null
-	phantom_env "$ph"
+	export_phantom "$ph" "$seed" --set phantom.deform_mm=0 \
+		--set phantom.noise=0 --set phantom.bias=0
 	runs=""
 	for m in armstg sphere; do
-		case $m in
-		armstg) g=graphs/armstg.ini ;;
-		sphere) g=graphs/spherical.ini ;;
-		esac
+		method_graph "$m"
 		o="$OUT/ph$seed-$m"
-		# shellcheck disable=SC2086
 		# the push depth: PUSH_MM (6; [tune] scores the registration,
 		# which this diagnostic switches off)
-		if w=$(run_graph "$g" "$o" --set register.iterations=0 \
-			--set grow.push_mm="${PUSH_MM:-6}" $SETS); then
+		# shellcheck disable=SC2086
+		if w=$(run_graph "$G" "$o" --set register.iterations=0 \
+			--set grow.push_mm="${PUSH_MM:-6}" $EXTRA); then
 			echo "seed $seed $m: ${w} s"
 			runs="$runs $o"
 		else

@@ -73,3 +73,88 @@ abspath() {
 	*) echo "$PWD/$1" ;;
 	esac
 }
+
+# parse_args "$@": the options the scripts here share.  A script sets OPTS
+# (the options it takes: out seeds seed set set-all data values, and cases
+# for positional words) and USAGE (its usage line after $0) first.
+#   --out DIR          OUT
+#   --seeds "1 2 3"    SEEDS          --seed N    SEED
+#   --set S.K=V        SETS: the growth methods (armstg, sphere) only
+#   --set-all S.K=V    ALLSETS: every method (e.g. register.sigma_field)
+#   --data DIR         DATA           --values "3 6"   VALUES
+#   WORD               ARGS (with cases in OPTS)
+SETS="" ALLSETS="" ARGS=""
+parse_args() {
+	while [ $# -gt 0 ]; do
+		case $1 in
+		--*)
+			_pa_o=${1#--}
+			case " $OPTS " in
+			*" $_pa_o "*) ;;
+			*) echo "$0: unknown option $1" >&2; usage_exit ;;
+			esac
+			[ $# -ge 2 ] || { echo "$0: $1 needs a value" >&2; usage_exit; }
+			case $_pa_o in
+			out) OUT=$2 ;;
+			seeds) SEEDS=$2 ;;
+			seed) SEED=$2 ;;
+			set) SETS="$SETS --set $2" ;;
+			set-all) ALLSETS="$ALLSETS --set $2" ;;
+			data) DATA=$2 ;;
+			values) VALUES=$2 ;;
+			esac
+			shift 2 ;;
+		*)
+			case " $OPTS " in
+			*" cases "*) ARGS="$ARGS $1"; shift ;;
+			*) echo "$0: unexpected argument '$1'" >&2; usage_exit ;;
+			esac ;;
+		esac
+	done
+}
+
+usage_exit() {
+	echo "usage: $0 $USAGE" >&2
+	exit 2
+}
+
+# method_graph M: graph (G) and extra options (EXTRA) of method M
+#   armstg   graphs/armstg.ini
+#   direct   graphs/direct_demons.ini              (no growth; tumour + edema masked)
+#   plain    graphs/direct_demons.ini, fixed_mask = brain (no masking: demons as is)
+#   sphere   graphs/spherical.ini                  (semi-spherical tumour model)
+# --set options (SETS) go to armstg and sphere, --set-all (ALLSETS) to all.
+method_graph() {
+	case $1 in
+	armstg) G=graphs/armstg.ini; EXTRA="$SETS $ALLSETS" ;;
+	direct) G=graphs/direct_demons.ini; EXTRA=$ALLSETS ;;
+	plain) G=graphs/direct_demons.ini
+		EXTRA="--set register.fixed_mask=brain.volume $ALLSETS" ;;
+	sphere) G=graphs/spherical.ini; EXTRA="$SETS $ALLSETS" ;;
+	*) echo "$0: unknown method '$1' (armstg direct plain sphere)" >&2
+		exit 2 ;;
+	esac
+}
+
+# export_phantom DIR SEED [--set phantom.K=V]...: the phantom of SEED as
+# NIfTI files in DIR (bench/pipeline/phantom_export.ini), with the words of
+# PHANTOM_SET ("phantom.lobulation=0.9 ...") as --set options, then the
+# graphs' environment pointed at it (phantom_env)
+export_phantom() {
+	_ep_d=$1 _ep_s=$2
+	shift 2
+	_ep_p=""
+	for _ep_w in ${PHANTOM_SET:-}; do _ep_p="$_ep_p --set $_ep_w"; done
+	# shellcheck disable=SC2086
+	run_graph bench/pipeline/phantom_export.ini "$_ep_d" \
+		--set phantom.seed="$_ep_s" "$@" $_ep_p >/dev/null
+	phantom_env "$_ep_d"
+}
+
+# need_venv MODULE...: bench/.venv with these Python packages (the module
+# names are the package names), made and installed on first use
+need_venv() {
+	[ -x bench/.venv/bin/python ] || python3 -m venv bench/.venv
+	bench/.venv/bin/python -c "import $(echo "$@" | tr ' ' ',')" 2>/dev/null ||
+		bench/.venv/bin/pip install -q "$@"
+}

@@ -18,26 +18,16 @@ cd "$(dirname "$0")/../.."
 OUT=out/bench-push-sweep
 SEEDS="1 2"
 VALUES="3 4.5 6 7.5 9"
-while [ $# -gt 0 ]; do
-	case $1 in
-	--out) OUT=$2; shift 2 ;;
-	--seeds) SEEDS=$2; shift 2 ;;
-	--values) VALUES=$2; shift 2 ;;
-	*) echo "usage: $0 [--out DIR] [--seeds LIST] [--values LIST]" >&2; exit 2 ;;
-	esac
-done
+OPTS="out seeds values"
+USAGE="[--out DIR] [--seeds LIST] [--values LIST]"
+parse_args "$@"
 OUT=$(abspath "$OUT")
 build_all
 mkdir -p "$OUT"
 TSV="$OUT/sweep.tsv"
 printf 'seed\tpush_mm\terr_band_mean_mm\tS_mm\tncc_band\twall_s\n' >"$TSV"
-PSETS=""
-for s in ${PHANTOM_SET:-}; do PSETS="$PSETS --set $s"; done
 for seed in $SEEDS; do
-	ph="$OUT/ph$seed"
-	# shellcheck disable=SC2086
-	run_graph bench/pipeline/phantom_export.ini "$ph" --set phantom.seed="$seed" $PSETS >/dev/null
-	phantom_env "$ph"
+	export_phantom "$OUT/ph$seed" "$seed"
 	for v in $VALUES; do
 		o="$OUT/ph$seed-p$v"
 		if ! w=$(run_graph graphs/armstg.ini "$o" --set grow.push_mm="$v"); then

@@ -2,18 +2,16 @@
 # Phantom accuracy of ARMSTG and its baselines (issue 6, "Evidence").
 #
 #   sh bench/pipeline/run_phantom.sh [--out DIR] [--seeds "1 2 3"] [--set stage.key=value]...
+#                                    [--set-all stage.key=value]...
 #
 # For each phantom seed: bench/pipeline/phantom_export.ini writes the phantom as
 # NIfTI files; the USER-FACING graphs run on them exactly as on real files
-#   armstg   graphs/armstg.ini
-#   direct   graphs/direct_demons.ini              (no growth; tumour + edema masked)
-#   plain    graphs/direct_demons.ini --set register.fixed_mask=brain.volume
-#            (no growth, no masking: demons as is)
-#   sphere   graphs/spherical.ini                  (semi-spherical tumour model)
+# (methods armstg, direct, plain, sphere: lib.sh method_graph)
 # and bench/pipeline/eval_phantom.ini scores each total warp against the true
 # field: displacement error in the 15 mm band outside the tumour core, in the
 # brain; ventricle metric S and Dice.  --set options go to the armstg and
-# spherical runs (e.g. --set nodes.spacing=3).  Rows: DIR/phantom.tsv.
+# spherical runs (e.g. --set nodes.spacing=3), --set-all options to every
+# method (e.g. --set-all register.sigma_field=3).  Rows: DIR/phantom.tsv.
 # METHODS="direct plain" runs a subset.
 # PHANTOM_SET="phantom.location=deep ..." changes the phantom.
 set -eu
@@ -21,37 +19,21 @@ cd "$(dirname "$0")/../.."
 . bench/pipeline/lib.sh
 OUT=out/bench-phantom
 SEEDS="1 2 3"
-SETS=""
-while [ $# -gt 0 ]; do
-	case $1 in
-	--out) OUT=$2; shift 2 ;;
-	--seeds) SEEDS=$2; shift 2 ;;
-	--set) SETS="$SETS --set $2"; shift 2 ;;
-	*) echo "usage: $0 [--out DIR] [--seeds LIST] [--set stage.key=value]..." >&2; exit 2 ;;
-	esac
-done
+OPTS="out seeds set set-all"
+USAGE="[--out DIR] [--seeds LIST] [--set stage.key=value]... [--set-all stage.key=value]..."
+parse_args "$@"
 OUT=$(abspath "$OUT")
 build_all
 mkdir -p "$OUT"
 TSV="$OUT/phantom.tsv"
 printf 'seed\tmethod\terr_band_mean_mm\terr_band_median_mm\terr_band_p95_mm\terr_brain_mean_mm\tS_mm\tS_mean_mm\tdice_ventricles\tdice_tumour\tjac_min\tncc_band\tpush_mm\twall_s\n' >"$TSV"
-PSETS=""
-for s in ${PHANTOM_SET:-}; do PSETS="$PSETS --set $s"; done
 for seed in $SEEDS; do
-	ph="$OUT/ph$seed"
-	# shellcheck disable=SC2086
-	run_graph bench/pipeline/phantom_export.ini "$ph" --set phantom.seed="$seed" $PSETS >/dev/null
-	phantom_env "$ph"
+	export_phantom "$OUT/ph$seed" "$seed"
 	for m in ${METHODS:-armstg direct plain sphere}; do
 		o="$OUT/ph$seed-$m"
-		case $m in
-		armstg) g=graphs/armstg.ini; extra=$SETS ;;
-		direct) g=graphs/direct_demons.ini; extra="" ;;
-		plain) g=graphs/direct_demons.ini; extra="--set register.fixed_mask=brain.volume" ;;
-		sphere) g=graphs/spherical.ini; extra=$SETS ;;
-		esac
+		method_graph "$m"
 		# shellcheck disable=SC2086
-		if ! w=$(run_graph "$g" "$o" $extra); then
+		if ! w=$(run_graph "$G" "$o" $EXTRA); then
 			echo "seed $seed $m: FAILED (see $o.log)" >&2
 			tail -3 "$o.log" >&2
 			printf '%s\t%s\tfailed\n' "$seed" "$m" >>"$TSV"

@@ -2,14 +2,16 @@
 # Real data: SRI24 -> BraTS 2013 pat0001-0003 with the manual tumour labels
 # (issue 6, "Evidence").
 #
-#   sh bench/pipeline/run_real.sh [--out DIR] [--data DIR] [--set stage.key=value]... [CASE...]
+#   sh bench/pipeline/run_real.sh [--out DIR] [--data DIR] [--set stage.key=value]...
+#                                 [--set-all stage.key=value]... [CASE...]
 #
 # 1. bench/pipeline/ventricles.py segments each patient's lateral ventricles
 #    semi-automatically from ../shared/data (thresholds + manual seed points;
 #    masks and a check figure under DIR/ventricles, not committed);
 # 2. graphs/armstg.ini, graphs/direct_demons.ini (also unmasked, "plain") and
 #    graphs/spherical.ini run on the case with their default paths switched by
-#    environment variables (bench/pipeline/lib.sh brats_env);
+#    environment variables (bench/pipeline/lib.sh brats_env; --set goes to
+#    armstg and sphere, --set-all to every method);
 # 3. bench/pipeline/eval_real.ini scores the atlas labels in patient space:
 #    ventricle metric S (SRI24 lateral ventricles 201-414 vs the patient mask),
 #    S_mean, ventricle Dice; the run's own metrics give the tumour Dice
@@ -21,25 +23,13 @@ cd "$(dirname "$0")/../.."
 . bench/pipeline/lib.sh
 OUT=out/bench-real
 DATA=${ARMSTG_DATA:-../shared/data}
-SETS=""
-CASES=""
-while [ $# -gt 0 ]; do
-	case $1 in
-	--out) OUT=$2; shift 2 ;;
-	--data) DATA=$2; shift 2 ;;
-	--set) SETS="$SETS --set $2"; shift 2 ;;
-	-*) echo "usage: $0 [--out DIR] [--data DIR] [--set stage.key=value]... [CASE...]" >&2; exit 2 ;;
-	*) CASES="$CASES $1"; shift ;;
-	esac
-done
-CASES=${CASES:-"0001 0002 0003"}
+OPTS="out data set set-all cases"
+USAGE="[--out DIR] [--data DIR] [--set stage.key=value]... [--set-all stage.key=value]... [CASE...]"
+parse_args "$@"
+CASES=${ARGS:-"0001 0002 0003"}
 OUT=$(abspath "$OUT")
 build_all
-if [ ! -x bench/.venv/bin/python ]; then
-	python3 -m venv bench/.venv
-fi
-bench/.venv/bin/python -c "import numpy, scipy, nibabel, matplotlib" 2>/dev/null ||
-	bench/.venv/bin/pip install -q numpy scipy nibabel matplotlib
+need_venv numpy scipy nibabel matplotlib
 mkdir -p "$OUT"
 # shellcheck disable=SC2086
 bench/.venv/bin/python bench/pipeline/ventricles.py --data "$DATA" --out "$OUT/ventricles" $CASES
@@ -49,14 +39,9 @@ for c in $CASES; do
 	brats_env "$c" "$DATA"
 	for m in ${METHODS:-armstg direct plain sphere}; do
 		o="$OUT/pat$c-$m"
-		case $m in
-		armstg) g=graphs/armstg.ini; extra=$SETS ;;
-		direct) g=graphs/direct_demons.ini; extra="" ;;
-		plain) g=graphs/direct_demons.ini; extra="--set register.fixed_mask=brain.volume" ;;
-		sphere) g=graphs/spherical.ini; extra=$SETS ;;
-		esac
+		method_graph "$m"
 		# shellcheck disable=SC2086
-		if ! w=$(run_graph "$g" "$o" $extra); then
+		if ! w=$(run_graph "$G" "$o" $EXTRA); then
 			echo "pat$c $m: FAILED (see $o.log)" >&2
 			tail -3 "$o.log" >&2
 			printf '%s\t%s\tfailed\n' "$c" "$m" >>"$TSV"

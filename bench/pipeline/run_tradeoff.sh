@@ -18,13 +18,9 @@ cd "$(dirname "$0")/../.."
 . bench/pipeline/lib.sh
 OUT=out/bench-tradeoff
 SEED=1
-while [ $# -gt 0 ]; do
-	case $1 in
-	--out) OUT=$2; shift 2 ;;
-	--seed) SEED=$2; shift 2 ;;
-	*) echo "usage: $0 [--out DIR] [--seed N]" >&2; exit 2 ;;
-	esac
-done
+OPTS="out seed"
+USAGE="[--out DIR] [--seed N]"
+parse_args "$@"
 SPACINGS=${SPACINGS:-"2 3 4 5 6"}
 # rows already measured are kept when APPEND=1 (the spacing sweep is long)
 SUPPORTS=${SUPPORTS:-"12 32"}
@@ -34,9 +30,7 @@ build_all
 # the sampler's node count is read from its log line
 export ARMSTG_LOG=warn,nodes=info
 mkdir -p "$OUT"
-ph="$OUT/ph$SEED"
-run_graph bench/pipeline/phantom_export.ini "$ph" --set phantom.seed="$SEED" >/dev/null
-phantom_env "$ph"
+export_phantom "$OUT/ph$SEED" "$SEED"
 TSV="$OUT/tradeoff.tsv"
 [ "${APPEND:-0}" = 1 ] && [ -f "$TSV" ] ||
 printf 'factor\tspacing_mm\tsupport_k\tdt_safety\tnodes\tgrowth_steps\titerations\ttled_wall_s\ttotal_wall_s\terr_band_mean_mm\terr_band_p95_mm\tS_mm\n' >"$TSV"
