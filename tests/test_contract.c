@@ -17,12 +17,6 @@
 
 #define CHECK_TIMEOUT_S 120
 
-static const char *build_dir(void)
-{
-	const char *b = getenv("BUILD");
-	return b && *b ? b : "build";
-}
-
 /* ---- synthetic inputs ---- */
 
 static msg_t *make_input(int type, int typical)
@@ -473,7 +467,7 @@ static void test_broken_fails(void **state)
 {
 	(void)state;
 	char so[1024], report[8192];
-	snprintf(so, sizeof so, "%s/test-plugins/broken.so", build_dir());
+	snprintf(so, sizeof so, "%s/test-plugins/broken.so", tu_build_dir());
 	int fails = contract_run(so, NULL, report, sizeof report);
 	print_message("broken.so report:\n%s", report);
 	assert_true(fails >= 3);
@@ -489,7 +483,7 @@ static void test_broken_desc_fails(void **state)
 {
 	(void)state;
 	char so[1024], report[8192];
-	snprintf(so, sizeof so, "%s/test-plugins/broken_desc.so", build_dir());
+	snprintf(so, sizeof so, "%s/test-plugins/broken_desc.so", tu_build_dir());
 	int fails = contract_run(so, NULL, report, sizeof report);
 	print_message("broken_desc.so report:\n%s", report);
 	assert_int_equal(fails, 1);
@@ -503,7 +497,7 @@ static void test_good_test_plugin_passes(void **state)
 {
 	(void)state;
 	char so[1024], report[8192];
-	snprintf(so, sizeof so, "%s/test-plugins/tp_add.so", build_dir());
+	snprintf(so, sizeof so, "%s/test-plugins/tp_add.so", tu_build_dir());
 	int fails = contract_run(so, NULL, report, sizeof report);
 	if (fails)
 		print_error("%s", report);
@@ -516,7 +510,7 @@ int main(void)
 	struct CMUnitTest tests[128 + 3];
 	int n = 0;
 	char dir[1024];
-	snprintf(dir, sizeof dir, "%s/plugins", build_dir());
+	snprintf(dir, sizeof dir, "%s/plugins", tu_build_dir());
 	DIR *dp = opendir(dir);
 	struct dirent *de;
 	while (dp && (de = readdir(dp)) && n < 128) {

@@ -19,9 +19,7 @@ static char plugdir[1024];
 static int setup(void **state)
 {
 	(void)state;
-	const char *b = getenv("BUILD");
-	snprintf(plugdir, sizeof plugdir, "%s/test-plugins",
-		 b && *b ? b : "build");
+	snprintf(plugdir, sizeof plugdir, "%s/test-plugins", tu_build_dir());
 	setenv("ARMSTG_PLUGIN_PATH", plugdir, 1);
 	unsetenv("ARMSTG_TEST_UNSET_VAR");
 	return 0;
@@ -96,22 +94,7 @@ static const char *good =
 	"[stage other]\nplugin = tp_sink\nvolume = gen2.volume\n"
 	"path = other.txt\n";
 
-static double read_num(const char *path)
-{
-	FILE *f = fopen(path, "r");
-	double x = NAN;
-	if (f) {
-		if (fscanf(f, "%lf", &x) != 1)
-			x = NAN;
-		fclose(f);
-	}
-	return x;
-}
 
-static int file_exists(const char *p)
-{
-	return access(p, F_OK) == 0;
-}
 
 static int count_files(const char *dir)
 {
@@ -144,11 +127,11 @@ static void test_run_and_expansion(void **state)
 	run_opts_t o = { .outdir = out, .jobs = 1 };
 	assert_int_equal(graph_run(g, &o, err, sizeof err), 0);
 	snprintf(f, sizeof f, "%s/res/sum.txt", out);
-	assert_float_equal(read_num(f), 12.0, 1e-12); /* --set 7 + 5 */
+	assert_float_equal(tu_read_num(f), 12.0, 1e-12); /* --set 7 + 5 */
 	snprintf(f, sizeof f, "%s/other.txt", out);
-	assert_float_equal(read_num(f), 5.0, 1e-12);
+	assert_float_equal(tu_read_num(f), 5.0, 1e-12);
 	snprintf(f, sizeof f, "%s/run.tsv", out);
-	assert_true(file_exists(f));
+	assert_true(tu_exists(f));
 	/* the run table has one row per stage with its wall time and peak
 	 * memory */
 	FILE *t = fopen(f, "r");
@@ -199,9 +182,9 @@ static void test_targets_run_only_needed(void **state)
 			 .ntargets = 1 };
 	assert_int_equal(graph_run(g, &o, err, sizeof err), 0);
 	snprintf(f, sizeof f, "%s/other.txt", out);
-	assert_true(file_exists(f));
+	assert_true(tu_exists(f));
 	snprintf(f, sizeof f, "%s/res/sum.txt", out);
-	assert_false(file_exists(f));
+	assert_false(tu_exists(f));
 	snprintf(f, sizeof f, "%s/run.tsv", out);
 	FILE *t = fopen(f, "r");
 	char buf[4096] = "";
@@ -285,7 +268,6 @@ static void test_failure_leaves_no_files(void **state)
 static void test_cli(void **state)
 {
 	(void)state;
-	const char *b = getenv("BUILD");
 	char cmd[2048], gp[256], out[] = "/tmp/armstg-cli-XXXXXX";
 	write_tmp(good, gp, sizeof gp);
 	assert_non_null(mkdtemp(out));
@@ -305,7 +287,7 @@ static void test_cli(void **state)
 		char args[512];
 		snprintf(args, sizeof args, cases[i].args, gp, out);
 		snprintf(cmd, sizeof cmd, "%s/armstg %s >/dev/null 2>&1",
-			 b && *b ? b : "build", args);
+			 tu_build_dir(), args);
 		int st = system(cmd);
 		assert_true(WIFEXITED(st));
 		if (WEXITSTATUS(st) != cases[i].code)

@@ -72,8 +72,7 @@ static void set_plugin_path(void)
 	if (getenv("ARMSTG_PLUGIN_PATH"))
 		return;
 	char p[1024];
-	const char *b = getenv("BUILD");
-	snprintf(p, sizeof p, "%s/plugins", b && *b ? b : "build");
+	snprintf(p, sizeof p, "%s/plugins", tu_build_dir());
 	setenv("ARMSTG_PLUGIN_PATH", p, 1);
 }
 

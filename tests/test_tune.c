@@ -53,16 +53,11 @@ static const char tune_graph[] =
 static char graph_path[256];
 static char plugdir[1024];
 
-static const char *build_dir(void)
-{
-	const char *b = getenv("BUILD");
-	return b && *b ? b : "build";
-}
 
 static int setup(void **state)
 {
 	(void)state;
-	snprintf(plugdir, sizeof plugdir, "%s/test-plugins", build_dir());
+	snprintf(plugdir, sizeof plugdir, "%s/test-plugins", tu_build_dir());
 	setenv("ARMSTG_PLUGIN_PATH", plugdir, 1);
 	snprintf(graph_path, sizeof graph_path, "/tmp/armstg-tune-%d.ini",
 		 (int)getpid());
@@ -125,22 +120,7 @@ static const char *in(const char *dir, const char *name)
 	return buf[slot];
 }
 
-static int exists(const char *p)
-{
-	return access(p, F_OK) == 0;
-}
 
-static double read_num(const char *path)
-{
-	FILE *f = fopen(path, "r");
-	double x = NAN;
-	if (f) {
-		if (fscanf(f, "%lf", &x) != 1)
-			x = NAN;
-		fclose(f);
-	}
-	return x;
-}
 
 static int count_lines(const char *path)
 {
@@ -154,19 +134,6 @@ static int count_lines(const char *path)
 	return n;
 }
 
-/* entries in dir, hidden temporary files included */
-static int count_entries(const char *dir)
-{
-	DIR *d = opendir(dir);
-	int n = 0;
-	struct dirent *de;
-	if (!d)
-		return -1;
-	while ((de = readdir(d)))
-		n += strcmp(de->d_name, ".") && strcmp(de->d_name, "..");
-	closedir(d);
-	return n;
-}
 
 static char *slurp(const char *path)
 {
@@ -248,21 +215,21 @@ static void test_min_search_runs_shared_stages_once(void **state)
 	if (r.rc)
 		fail_msg("rc %d: %s", r.rc, r.err);
 	/* the final run used the best value */
-	assert_float_equal(read_num(in(r.out, "chosen.txt")), 3.0, 0);
-	assert_float_equal(read_num(in(r.out, "fit-3.txt")), 3.0, 0);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 3.0, 0);
+	assert_float_equal(tu_read_num(in(r.out, "fit-3.txt")), 3.0, 0);
 	/* candidate files were discarded */
 	const char *gone[] = { "fit-1.txt", "fit-2.txt", "fit-4.txt",
 			       "fit-5.txt", "fit-9.txt" };
 	for (int i = 0; i < ARMSTG_COUNT(gone); i++)
-		if (exists(in(r.out, gone[i])))
+		if (tu_exists(in(r.out, gone[i])))
 			fail_msg("candidate file %s was committed", gone[i]);
 	/* files of the once-run stages, written while tuning, committed */
-	assert_float_equal(read_num(in(r.out, "pre-0.txt")), 0.0, 0);
-	assert_float_equal(read_num(in(r.out, "ref-0.txt")), 0.0, 0);
-	assert_float_equal(read_num(in(r.out, "side.txt")), 0.0, 0);
+	assert_float_equal(tu_read_num(in(r.out, "pre-0.txt")), 0.0, 0);
+	assert_float_equal(tu_read_num(in(r.out, "ref-0.txt")), 0.0, 0);
+	assert_float_equal(tu_read_num(in(r.out, "side.txt")), 0.0, 0);
 	/* exactly: chosen, fit-3, pre-0, ref-0, side, run.tsv, tune.tsv (no
 	 * temporary file left) */
-	assert_int_equal(count_entries(r.out), 7);
+	assert_int_equal(tu_count_entries(r.out), 7);
 	/* pre and ref ran once; sim once per candidate and once more */
 	assert_int_equal(count_lines(in(r.cnt, "pre.count")), 1);
 	assert_int_equal(count_lines(in(r.cnt, "ref.count")), 1);
@@ -296,7 +263,7 @@ static double chosen_with(const char *const *sets, int nsets)
 	run_sets(&r, sets, nsets);
 	if (r.rc)
 		fail_msg("rc %d: %s", r.rc, r.err);
-	double v = read_num(in(r.out, "chosen.txt"));
+	double v = tu_read_num(in(r.out, "chosen.txt"));
 	ttab_t tt;
 	tune_tsv(r.out, &tt);
 	assert_float_equal(chosen_value(&tt), v, 0);
@@ -382,10 +349,10 @@ static void test_failed_candidates_are_skipped(void **state)
 	run_sets(&r, sets, 2);
 	if (r.rc)
 		fail_msg("rc %d: %s", r.rc, r.err);
-	assert_float_equal(read_num(in(r.out, "chosen.txt")), 2.0, 0);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 2.0, 0);
 	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 6);
 	assert_int_equal(count_lines(in(r.cnt, "pre.count")), 1);
-	assert_false(exists(in(r.out, "fit-4.txt")));
+	assert_false(tu_exists(in(r.out, "fit-4.txt")));
 	ttab_t tt;
 	tune_tsv(r.out, &tt);
 	assert_int_equal(tt.t->nrows, 5);
@@ -417,8 +384,8 @@ static void test_all_candidates_fail(void **state)
 			    "3: stage 'sim' (plugin tp_score) failed: asked "
 			    "to fail at 3; 4: score sq is NaN");
 	/* no output file: only the two run tables */
-	assert_int_equal(count_entries(r.out), 2);
-	assert_true(exists(in(r.out, "run.tsv")));
+	assert_int_equal(tu_count_entries(r.out), 2);
+	assert_true(tu_exists(in(r.out, "run.tsv")));
 	ttab_t tt;
 	tune_tsv(r.out, &tt);
 	assert_int_equal(tt.t->nrows, 2);
@@ -434,12 +401,12 @@ static void test_all_candidates_fail(void **state)
 	assert_non_null(mkdtemp(out));
 	snprintf(cmd, sizeof cmd, "TT_COUNT=%s %s/armstg run %s --set "
 		 "sim.fail_at=3 --set fit.nan_at=4 --set tune.values=3,4 "
-		 "--out %s -q >/dev/null 2>&1", cnt, build_dir(), graph_path,
+		 "--out %s -q >/dev/null 2>&1", cnt, tu_build_dir(), graph_path,
 		 out);
 	int st = system(cmd);
 	assert_true(WIFEXITED(st));
 	assert_int_equal(WEXITSTATUS(st), 1);
-	assert_int_equal(count_entries(out), 2);
+	assert_int_equal(tu_count_entries(out), 2);
 	tu_rm_rf(out);
 	tu_rm_rf(cnt);
 }
@@ -454,8 +421,8 @@ static void test_shared_stage_failure_fails_the_run(void **state)
 	assert_string_equal(r.err, "stage 'pre' (plugin tp_score) failed: "
 			    "asked to fail at 0");
 	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 0);
-	assert_false(exists(in(r.out, "tune.tsv")));
-	assert_int_equal(count_entries(r.out), 1); /* run.tsv */
+	assert_false(tu_exists(in(r.out, "tune.tsv")));
+	assert_int_equal(tu_count_entries(r.out), 1); /* run.tsv */
 	done(&r);
 }
 
@@ -467,9 +434,9 @@ static void test_set_rules(void **state)
 	const char *one[] = { "tune.values=4" };
 	run_sets(&r, one, 1);
 	assert_int_equal(r.rc, 0);
-	assert_float_equal(read_num(in(r.out, "chosen.txt")), 4.0, 0);
-	assert_true(exists(in(r.out, "fit-4.txt")));
-	assert_false(exists(in(r.out, "tune.tsv")));
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 4.0, 0);
+	assert_true(tu_exists(in(r.out, "fit-4.txt")));
+	assert_false(tu_exists(in(r.out, "tune.tsv")));
 	assert_null(strstr(slurp(in(r.out, "run.tsv")), "\ntune\t"));
 	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 1);
 	done(&r);
@@ -477,15 +444,15 @@ static void test_set_rules(void **state)
 	const char *expl[] = { "sim.offset=2" };
 	run_sets(&r, expl, 1);
 	assert_int_equal(r.rc, 0);
-	assert_float_equal(read_num(in(r.out, "chosen.txt")), 2.0, 0);
-	assert_false(exists(in(r.out, "tune.tsv")));
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 2.0, 0);
+	assert_false(tu_exists(in(r.out, "tune.tsv")));
 	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 1);
 	done(&r);
 	/* ... even next to --set tune.values */
 	const char *both[] = { "tune.values=1,5", "sim.offset=4" };
 	run_sets(&r, both, 2);
 	assert_int_equal(r.rc, 0);
-	assert_float_equal(read_num(in(r.out, "chosen.txt")), 4.0, 0);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 4.0, 0);
 	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 1);
 	done(&r);
 	/* two values: a search between them, (5 - 3.2)^2 < (1 - 3.2)^2 */
@@ -537,7 +504,7 @@ static void test_set_rules(void **state)
 	/* armstg check refuses a bad [tune] with exit 2 */
 	char cmd[1024];
 	snprintf(cmd, sizeof cmd, "TT_COUNT=/tmp %s/armstg check %s --set "
-		 "tune.goal=best >/dev/null 2>&1", build_dir(), graph_path);
+		 "tune.goal=best >/dev/null 2>&1", tu_build_dir(), graph_path);
 	int st = system(cmd);
 	assert_true(WIFEXITED(st));
 	assert_int_equal(WEXITSTATUS(st), 2);
@@ -551,21 +518,21 @@ static void test_targets(void **state)
 	const char *side[] = { "side" };
 	run_with(&r, NULL, 0, 1, side, 1);
 	assert_int_equal(r.rc, 0);
-	assert_true(exists(in(r.out, "side.txt")));
-	assert_false(exists(in(r.out, "tune.tsv")));
+	assert_true(tu_exists(in(r.out, "side.txt")));
+	assert_false(tu_exists(in(r.out, "tune.tsv")));
 	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 0);
-	assert_int_equal(count_entries(r.out), 2);
+	assert_int_equal(tu_count_entries(r.out), 2);
 	done(&r);
 	/* save depends on sim: a search, then only what save needs; ref ran
 	 * for the score only, so its file is not committed */
 	const char *save[] = { "save" };
 	run_with(&r, NULL, 0, 1, save, 1);
 	assert_int_equal(r.rc, 0);
-	assert_float_equal(read_num(in(r.out, "chosen.txt")), 3.0, 0);
-	assert_true(exists(in(r.out, "pre-0.txt")));
-	assert_false(exists(in(r.out, "ref-0.txt")));
-	assert_false(exists(in(r.out, "fit-3.txt")));
-	assert_int_equal(count_entries(r.out), 4); /* + run.tsv, tune.tsv */
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 3.0, 0);
+	assert_true(tu_exists(in(r.out, "pre-0.txt")));
+	assert_false(tu_exists(in(r.out, "ref-0.txt")));
+	assert_false(tu_exists(in(r.out, "fit-3.txt")));
+	assert_int_equal(tu_count_entries(r.out), 4); /* + run.tsv, tune.tsv */
 	assert_int_equal(count_lines(in(r.cnt, "ref.count")), 1);
 	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 6);
 	char *rt = slurp(in(r.out, "run.tsv"));
@@ -633,7 +600,7 @@ static void test_interrupt(void **state)
 	new_dirs(&r);
 	snprintf(count, sizeof count, "%s/sim.count", r.cnt);
 	char exe[512];
-	snprintf(exe, sizeof exe, "%s/armstg", build_dir());
+	snprintf(exe, sizeof exe, "%s/armstg", tu_build_dir());
 	pid_t pid = fork();
 	assert_true(pid >= 0);
 	if (pid == 0) {

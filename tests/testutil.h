@@ -20,6 +20,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <ftw.h>
+#include <math.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -103,6 +104,56 @@ static inline void tu_cleanup(const char *dir)
 static inline int tu_tmpdir_remove(void)
 {
 	return tu_tmpdir()[0] ? tu_rm_rf(tu_tmpdir()) : 0;
+}
+
+/* the build folder ($BUILD, default build) */
+static inline const char *tu_build_dir(void)
+{
+	const char *b = getenv("BUILD");
+	return b && *b ? b : "build";
+}
+
+static inline int tu_exists(const char *path)
+{
+	return access(path, F_OK) == 0;
+}
+
+/* the first number in a text file, NaN when absent or unreadable */
+static inline double tu_read_num(const char *path)
+{
+	FILE *f = fopen(path, "r");
+	double x = NAN;
+	if (f) {
+		if (fscanf(f, "%lf", &x) != 1)
+			x = NAN;
+		fclose(f);
+	}
+	return x;
+}
+
+/* entries of a folder, hidden (temporary) files included; 0 when absent
+ * (nftw, not <dirent.h>: its DT_* names clash with nifti1.h's) */
+static int tu_count_n_;
+
+static inline int tu_count_one_(const char *path, const struct stat *st,
+				int flag, struct FTW *ftw)
+{
+	(void)path;
+	(void)st;
+	(void)flag;
+	if (ftw->level == 0)
+		return FTW_CONTINUE;
+	tu_count_n_++;
+	return ftw->level == 1 && flag == FTW_D ? FTW_SKIP_SUBTREE
+						: FTW_CONTINUE;
+}
+
+static inline int tu_count_entries(const char *dir)
+{
+	tu_count_n_ = 0;
+	if (nftw(dir, tu_count_one_, 16, FTW_PHYS | FTW_ACTIONRETVAL))
+		return 0;
+	return tu_count_n_;
 }
 
 /* path of name inside the scratch folder (4 rotating static buffers) */

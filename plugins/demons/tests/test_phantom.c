@@ -26,8 +26,7 @@ static void run_case(const char *const *pp, const char *const *dp,
 		     double *err_vox, double *base_mm, double *jmin)
 {
 	char path[1024], e[1024] = "";
-	const char *b = getenv("BUILD");
-	snprintf(path, sizeof path, "%s/plugins/phantom.so", b && *b ? b : "build");
+	snprintf(path, sizeof path, "%s/plugins/phantom.so", tu_build_dir());
 	rt_plugin_t pl;
 	if (access(path, R_OK) || plugin_load_file(path, &pl, e, sizeof e)) {
 		print_message("skip: %s not loadable (%s)\n", path, e);

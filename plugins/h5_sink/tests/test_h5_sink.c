@@ -24,18 +24,6 @@ static int teardown(void **state)
 	return system(cmd) ? -1 : 0;
 }
 
-static int count_files(const char *d)
-{
-	DIR *dp = opendir(d);
-	if (!dp)
-		return 0;
-	int n = 0;
-	struct dirent *de;
-	while ((de = readdir(dp)))
-		n += strcmp(de->d_name, ".") && strcmp(de->d_name, "..");
-	closedir(dp);
-	return n;
-}
 
 static const char *at(const char *sub, const char *name)
 {
@@ -80,7 +68,7 @@ static void test_points_and_table(void **state)
 	assert_true(msg_equal(&t->base, &tr->base));
 	msg_unref(&pr2->base);
 	msg_unref(&tr->base);
-	assert_int_equal(count_files(out), 2);
+	assert_int_equal(tu_count_entries(out), 2);
 
 	/* only a table: it goes to path, HDF5 by its name */
 	in[0] = NULL;
@@ -125,7 +113,7 @@ static void test_refusals(void **state)
 	assert_int_equal(tu_run_in(TU_PLUGIN(), p2, pts, NULL, out, err,
 				   sizeof err), ARMSTG_EINVAL);
 	assert_non_null(strstr(err, "path 'nodes.tsv' must end in .h5"));
-	assert_int_equal(count_files(out), 0);
+	assert_int_equal(tu_count_entries(out), 0);
 
 	/* the empty point set itself is fine */
 	assert_int_equal(tu_run_in(TU_PLUGIN(), p1, pts, NULL, out, err,

@@ -41,9 +41,7 @@ typedef struct phantom_run {
 static void phantom_make(phantom_run_t *r, const char *const *pp)
 {
 	char path[1024], e[1024] = "";
-	const char *b = getenv("BUILD");
-	snprintf(path, sizeof path, "%s/plugins/phantom.so",
-		 b && *b ? b : "build");
+	snprintf(path, sizeof path, "%s/plugins/phantom.so", tu_build_dir());
 	memset(r, 0, sizeof *r);
 	if (access(path, R_OK) || plugin_load_file(path, &r->pl, e, sizeof e)) {
 		print_message("skip: %s not loadable (%s); build it with "
