@@ -63,40 +63,14 @@ int main(int argc, char **argv)
 		else if (!strcmp(argv[i], "Kn")) Kn = (int)v;
 		else return 2;
 	}
-	synth_cloud_t cl = { 0 };
-	synth_shell(&cl, c.a, c.b, c.h, c.jit, TL_BOUNDARY, TL_BOUNDARY, 17);
-	int64_t n = cl.n;
-	double *X = malloc((size_t)(3 * n) * sizeof *X);
-	uint8_t *kind = malloc((size_t)n);
-	for (int64_t i = 0; i < n; i++) {
-		double r = 0;
-		for (int d = 0; d < 3; d++) {
-			X[3 * i + d] = cl.x[3 * i + d] * TLED_MM;
-			r += cl.x[3 * i + d] * cl.x[3 * i + d];
-		}
-		r = sqrt(r);
-		kind[i] = cl.label[i] != TL_BOUNDARY ? TLED_FREE
-			  : r < 0.5 * (c.a + c.b) ? TLED_DRIVEN : TLED_FIXED;
-	}
-	g_cav_a = c.a * TLED_MM;
-	g_cav_b = c.b * TLED_MM;
-	tled_model_opts_t mo;
-	tled_model_opts_default(&mo);
-	mo.inside = cavity_inside;
-	mo.support_k = c.K;
-	mo.nthreads = 1;
-	mo.corr = c.corr;
-	if (c.ip_factor > 0)
-		mo.ip_factor = c.ip_factor;
-	tled_material_set(&mo.mat[MAT_BRAIN], 3000, c.nu, 1000);
+	c.nthreads = 1;
 	tled_model_t m;
 	char err[512];
-	if (tled_model_build(&m, X, cl.label, n, kind, NULL, &mo, err,
-			     sizeof err)) {
+	if (cavity_model_build(&c, &m, err, sizeof err)) {
 		fprintf(stderr, "%s\n", err);
 		return 1;
 	}
-	n = m.n;
+	int64_t n = m.n;
 	if (Rfix > 0) {
 		/* fixed weight radius Rfix * h at every point: one global set
 		 * of smooth shape functions (derivatives uncorrected) */

@@ -92,13 +92,13 @@ static inline double cavity_exact(const cavity_cfg_t *c, double r)
 
 /* Drives the cavity to radius a + ua in `steps` equal growth steps (for
  * the large-deformation test), relaxing after each. */
-static inline void cavity_run(const cavity_cfg_t *c, int steps,
-			      cavity_res_t *res)
+/* the cavity's node cloud (shell a..b mm, spacing h, optionally a finer
+ * cavity surface ha) and its model: cavity surface driven, outer surface
+ * fixed (every boundary node driven with lin != 0), brain material with
+ * c->nu; 0 or the model's error code and message */
+static inline int cavity_model_build(const cavity_cfg_t *c, tled_model_t *m,
+				     char *err, size_t errsize)
 {
-	memset(res, 0, sizeof *res);
-	struct timespec w0, w1;
-	clock_gettime(CLOCK_MONOTONIC, &w0);
-	clock_t c0 = clock();
 	synth_cloud_t cl = { 0 };
 	synth_shell(&cl, c->a, c->b, c->h, c->jit, TL_BOUNDARY, TL_BOUNDARY,
 		    17);
@@ -146,12 +146,26 @@ static inline void cavity_run(const cavity_cfg_t *c, int steps,
 	if (c->dil > 0)
 		mo.support_dilation = c->dil;
 	tled_material_set(&mo.mat[MAT_BRAIN], 3000, c->nu, 1000);
+	int rc = tled_model_build(m, X, cl.label, n, kind, NULL, &mo, err,
+				  errsize);
+	free(X);
+	free(kind);
+	synth_free(&cl);
+	return rc;
+}
+
+static inline void cavity_run(const cavity_cfg_t *c, int steps,
+			      cavity_res_t *res)
+{
+	memset(res, 0, sizeof *res);
+	struct timespec w0, w1;
+	clock_gettime(CLOCK_MONOTONIC, &w0);
+	clock_t c0 = clock();
 	tled_model_t m;
 	tled_solver_t s;
 	memset(&s, 0, sizeof s);
 	double *tgt = NULL;
-	res->rc = tled_model_build(&m, X, cl.label, n, kind, NULL, &mo,
-				   res->err, sizeof res->err);
+	res->rc = cavity_model_build(c, &m, res->err, sizeof res->err);
 	if (res->rc)
 		goto out0;
 	res->n = m.n;
@@ -251,9 +265,6 @@ out1:
 	tled_solver_free(&s);
 	tled_model_free(&m);
 out0:
-	free(X);
-	free(kind);
-	synth_free(&cl);
 	clock_gettime(CLOCK_MONOTONIC, &w1);
 	res->wall_s = (double)(w1.tv_sec - w0.tv_sec) +
 		      1e-9 * (double)(w1.tv_nsec - w0.tv_nsec);
