@@ -20,15 +20,22 @@ static int in_cube(const double x[3], void *ctx)
 	return 1;
 }
 
-/* cube cloud in metres */
-static double *cube_m(synth_cloud_t *c, double Lmm, double hmm, double jit)
+/* the model of cloud c (mm) filling the cube of edge Lmm, options mo with
+ * the cube as the inside test; asserts that it builds */
+static void cube_build(tled_model_t *m, const synth_cloud_t *c, double Lmm,
+		       tled_model_opts_t *mo)
 {
-	synth_cube(c, Lmm, hmm, jit, 7);
 	double *X = malloc((size_t)(3 * c->n) * sizeof *X);
 	for (int64_t i = 0; i < 3 * c->n; i++)
 		X[i] = c->x[i] * TLED_MM;
 	g_L = Lmm * TLED_MM;
-	return X;
+	mo->inside = in_cube;
+	char err[512];
+	int rc = tled_model_build(m, X, c->label, c->n, NULL, NULL, mo, err,
+				  sizeof err);
+	free(X);
+	if (rc)
+		fail_msg("model: %s", err);
 }
 
 /* S = 2 dW/dC (checked by central differences of W along F), S(I) = 0, and
@@ -185,16 +192,14 @@ static void test_patch(void **state)
 	(void)state;
 	synth_cloud_t c = { 0 };
 	/* quick (asan-test): a coarser cube, same tolerance */
-	double *X = tled_quick() ? cube_m(&c, 12, 3, 0.3)
-				 : cube_m(&c, 20, 2.5, 0.3);
+	double L = tled_quick() ? 12 : 20;
+	synth_cube(&c, L, tled_quick() ? 3 : 2.5, 0.3, 7);
 	tled_model_opts_t mo;
 	tled_model_opts_default(&mo);
-	mo.inside = in_cube;
 	mo.nthreads = 2;
 	tled_model_t m;
 	char err[512];
-	assert_int_equal(tled_model_build(&m, X, c.label, c.n, NULL, NULL, &mo,
-					  err, sizeof err), 0);
+	cube_build(&m, &c, L, &mo);
 	assert_true(m.corr_rel < 1e-10);
 	tled_solver_t s;
 	assert_int_equal(tled_solver_init(&s, &m, err, sizeof err), 0);
@@ -235,7 +240,6 @@ static void test_patch(void **state)
 	free(tgt);
 	tled_solver_free(&s);
 	tled_model_free(&m);
-	free(X);
 	synth_free(&c);
 }
 
@@ -243,16 +247,14 @@ static void test_patch(void **state)
 static void small_model(tled_model_t *m, tled_solver_t *s, double nu)
 {
 	synth_cloud_t c = { 0 };
-	double *X = cube_m(&c, 12, 3, 0.25);
+	synth_cube(&c, 12, 3, 0.25, 7);
 	tled_model_opts_t mo;
 	tled_model_opts_default(&mo);
-	mo.inside = in_cube;
 	mo.support_k = 16;
 	mo.nthreads = 1;
 	tled_material_set(&mo.mat[MAT_BRAIN], 3000, nu, 1000);
 	char err[512];
-	assert_int_equal(tled_model_build(m, X, c.label, c.n, NULL, NULL, &mo,
-					  err, sizeof err), 0);
+	cube_build(m, &c, 12, &mo);
 	assert_int_equal(tled_solver_init(s, m, err, sizeof err), 0);
 	uint64_t r = 5;
 	for (int64_t a = 0; a < m->n; a++)
@@ -263,7 +265,6 @@ static void small_model(tled_model_t *m, tled_solver_t *s, double nu)
 	 * start, so the initial energy is that of an admissible state */
 	tled_solver_update_active(s);
 	tled_solver_impose(s);
-	free(X);
 	synth_free(&c);
 }
 
@@ -360,17 +361,10 @@ static void test_coincident(void **state)
 			   c.x[3 * (5 * i + 40) + 2], 0);
 	for (int i = 0; i < 4; i++)
 		synth_push(&c, 7.6, 7.4, 7.5, TL_SEED);
-	double *X = malloc((size_t)(3 * c.n) * sizeof *X);
-	for (int64_t i = 0; i < 3 * c.n; i++)
-		X[i] = c.x[i] * TLED_MM;
-	g_L = 15 * TLED_MM;
 	tled_model_opts_t mo;
 	tled_model_opts_default(&mo);
-	mo.inside = in_cube;
 	tled_model_t m;
-	char err[512];
-	assert_int_equal(tled_model_build(&m, X, c.label, c.n, NULL, NULL, &mo,
-					  err, sizeof err), 0);
+	cube_build(&m, &c, 15, &mo);
 	assert_int_equal(m.n_merged, 13);
 	assert_int_equal(m.n, n0 + 1);
 	/* the 4 seeds map to one node labelled seed */
@@ -382,7 +376,6 @@ static void test_coincident(void **state)
 	for (int64_t e = 0; e < 3 * m.ipptr[m.nip]; e++)
 		assert_true(isfinite(m.dN[e]));
 	tled_model_free(&m);
-	free(X);
 	synth_free(&c);
 }
 
