@@ -73,6 +73,10 @@ typedef struct g_tune {
 	const char *metric;        /* row selectors (point into kv) */
 	const char *structure;     /* NULL: the first row with metric */
 	int goal_max;
+	/* tolerance: the earliest candidate within tol of the best score is
+	 * chosen (a score difference below the score's noise does not pick
+	 * a later, usually larger, value); 0: the best, ties the earlier */
+	double tol;
 	/* require = METRIC [STRUCTURE] OP NUMBER: a candidate whose row
 	 * fails it is dropped like a failed one */
 	int has_req;
@@ -843,7 +847,8 @@ static int depends_on(graph_t *g, int v, int t, signed char *memo)
 }
 
 static const char *const tune_keys[] = { "param", "values", "score", "metric",
-					 "structure", "goal", "require" };
+					 "structure", "goal", "require",
+					 "tolerance" };
 
 /* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
  * with an error reported when the list is empty or has an empty item. */
@@ -926,7 +931,7 @@ static void validate_tune(graph_t *g)
 		if (!known)
 			gerr(g, kv->line, NULL, kv->key, "unknown key in "
 			     "[tune] (known: param, values, score, metric, "
-			     "structure, goal, require)");
+			     "structure, goal, require, tolerance)");
 		else if (!kv->val[0] && strcmp(kv->key, "values"))
 			gerr(g, kv->line, NULL, kv->key, "empty value");
 	}
@@ -1036,6 +1041,16 @@ static void validate_tune(graph_t *g)
 		else
 			gerr(g, gk->line, NULL, "goal", "[tune] goal must be "
 			     "max or min, got '%s'", gk->val);
+	}
+	g_kv_t *tk = kv_find(t->kv, t->nkv, "tolerance");
+	t->tol = 0;
+	if (tk && tk->val[0]) {
+		char *end = NULL;
+		t->tol = strtod(tk->val, &end);
+		if (*end || !isfinite(t->tol) || t->tol < 0)
+			gerr(g, tk->line, NULL, "tolerance", "[tune] tolerance "
+			     "must be a number >= 0 in the score's units, got "
+			     "'%s'", tk->val);
 	}
 	g_kv_t *rk = kv_find(t->kv, t->nkv, "require");
 	if (rk && rk->val[0]) {
@@ -1776,6 +1791,19 @@ static int tune_run(graph_t *g, const run_opts_t *o, char *err,
 		snprintf(err, errsize, "interrupted");
 		rc = ARMSTG_ECANCELLED;
 		goto out;
+	}
+	/* within the tolerance of the best score: the earliest candidate */
+	for (int k = 0; best >= 0 && t->tol > 0 && k < best; k++) {
+		const tune_row_t *row = &t->rows[k];
+		double bs = t->rows[best].score;
+		if (row->ok && (t->goal_max ? row->score >= bs - t->tol
+					    : row->score <= bs + t->tol)) {
+			rt_log(NULL, LOG_INFO, "tune %s.%s = %s: within "
+			       "tolerance %g of the best (%s, %s %.6g)",
+			       ts->name, t->key, t->values[k], t->tol,
+			       t->values[best], sel, bs);
+			best = k;
+		}
 	}
 	if (best < 0) {
 		size_t w = (size_t)snprintf(err, errsize, "[tune] every value "

@@ -9,7 +9,8 @@
  *   [tune]              param = STAGE.KEY, values = V1, V2, ...,
  *                       score = STAGE.PORT (a table output), metric = M,
  *                       structure = S (optional), goal = max | min,
- *                       require = M2 [S2] OP NUMBER (optional)
+ *                       require = M2 [S2] OP NUMBER (optional),
+ *                       tolerance = T (optional, >= 0, the score's units)
  *
  * Values may use ${VAR} and ${VAR:-default} (environment variables; "$$" is a
  * literal '$').  `--set stage.key=value` overrides or adds any key.  Loading
@@ -29,7 +30,9 @@
  * in a stage that depends on the tuned one, or scores NaN (or +-inf), or
  * whose row M2 (S2) of the same table fails `require` (OP: > >= < <=), is
  * skipped with a warning; if all fail, the run fails.  Ties keep the
- * earlier value.  Then
+ * earlier value; with a tolerance T the earliest candidate whose score is
+ * within T of the best is chosen (the score's noise should not pick a
+ * later value).  Then
  * the normal run (all stages or the targets) with the best value: only it
  * writes files.  OUT/tune.tsv lists the candidates (value, score, wall_s,
  * status, chosen, error); run.tsv gets a row 'tune' with their total time

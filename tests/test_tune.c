@@ -339,6 +339,32 @@ static void test_ties_keep_the_earlier_value(void **state)
 	assert_float_equal(chosen_with(c, 3), 4.0, 0);
 }
 
+/* tolerance: sq near of 1..5 (target 3.2) is 4.84 1.44 0.04 0.64 3.24;
+ * the earliest candidate within the tolerance of the best is chosen, the
+ * best itself when none is; tune.tsv marks the one chosen */
+static void test_tolerance(void **state)
+{
+	(void)state;
+	const char *a[] = { "tune.tolerance=1.5" };        /* 1.44 <= 1.54 */
+	assert_float_equal(chosen_with(a, 1), 2.0, 0);
+	const char *b[] = { "tune.tolerance=1.3" };        /* only 4: 0.64 */
+	assert_float_equal(chosen_with(b, 1), 3.0, 0);
+	const char *c[] = { "tune.tolerance=0.7", "tune.values=5,4,3,2,1" };
+	assert_float_equal(chosen_with(c, 2), 4.0, 0);
+	const char *d[] = { "tune.tolerance=0.5", "tune.values=5,4,3,2,1" };
+	assert_float_equal(chosen_with(d, 2), 3.0, 0);
+	/* goal max: the max 4.84 at 1; 3.24 (5) is within 1.7, not 1.5 */
+	const char *e[] = { "tune.goal=max", "tune.tolerance=1.7",
+			    "tune.values=5,4,3,2,1" };
+	assert_float_equal(chosen_with(e, 3), 5.0, 0);
+	const char *f[] = { "tune.goal=max", "tune.tolerance=1.5",
+			    "tune.values=5,4,3,2,1" };
+	assert_float_equal(chosen_with(f, 3), 1.0, 0);
+	/* a failed candidate is never chosen, however early */
+	const char *g[] = { "tune.tolerance=10", "sim.fail_at=1" };
+	assert_float_equal(chosen_with(g, 2), 2.0, 0);
+}
+
 static void test_failed_candidates_are_skipped(void **state)
 {
 	(void)state;
@@ -468,7 +494,12 @@ static void test_set_rules(void **state)
 		{ "tune.values=", "key 'values': [tune] values: the list is "
 		  "empty (give one or more values separated by commas)" },
 		{ "tune.steps=3", "key 'steps': unknown key in [tune] (known: "
-		  "param, values, score, metric, structure, goal, require)" },
+		  "param, values, score, metric, structure, goal, require, "
+		  "tolerance)" },
+		{ "tune.tolerance=nan", "key 'tolerance': [tune] tolerance "
+		  "must be a number >= 0 in the score's units, got 'nan'" },
+		{ "tune.tolerance=-0.1", "key 'tolerance': [tune] tolerance "
+		  "must be a number >= 0 in the score's units, got '-0.1'" },
 		{ "tune.score=fit.volume", "key 'score': [tune] score: "
 		  "'fit.volume' is a volume, not a table" },
 		{ "tune.param=sim.size", "key 'param': [tune] param: 'size' "
@@ -634,6 +665,7 @@ int main(void)
 		cmocka_unit_test(test_min_search_runs_shared_stages_once),
 		cmocka_unit_test(test_goal_metric_structure),
 		cmocka_unit_test(test_ties_keep_the_earlier_value),
+		cmocka_unit_test(test_tolerance),
 		cmocka_unit_test(test_failed_candidates_are_skipped),
 		cmocka_unit_test(test_require),
 		cmocka_unit_test(test_all_candidates_fail),
