@@ -1792,18 +1792,19 @@ static int tune_run(graph_t *g, const run_opts_t *o, char *err,
 		rc = ARMSTG_ECANCELLED;
 		goto out;
 	}
-	/* within the tolerance of the best score: the earliest candidate */
+	/* within the tolerance of the best score: the earliest candidate
+	 * (the first one that qualifies; best itself always does) */
 	for (int k = 0; best >= 0 && t->tol > 0 && k < best; k++) {
 		const tune_row_t *row = &t->rows[k];
 		double bs = t->rows[best].score;
-		if (row->ok && (t->goal_max ? row->score >= bs - t->tol
-					    : row->score <= bs + t->tol)) {
-			rt_log(NULL, LOG_INFO, "tune %s.%s = %s: within "
-			       "tolerance %g of the best (%s, %s %.6g)",
-			       ts->name, t->key, t->values[k], t->tol,
-			       t->values[best], sel, bs);
-			best = k;
-		}
+		if (!row->ok || (t->goal_max ? row->score < bs - t->tol
+					     : row->score > bs + t->tol))
+			continue;
+		rt_log(NULL, LOG_INFO, "tune %s.%s = %s: within tolerance %g "
+		       "of the best (%s, %s %.6g)", ts->name, t->key,
+		       t->values[k], t->tol, t->values[best], sel, bs);
+		best = k;
+		break;
 	}
 	if (best < 0) {
 		size_t w = (size_t)snprintf(err, errsize, "[tune] every value "

@@ -326,17 +326,32 @@ static void test_require(void **state)
 	done(&r);
 }
 
+/* the value chosen with each set of --set options (at most 3) */
+typedef struct pick {
+	const char *sets[3];
+	double want;
+} pick_t;
+
+static void expect_picks(const pick_t *p, int n)
+{
+	for (int i = 0; i < n; i++) {
+		int ns = 0;
+		while (ns < 3 && p[i].sets[ns])
+			ns++;
+		assert_float_equal(chosen_with(p[i].sets, ns), p[i].want, 0);
+	}
+}
+
 static void test_ties_keep_the_earlier_value(void **state)
 {
 	(void)state;
 	/* target 3: 2 and 4 both score 1 */
-	const char *a[] = { "fit.target=3", "tune.values=2,4" };
-	assert_float_equal(chosen_with(a, 2), 2.0, 0);
-	const char *b[] = { "fit.target=3", "tune.values=4, 2" };
-	assert_float_equal(chosen_with(b, 2), 4.0, 0);
-	const char *c[] = { "fit.target=3", "tune.values=4,2",
-			    "tune.goal=max" };
-	assert_float_equal(chosen_with(c, 3), 4.0, 0);
+	const pick_t p[] = {
+		{ { "fit.target=3", "tune.values=2,4" }, 2 },
+		{ { "fit.target=3", "tune.values=4, 2" }, 4 },
+		{ { "fit.target=3", "tune.values=4,2", "tune.goal=max" }, 4 },
+	};
+	expect_picks(p, ARMSTG_COUNT(p));
 }
 
 /* tolerance: sq near of 1..5 (target 3.2) is 4.84 1.44 0.04 0.64 3.24;
@@ -345,24 +360,21 @@ static void test_ties_keep_the_earlier_value(void **state)
 static void test_tolerance(void **state)
 {
 	(void)state;
-	const char *a[] = { "tune.tolerance=1.5" };        /* 1.44 <= 1.54 */
-	assert_float_equal(chosen_with(a, 1), 2.0, 0);
-	const char *b[] = { "tune.tolerance=1.3" };        /* only 4: 0.64 */
-	assert_float_equal(chosen_with(b, 1), 3.0, 0);
-	const char *c[] = { "tune.tolerance=0.7", "tune.values=5,4,3,2,1" };
-	assert_float_equal(chosen_with(c, 2), 4.0, 0);
-	const char *d[] = { "tune.tolerance=0.5", "tune.values=5,4,3,2,1" };
-	assert_float_equal(chosen_with(d, 2), 3.0, 0);
-	/* goal max: the max 4.84 at 1; 3.24 (5) is within 1.7, not 1.5 */
-	const char *e[] = { "tune.goal=max", "tune.tolerance=1.7",
-			    "tune.values=5,4,3,2,1" };
-	assert_float_equal(chosen_with(e, 3), 5.0, 0);
-	const char *f[] = { "tune.goal=max", "tune.tolerance=1.5",
-			    "tune.values=5,4,3,2,1" };
-	assert_float_equal(chosen_with(f, 3), 1.0, 0);
-	/* a failed candidate is never chosen, however early */
-	const char *g[] = { "tune.tolerance=10", "sim.fail_at=1" };
-	assert_float_equal(chosen_with(g, 2), 2.0, 0);
+	const pick_t p[] = {
+		{ { "tune.tolerance=1.5" }, 2 },        /* 1.44 <= 1.54 */
+		{ { "tune.tolerance=1.3" }, 3 },        /* only 4: 0.64 */
+		{ { "tune.tolerance=0.7", "tune.values=5,4,3,2,1" }, 4 },
+		{ { "tune.tolerance=0.5", "tune.values=5,4,3,2,1" }, 3 },
+		/* goal max: the max 4.84 at 1; 3.24 (5) is within 1.7,
+		 * not 1.5 */
+		{ { "tune.goal=max", "tune.tolerance=1.7",
+		    "tune.values=5,4,3,2,1" }, 5 },
+		{ { "tune.goal=max", "tune.tolerance=1.5",
+		    "tune.values=5,4,3,2,1" }, 1 },
+		/* a failed candidate is never chosen, however early */
+		{ { "tune.tolerance=10", "sim.fail_at=1" }, 2 },
+	};
+	expect_picks(p, ARMSTG_COUNT(p));
 }
 
 static void test_failed_candidates_are_skipped(void **state)
