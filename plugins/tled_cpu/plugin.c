@@ -100,7 +100,6 @@ typedef struct priv {
 	int front;
 	double push_mm;
 	double push_wall;
-	int push_shape;
 } priv_t;
 
 static const armstg_param_t params[] = {
@@ -218,16 +217,6 @@ static const armstg_param_t params[] = {
 	  "front=push: free nodes within this distance outside the front "
 	  "are attached to it (driven by the layer map, kept as tissue)",
 	  NULL, offsetof(priv_t, push_wall), 0 },
-	{ "push_shape", PT_ENUM, "offset", 0, 0, "",
-	  "front=push: the tumour's shape when the push starts: offset (the "
-	  "contour layer push_mm deep: every point of the outline is pushed "
-	  "push_mm along its normal) or scale (the outline shrunk about its "
-	  "component's centroid so that its points move push_mm on average: "
-	  "points far from the centre are pushed more, as by a uniform "
-	  "volumetric growth, Eshelby's inclusion; a ball is the same "
-	  "either way; a component whose centroid lies outside it keeps "
-	  "offset)",
-	  "offset|scale", offsetof(priv_t, push_shape), 0 },
 };
 
 static const armstg_port_t inputs[] = {
@@ -556,125 +545,6 @@ static int cmp_layer(const void *a, const void *b)
 	return (x->layer > y->layer) - (x->layer < y->layer);
 }
 
-/* front = push, push_shape = scale: the layers of each component below the
- * outline (layer 0) are replaced by copies of the outline shrunk about the
- * component's centroid c: layer i (1..k) is c + s_i (x0 - c), s_i = 1 -
- * f i / k, f = push / mean |x0 - c| (at most 0.9), k = the largest
- * push, f max |x0 - c|, over the component's layer spacing (rounded up:
- * no point moves more per step than the levelset's layers), each point mapped to its copy on
- * layer i - 1 (d = f / k (x0 - c)).  A component whose centroid is not
- * inside its outline (not star-shaped about it) keeps its layers.  *nfall:
- * the number of such components.  -1: out of memory. */
-static int layers_scale(layer_t **Lp, int *nlp, double push, double h,
-			int *nfall)
-{
-	layer_t *L = *Lp, *O = NULL;
-	int nl = *nlp, no = 0, cap = 0;
-	char *isnew = NULL, *drop = calloc((size_t)nl + 1, 1);
-	*nfall = 0;
-	if (!drop)
-		return -1;
-	for (int j = 0; j < nl;) {
-		int c = L[j].comp, e = j;
-		while (e < nl && L[e].comp == c)
-			e++;
-		/* L[j..e): component c, layer 0 first */
-		const layer_t *L0 = &L[j];
-		double cen[3] = { 0, 0, 0 }, rm = 0, rx = 0, sp = 0;
-		for (int64_t q = 0; q < L0->n; q++)
-			for (int d = 0; d < 3; d++)
-				cen[d] += L0->x[3 * q + d] / L0->n;
-		for (int64_t q = 0; q < L0->n; q++) {
-			const double *x = L0->x + 3 * q;
-			double r = sqrt((x[0] - cen[0]) * (x[0] - cen[0]) +
-					(x[1] - cen[1]) * (x[1] - cen[1]) +
-					(x[2] - cen[2]) * (x[2] - cen[2]));
-			rm += r / L0->n;
-			rx = fmax(rx, r);
-		}
-		if (e - j > 1 && L[j + 1].n > 0) {
-			for (int64_t q = 0; q < L[j + 1].n; q++) {
-				const double *dd = L[j + 1].d + 3 * q;
-				sp += sqrt(dd[0] * dd[0] + dd[1] * dd[1] +
-					   dd[2] * dd[2]) / L[j + 1].n;
-			}
-		}
-		int keep = L0->layer != 0 || L0->n < 4 || !(rm > 0) ||
-			   !(sp > 0) || push <= 0 ||
-			   layer_side(L0, cen, h) >= 0;
-		if (keep && L0->layer == 0 && L0->n >= 4 && push > 0 &&
-		    e - j > 1)
-			(*nfall)++;
-		double f = keep ? 0 : fmin(push / rm, 0.9);
-		int k = keep ? 0 : (int)ceil(f * rx / sp - 1e-9);
-		int add = keep ? e - j : 1 + k;
-		if (no + add > cap) {
-			cap = 2 * (no + add) + 16;
-			layer_t *t = realloc(O, (size_t)cap * sizeof *O);
-			if (!t)
-				goto oom;
-			O = t;
-			char *u = realloc(isnew, (size_t)cap);
-			if (!u)
-				goto oom;
-			isnew = u;
-		}
-		if (keep) {
-			for (int i = j; i < e; i++) {
-				isnew[no] = 0;
-				O[no++] = L[i];
-			}
-			j = e;
-			continue;
-		}
-		isnew[no] = 0;
-		O[no++] = L[j];
-		for (int i = 1; i <= k; i++) {
-			layer_t *N = &O[no];
-			memset(N, 0, sizeof *N);
-			N->comp = c;
-			N->layer = i;
-			N->n = L0->n;
-			N->x = malloc((size_t)(3 * N->n) * sizeof(double));
-			N->nrm = malloc((size_t)(3 * N->n) * sizeof(double));
-			N->d = malloc((size_t)(3 * N->n) * sizeof(double));
-			isnew[no++] = 1;
-			if (!N->x || !N->nrm || !N->d)
-				goto oom;
-			double si = 1 - f * i / k;
-			for (int64_t q = 0; q < 3 * N->n; q++) {
-				double r = L0->x[q] - cen[q % 3];
-				N->x[q] = cen[q % 3] + si * r;
-				N->d[q] = f / k * r;
-				N->nrm[q] = L0->nrm[q];
-			}
-			if (layer_index(N, h))
-				goto oom;
-		}
-		for (int i = j + 1; i < e; i++)
-			drop[i] = 1;
-		j = e;
-	}
-	for (int i = 0; i < nl; i++)
-		if (drop[i])
-			layer_free(&L[i]);
-	free(L);
-	free(drop);
-	free(isnew);
-	*Lp = O;
-	*nlp = no;
-	return 0;
-oom:
-	/* L is untouched (the caller frees it); the new layers here */
-	for (int i = 0; i < no; i++)
-		if (isnew[i])
-			layer_free(&O[i]);
-	free(O);
-	free(isnew);
-	free(drop);
-	return -1;
-}
-
 /* ------------------------------------------------------------ process */
 
 static int tled_process(armstg_stage_t *st)
@@ -982,17 +852,6 @@ static int tled_process(armstg_stage_t *st)
 	 * md_k: linear between layer k and its parent) and becomes the
 	 * innermost; deeper layers are dropped.  (Until 2026-11 the depth was
 	 * rounded to whole layers: push_mm 2-4 all gave 3 mm.) */
-	if (pv->front == 1 && pv->push_shape == 1) {
-		int nfall;
-		if (layers_scale(&L, &nl, pv->push_mm * TLED_MM, m.h_mean,
-				 &nfall))
-			goto oom;
-		if (nfall)
-			H->log(st, LOG_WARN, "push_shape=scale: %d tumour "
-			       "component(s) do not contain their centroid; "
-			       "their push starts from the offset layers",
-			       nfall);
-	}
 	if (pv->front == 1) {
 		int w = 0;
 		for (int j = 0; j < nl;) {
