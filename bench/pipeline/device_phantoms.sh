@@ -1,0 +1,54 @@
+#!/bin/sh
+# Many phantom runs at once on a larger machine (session 7: the 16-core GPU
+# host, used for its CPU cores; nothing here uses the GPU).  One run_phantom.sh
+# per (seed, variant), all in parallel, one OpenMP thread each (THREADS).
+#
+#   SEEDS="13 14" VARIANTS="base sphere" sh bench/pipeline/device_phantoms.sh irr|def
+#
+# variants: base (graphs/armstg.ini), sphere (graphs/spherical.ini), scale and
+# scalelow (armstg with grow.push_shape=scale, the experiment of commit
+# 072e245, reverted; scalelow with PUSH_VALUES 1.5-6).  irr: the irregular
+# phantoms (lobulation 0.9, two components).  The machine has no compiler
+# headers or Debian libraries: the build (BUILD, default carry/build: armstg
+# and plugins/*.so) and the runtime libraries (debs/*.deb, apt-get download,
+# see README "GPU machine") travel with the checkout; make is stubbed out.
+# Output: OUT/all-KIND-VARIANTS.txt, every run's phantom.tsv row and
+# tune.tsv (the folder's file count is limited), parsed into results/*.tsv.
+set -u
+[ -d /tmp/dl/usr ] || { mkdir -p /tmp/dl && for f in debs/*.deb; do dpkg -x "$f" /tmp/dl; done; }
+export LD_LIBRARY_PATH=/tmp/dl/usr/lib/x86_64-linux-gnu:/tmp/dl/lib/x86_64-linux-gnu
+export BUILD=${BUILD:-carry/build} OMP_NUM_THREADS=${THREADS:-1}
+mkdir -p /tmp/bin && printf '#!/bin/sh\nexit 0\n' >/tmp/bin/make && chmod +x /tmp/bin/make
+export PATH=/tmp/bin:$PATH
+KIND=$1
+[ "$KIND" = irr ] && export PHANTOM_SET="phantom.lobulation=0.9 phantom.two_components=true"
+W=/tmp/w
+OUT=${OUT:-out/device}
+mkdir -p "$W" "$OUT"
+for s in $SEEDS; do
+	for v in $VARIANTS; do
+		(
+			X=""
+			case $v in
+			base) M=armstg ;;
+			sphere) M=sphere ;;
+			scale) M=armstg X="--set grow.push_shape=scale" ;;
+			scalelow) M=armstg X="--set grow.push_shape=scale"
+				export PUSH_VALUES="1.5, 2.25, 3, 4.5, 6" ;;
+			*) echo "unknown variant $v" >&2; exit 2 ;;
+			esac
+			# shellcheck disable=SC2086
+			METHODS=$M sh bench/pipeline/run_phantom.sh --out "$W/$KIND-$v-$s" \
+				--seeds "$s" $X >"$W/$KIND-$v-$s.log" 2>&1
+		) &
+	done
+done
+wait
+for s in $SEEDS; do
+	for v in $VARIANTS; do
+		d=$KIND-$v-$s
+		echo "== $d"
+		tail -n +2 "$W/$d/phantom.tsv"
+		for t in "$W/$d"/ph*/tune.tsv; do echo "-- $t"; cat "$t"; done
+	done
+done >"$OUT/all-$KIND-$(echo "$VARIANTS" | tr ' ' _).txt"
