@@ -7,7 +7,8 @@
 #
 # variants: base (graphs/armstg.ini), sphere (graphs/spherical.ini), scale and
 # scalelow (armstg with grow.push_shape=scale, the experiment of commit
-# 072e245, reverted; scalelow with PUSH_VALUES 1.5-6).  irr: the irregular
+# 072e245, reverted: they need a build of that commit, main's tled_cpu refuses
+# the key; scalelow with PUSH_VALUES 1.5-6).  irr: the irregular
 # phantoms (lobulation 0.9, two components).  The machine has no compiler
 # headers or Debian libraries: the build (BUILD, default carry/build: armstg
 # and plugins/*.so) and the runtime libraries (debs/*.deb, apt-get download,
@@ -15,11 +16,21 @@
 # Output: OUT/all-KIND-VARIANTS.txt, every run's phantom.tsv row and
 # tune.tsv (the folder's file count is limited), parsed into results/*.tsv.
 set -u
+die() { echo "device_phantoms.sh: $*" >&2; exit 2; }
+[ $# -eq 1 ] || die "usage: SEEDS=\"1 2\" VARIANTS=\"base sphere\" sh $0 irr|def"
+case $1 in irr | def) ;; *) die "unknown phantom kind '$1' (irr or def)" ;; esac
+[ -n "${SEEDS:-}" ] || die "SEEDS is empty"
+[ -n "${VARIANTS:-}" ] || die "VARIANTS is empty"
+for v in $VARIANTS; do
+	case $v in base | sphere | scale | scalelow) ;;
+	*) die "unknown variant '$v' (base, sphere, scale, scalelow)" ;; esac
+done
+[ -x "${BUILD:-carry/build}/armstg" ] || die "no ${BUILD:-carry/build}/armstg (carry the build)"
 [ -d /tmp/dl/usr ] || { mkdir -p /tmp/dl && for f in debs/*.deb; do dpkg -x "$f" /tmp/dl; done; }
 export LD_LIBRARY_PATH=/tmp/dl/usr/lib/x86_64-linux-gnu:/tmp/dl/lib/x86_64-linux-gnu
-export BUILD=${BUILD:-carry/build} OMP_NUM_THREADS=${THREADS:-1}
+export BUILD="${BUILD:-carry/build}" OMP_NUM_THREADS="${THREADS:-1}"
 mkdir -p /tmp/bin && printf '#!/bin/sh\nexit 0\n' >/tmp/bin/make && chmod +x /tmp/bin/make
-export PATH=/tmp/bin:$PATH
+export PATH="/tmp/bin:$PATH"
 KIND=$1
 [ "$KIND" = irr ] && export PHANTOM_SET="phantom.lobulation=0.9 phantom.two_components=true"
 W=/tmp/w
@@ -35,7 +46,6 @@ for s in $SEEDS; do
 			scale) M=armstg X="--set grow.push_shape=scale" ;;
 			scalelow) M=armstg X="--set grow.push_shape=scale"
 				export PUSH_VALUES="1.5, 2.25, 3, 4.5, 6" ;;
-			*) echo "unknown variant $v" >&2; exit 2 ;;
 			esac
 			# shellcheck disable=SC2086
 			METHODS=$M sh bench/pipeline/run_phantom.sh --out "$W/$KIND-$v-$s" \
