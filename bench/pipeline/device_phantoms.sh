@@ -5,7 +5,8 @@
 #
 #   SEEDS="13 14" VARIANTS="base sphere" sh bench/pipeline/device_phantoms.sh irr|def
 #
-# variants: base (graphs/armstg.ini), sphere (graphs/spherical.ini), scale and
+# variants: base (graphs/armstg.ini), sphere (graphs/spherical.ini), direct
+# (graphs/direct_demons.ini), scale and
 # scalelow (armstg with grow.push_shape=scale, the experiment of commit
 # 072e245, reverted: they need a build of that commit, main's tled_cpu refuses
 # the key; scalelow with PUSH_VALUES 1.5-6).  irr: the irregular
@@ -13,7 +14,9 @@
 # headers or Debian libraries: the build (BUILD, default carry/build: armstg
 # and plugins/*.so) and the runtime libraries (debs/*.deb, apt-get download,
 # see README "GPU machine") travel with the checkout; make is stubbed out.
-# Output: OUT/all-KIND-VARIANTS.txt, every run's phantom.tsv row and
+# EXTRA: more run_phantom.sh options for every run (e.g. "--set
+# grow.push_mm=6 --set nodes.spacing=4"); TAG names the batch, so that two
+# batches can run at once.  Output: OUT/all-KIND-VARIANTS[-TAG].txt, every run's phantom.tsv row and
 # tune.tsv (the folder's file count is limited), parsed into results/*.tsv.
 set -u
 die() { echo "device_phantoms.sh: $*" >&2; exit 2; }
@@ -22,8 +25,8 @@ case $1 in irr | def) ;; *) die "unknown phantom kind '$1' (irr or def)" ;; esac
 [ -n "${SEEDS:-}" ] || die "SEEDS is empty"
 [ -n "${VARIANTS:-}" ] || die "VARIANTS is empty"
 for v in $VARIANTS; do
-	case $v in base | sphere | scale | scalelow) ;;
-	*) die "unknown variant '$v' (base, sphere, scale, scalelow)" ;; esac
+	case $v in base | sphere | direct | scale | scalelow) ;;
+	*) die "unknown variant '$v' (base, sphere, direct, scale, scalelow)" ;; esac
 done
 [ -x "${BUILD:-carry/build}/armstg" ] || die "no ${BUILD:-carry/build}/armstg (carry the build)"
 [ -d /tmp/dl/usr ] || { mkdir -p /tmp/dl && for f in debs/*.deb; do dpkg -x "$f" /tmp/dl; done; }
@@ -32,8 +35,13 @@ export BUILD="${BUILD:-carry/build}" OMP_NUM_THREADS="${THREADS:-1}"
 mkdir -p /tmp/bin && printf '#!/bin/sh\nexit 0\n' >/tmp/bin/make && chmod +x /tmp/bin/make
 export PATH="/tmp/bin:$PATH"
 KIND=$1
-[ "$KIND" = irr ] && export PHANTOM_SET="phantom.lobulation=0.9 phantom.two_components=true"
-W=/tmp/w
+# PHANTOM_MORE: more phantom options (e.g. phantom.mass_effect=8)
+if [ "$KIND" = irr ]; then
+	export PHANTOM_SET="phantom.lobulation=0.9 phantom.two_components=true ${PHANTOM_MORE:-}"
+else
+	export PHANTOM_SET="${PHANTOM_MORE:-}"
+fi
+W=/tmp/w${TAG:+-$TAG}
 OUT=${OUT:-out/device}
 mkdir -p "$W" "$OUT"
 for s in $SEEDS; do
@@ -43,13 +51,14 @@ for s in $SEEDS; do
 			case $v in
 			base) M=armstg ;;
 			sphere) M=sphere ;;
+			direct) M=direct ;;
 			scale) M=armstg X="--set grow.push_shape=scale" ;;
 			scalelow) M=armstg X="--set grow.push_shape=scale"
 				export PUSH_VALUES="1.5, 2.25, 3, 4.5, 6" ;;
 			esac
 			# shellcheck disable=SC2086
 			METHODS=$M sh bench/pipeline/run_phantom.sh --out "$W/$KIND-$v-$s" \
-				--seeds "$s" $X >"$W/$KIND-$v-$s.log" 2>&1
+				--seeds "$s" $X ${EXTRA:-} >"$W/$KIND-$v-$s.log" 2>&1
 		) &
 	done
 done
@@ -61,4 +70,4 @@ for s in $SEEDS; do
 		tail -n +2 "$W/$d/phantom.tsv"
 		for t in "$W/$d"/ph*/tune.tsv; do echo "-- $t"; cat "$t"; done
 	done
-done >"$OUT/all-$KIND-$(echo "$VARIANTS" | tr ' ' _).txt"
+done >"$OUT/all-$KIND-$(echo "$VARIANTS" | tr ' ' _)${TAG:+-$TAG}.txt"
