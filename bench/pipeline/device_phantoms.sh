@@ -12,8 +12,10 @@
 # the key; scalelow with PUSH_VALUES 1.5-6).  irr: the irregular
 # phantoms (lobulation 0.9, two components).  The machine has no compiler
 # headers or Debian libraries: the build (BUILD, default carry/build: armstg
-# and plugins/*.so) and the runtime libraries (debs/*.deb, apt-get download,
-# see README "GPU machine") travel with the checkout; make is stubbed out.
+# and plugins/*.so) and the runtime libraries travel with the checkout
+# (debs/*.deb: `apt-get download` of the packages that own what `ldd
+# build/armstg build/plugins/*.so` lists; carry/ and debs/ are listed in
+# .git/info/exclude); make is stubbed out.
 # EXTRA: more run_phantom.sh options for every run (e.g. "--set
 # grow.push_mm=6 --set nodes.spacing=4"); TAG names the batch, so that two
 # batches can run at once.  Output: OUT/all-KIND-VARIANTS[-TAG].txt, every run's phantom.tsv row and
