@@ -6,18 +6,16 @@
 #   SEEDS="13 14" VARIANTS="base sphere" sh bench/pipeline/device_phantoms.sh irr|def
 #
 # variants: base (graphs/armstg.ini), sphere (graphs/spherical.ini), direct
-# (graphs/direct_demons.ini), scale and
-# scalelow (armstg with grow.push_shape=scale, the experiment of commit
-# 072e245, reverted: they need a build of that commit, main's tled_cpu refuses
-# the key; scalelow with PUSH_VALUES 1.5-6).  irr: the irregular
-# phantoms (lobulation 0.9, two components).  The machine has no compiler
+# (graphs/direct_demons.ini).  irr: the irregular phantoms (lobulation 0.9,
+# two components); def: the default ones.  The machine has no compiler
 # headers or Debian libraries: the build (BUILD, default carry/build: armstg
 # and plugins/*.so) and the runtime libraries travel with the checkout
 # (debs/*.deb: `apt-get download` of the packages that own what `ldd
 # build/armstg build/plugins/*.so` lists; carry/ and debs/ are listed in
 # .git/info/exclude); make is stubbed out.
 # EXTRA: more run_phantom.sh options for every run (e.g. "--set
-# grow.push_mm=6 --set nodes.spacing=4"); TAG names the batch, so that two
+# grow.push_mm=6 --set nodes.spacing=4"); the environment reaches the graphs
+# (e.g. PUSH_VALUES, the depths [tune] tries); TAG names the batch, so that two
 # batches can run at once.  Output: OUT/all-KIND-VARIANTS[-TAG].txt, every run's phantom.tsv row and
 # tune.tsv (the folder's file count is limited), parsed into results/*.tsv.
 set -u
@@ -27,8 +25,8 @@ case $1 in irr | def) ;; *) die "unknown phantom kind '$1' (irr or def)" ;; esac
 [ -n "${SEEDS:-}" ] || die "SEEDS is empty"
 [ -n "${VARIANTS:-}" ] || die "VARIANTS is empty"
 for v in $VARIANTS; do
-	case $v in base | sphere | direct | scale | scalelow) ;;
-	*) die "unknown variant '$v' (base, sphere, direct, scale, scalelow)" ;; esac
+	case $v in base | sphere | direct) ;;
+	*) die "unknown variant '$v' (base, sphere or direct)" ;; esac
 done
 [ -x "${BUILD:-carry/build}/armstg" ] || die "no ${BUILD:-carry/build}/armstg (carry the build)"
 [ -d /tmp/dl/usr ] || { mkdir -p /tmp/dl && for f in debs/*.deb; do dpkg -x "$f" /tmp/dl; done; }
@@ -49,18 +47,14 @@ mkdir -p "$W" "$OUT"
 for s in $SEEDS; do
 	for v in $VARIANTS; do
 		(
-			X=""
 			case $v in
 			base) M=armstg ;;
 			sphere) M=sphere ;;
 			direct) M=direct ;;
-			scale) M=armstg X="--set grow.push_shape=scale" ;;
-			scalelow) M=armstg X="--set grow.push_shape=scale"
-				export PUSH_VALUES="1.5, 2.25, 3, 4.5, 6" ;;
 			esac
 			# shellcheck disable=SC2086
 			METHODS=$M sh bench/pipeline/run_phantom.sh --out "$W/$KIND-$v-$s" \
-				--seeds "$s" $X ${EXTRA:-} >"$W/$KIND-$v-$s.log" 2>&1
+				--seeds "$s" ${EXTRA:-} >"$W/$KIND-$v-$s.log" 2>&1
 		) &
 	done
 done
@@ -70,6 +64,8 @@ for s in $SEEDS; do
 		d=$KIND-$v-$s
 		echo "== $d"
 		tail -n +2 "$W/$d/phantom.tsv"
-		for t in "$W/$d"/ph*/tune.tsv; do echo "-- $t"; cat "$t"; done
+		for t in "$W/$d"/ph*/tune.tsv; do
+			[ -f "$t" ] && { echo "-- $t"; cat "$t"; }
+		done
 	done
 done >"$OUT/all-$KIND-$(echo "$VARIANTS" | tr ' ' _)${TAG:+-$TAG}.txt"
