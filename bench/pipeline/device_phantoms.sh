@@ -29,10 +29,18 @@ for v in $VARIANTS; do
 	*) die "unknown variant '$v' (base, sphere or direct)" ;; esac
 done
 [ -x "${BUILD:-carry/build}/armstg" ] || die "no ${BUILD:-carry/build}/armstg (carry the build)"
-[ -d /tmp/dl/usr ] || { mkdir -p /tmp/dl && for f in debs/*.deb; do dpkg -x "$f" /tmp/dl; done; }
+# the libraries and the make stub are put in place by rename, so that
+# batches started together never load a half-written library (SIGBUS)
+if [ ! -d /tmp/dl ]; then
+	t=$(mktemp -d /tmp/dl.XXXXXX)
+	for f in debs/*.deb; do dpkg -x "$f" "$t"; done
+	mv -T "$t" /tmp/dl 2>/dev/null || rm -rf "$t"
+fi
 export LD_LIBRARY_PATH=/tmp/dl/usr/lib/x86_64-linux-gnu:/tmp/dl/lib/x86_64-linux-gnu
 export BUILD="${BUILD:-carry/build}" OMP_NUM_THREADS="${THREADS:-1}"
-mkdir -p /tmp/bin && printf '#!/bin/sh\nexit 0\n' >/tmp/bin/make && chmod +x /tmp/bin/make
+mkdir -p /tmp/bin
+t=$(mktemp /tmp/bin/make.XXXXXX)
+printf '#!/bin/sh\nexit 0\n' >"$t" && chmod +x "$t" && mv -f "$t" /tmp/bin/make
 export PATH="/tmp/bin:$PATH"
 KIND=$1
 # PHANTOM_MORE: more phantom options (e.g. phantom.mass_effect=8)
