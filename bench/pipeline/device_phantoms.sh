@@ -17,7 +17,8 @@
 # grow.push_mm=6 --set nodes.spacing=4"); the environment reaches the graphs
 # (e.g. PUSH_VALUES, the depths [tune] tries); TAG names the batch, so that two
 # batches can run at once.  Output: OUT/all-KIND-VARIANTS[-TAG].txt, every run's phantom.tsv row and
-# tune.tsv (the folder's file count is limited), parsed into results/*.tsv.
+# tune.tsv (the folder's file count is limited), and OUT/KIND-VARIANTS[-TAG].tsv,
+# the rows alone (phantom kind and batch first; results/*.tsv).
 set -u
 die() { echo "device_phantoms.sh: $*" >&2; exit 2; }
 [ $# -eq 1 ] || die "usage: SEEDS=\"1 2\" VARIANTS=\"base sphere\" sh $0 irr|def"
@@ -77,3 +78,14 @@ for s in $SEEDS; do
 		done
 	done
 done >"$OUT/all-$KIND-$(echo "$VARIANTS" | tr ' ' _)${TAG:+-$TAG}.txt"
+# the rows alone, as results/*.tsv hold them: phantom kind and batch first
+name=$KIND-$(echo "$VARIANTS" | tr ' ' _)${TAG:+-$TAG}
+{
+	printf 'phantom\tbatch\t'
+	head -1 "$W/$KIND-$(echo "$VARIANTS" | cut -d' ' -f1)-$(echo "$SEEDS" | cut -d' ' -f1)/phantom.tsv"
+	for s in $SEEDS; do
+		for v in $VARIANTS; do
+			tail -n +2 "$W/$KIND-$v-$s/phantom.tsv" | sed "s/^/$KIND\t${TAG:--}\t/"
+		done
+	done
+} >"$OUT/$name.tsv"
