@@ -30,9 +30,12 @@ for v in $VARIANTS; do
 	*) die "unknown variant '$v' (base, sphere or direct)" ;; esac
 done
 [ -x "${BUILD:-carry/build}/armstg" ] || die "no ${BUILD:-carry/build}/armstg (carry the build)"
+KIND=$1
 # the libraries and the make stub are put in place by rename, so that
 # batches started together never load a half-written library (SIGBUS)
-if [ ! -d /tmp/dl ]; then
+# (no debs/: the machine's own libraries)
+set -- debs/*.deb
+if [ ! -d /tmp/dl ] && [ -e "$1" ]; then
 	t=$(mktemp -d /tmp/dl.XXXXXX)
 	for f in debs/*.deb; do dpkg -x "$f" "$t"; done
 	mv -T "$t" /tmp/dl 2>/dev/null || rm -rf "$t"
@@ -43,7 +46,6 @@ mkdir -p /tmp/bin
 t=$(mktemp /tmp/bin/make.XXXXXX)
 printf '#!/bin/sh\nexit 0\n' >"$t" && chmod +x "$t" && mv -f "$t" /tmp/bin/make
 export PATH="/tmp/bin:$PATH"
-KIND=$1
 # PHANTOM_MORE: more phantom options (e.g. phantom.mass_effect=8)
 if [ "$KIND" = irr ]; then
 	export PHANTOM_SET="phantom.lobulation=0.9 phantom.two_components=true ${PHANTOM_MORE:-}"
