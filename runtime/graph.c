@@ -846,6 +846,14 @@ static int depends_on(graph_t *g, int v, int t, signed char *memo)
 	return memo[v];
 }
 
+/* the whole of s is one finite number (strtod): 1, else 0 */
+static int finite_number(const char *s, double *x)
+{
+	char *end = NULL;
+	*x = strtod(s, &end);
+	return end != s && !*end && isfinite(*x);
+}
+
 static const char *const tune_keys[] = { "param", "values", "score", "metric",
 					 "structure", "goal", "require",
 					 "tolerance" };
@@ -1045,9 +1053,7 @@ static void validate_tune(graph_t *g)
 	g_kv_t *tk = kv_find(t->kv, t->nkv, "tolerance");
 	t->tol = 0;
 	if (tk && tk->val[0]) {
-		char *end = NULL;
-		t->tol = strtod(tk->val, &end);
-		if (*end || !isfinite(t->tol) || t->tol < 0)
+		if (!finite_number(tk->val, &t->tol) || t->tol < 0)
 			gerr(g, tk->line, NULL, "tolerance", "[tune] tolerance "
 			     "must be a number >= 0 in the score's units, got "
 			     "'%s'", tk->val);
@@ -1069,11 +1075,9 @@ static void validate_tune(graph_t *g)
 				snprintf(tok[nt++], G_NAME, "%.*s", (int)l, p);
 			p += l;
 		}
-		char *end = NULL;
 		const char *op = nt >= 3 ? tok[nt - 2] : "";
 		if (!bad && (nt == 3 || nt == 4)) {
-			t->req_value = strtod(tok[nt - 1], &end);
-			bad = !*tok[nt - 1] || *end || !isfinite(t->req_value) ||
+			bad = !finite_number(tok[nt - 1], &t->req_value) ||
 			      (strcmp(op, ">") && strcmp(op, ">=") &&
 			       strcmp(op, "<") && strcmp(op, "<="));
 		} else {
