@@ -12,7 +12,7 @@
 # and plugins/*.so) and the runtime libraries travel with the checkout
 # (debs/*.deb: `apt-get download` of the packages that own what `ldd
 # build/armstg build/plugins/*.so` lists; carry/ and debs/ are listed in
-# .git/info/exclude); make is stubbed out.
+# .git/info/exclude); BENCH_PREBUILT=1 tells lib.sh not to rebuild.
 # EXTRA: more run_phantom.sh options for every run (e.g. "--set
 # grow.push_mm=6 --set nodes.spacing=4"); the environment reaches the graphs
 # (e.g. PUSH_VALUES, the depths [tune] tries); TAG names the batch, so that two
@@ -31,7 +31,7 @@ for v in $VARIANTS; do
 done
 [ -x "${BUILD:-carry/build}/armstg" ] || die "no ${BUILD:-carry/build}/armstg (carry the build)"
 KIND=$1
-# the libraries and the make stub are put in place by rename, so that
+# the libraries are put in place by rename, so that
 # batches started together never load a half-written library (SIGBUS)
 # (no debs/: the machine's own libraries)
 set -- debs/*.deb
@@ -42,10 +42,7 @@ if [ ! -d /tmp/dl ] && [ -e "$1" ]; then
 fi
 export LD_LIBRARY_PATH=/tmp/dl/usr/lib/x86_64-linux-gnu:/tmp/dl/lib/x86_64-linux-gnu
 export BUILD="${BUILD:-carry/build}" OMP_NUM_THREADS="${THREADS:-1}"
-mkdir -p /tmp/bin
-t=$(mktemp /tmp/bin/make.XXXXXX)
-printf '#!/bin/sh\nexit 0\n' >"$t" && chmod +x "$t" && mv -f "$t" /tmp/bin/make
-export PATH="/tmp/bin:$PATH"
+export BENCH_PREBUILT=1
 # PHANTOM_MORE: more phantom options (e.g. phantom.mass_effect=8)
 if [ "$KIND" = irr ]; then
 	export PHANTOM_SET="phantom.lobulation=0.9 phantom.two_components=true ${PHANTOM_MORE:-}"

@@ -9,7 +9,10 @@ export OMP_WAIT_POLICY=${OMP_WAIT_POLICY:-passive}
 export ARMSTG_LOG=${ARMSTG_LOG:-warn}
 ARMSTG="$BUILD/armstg"
 
+# BENCH_PREBUILT=1: BUILD was built elsewhere and carried here (a machine
+# without the headers to rebuild it): used as it is
 build_all() {
+	[ "${BENCH_PREBUILT:-0}" = 1 ] && return 0
 	make --no-print-directory -s "$ARMSTG" \
 		"$BUILD/plugins/phantom.so" "$BUILD/plugins/demons.so" \
 		"$BUILD/plugins/warp.so" "$BUILD/plugins/levelset.so" \
