@@ -12,7 +12,11 @@ ARMSTG="$BUILD/armstg"
 # BENCH_PREBUILT=1: BUILD was built elsewhere and carried here (a machine
 # without the headers to rebuild it): used as it is
 build_all() {
-	[ "${BENCH_PREBUILT:-0}" = 1 ] && return 0
+	if [ "${BENCH_PREBUILT:-0}" = 1 ]; then
+		[ -x "$ARMSTG" ] && return 0
+		echo "$0: BENCH_PREBUILT=1 but there is no $ARMSTG" >&2
+		exit 2
+	fi
 	make --no-print-directory -s "$ARMSTG" \
 		"$BUILD/plugins/phantom.so" "$BUILD/plugins/demons.so" \
 		"$BUILD/plugins/warp.so" "$BUILD/plugins/levelset.so" \
