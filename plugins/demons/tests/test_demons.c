@@ -495,6 +495,47 @@ static void test_sigma_unit(void **state)
 	reg_free(&b);
 }
 
+/* sigma_unit=image_voxel is sigma_field times the fixed image's own
+ * spacing (1.5 mm here) at every level: on two levels, 1 image voxel gives
+ * exactly the field of 1.5 mm, while 1 voxel of each level (3 mm on the
+ * coarse level) does not */
+static double max_field_diff(const reg_out_t *a, const reg_out_t *b)
+{
+	int64_t n = vol_nvox(a->field) * 3;
+	double d = 0;
+	for (int64_t v = 0; v < n; v++)
+		d = fmax(d, fabs(((float *)a->field->data)[v] -
+				 ((float *)b->field->data)[v]));
+	return d;
+}
+
+static void test_sigma_image_voxel(void **state)
+{
+	fixture_t *fx = *state;
+	char e[1024];
+	reg_out_t iv = { 0 }, lv = { 0 }, mm = { 0 };
+	const char *piv[] = { "levels=2", "iterations=5,5", "sigma_field=1",
+			      "sigma_unit=image_voxel", NULL };
+	const char *plv[] = { "levels=2", "iterations=5,5", "sigma_field=1",
+			      "sigma_unit=voxel", NULL };
+	const char *pmm[] = { "levels=2", "iterations=5,5", "sigma_field=1.5",
+			      NULL };
+	assert_int_equal(run_demons(piv, fx->fixed, fx->moving, NULL, NULL, &iv,
+				    e, sizeof e), 0);
+	assert_int_equal(run_demons(plv, fx->fixed, fx->moving, NULL, NULL, &lv,
+				    e, sizeof e), 0);
+	assert_int_equal(run_demons(pmm, fx->fixed, fx->moving, NULL, NULL, &mm,
+				    e, sizeof e), 0);
+	double div = max_field_diff(&iv, &mm), dlv = max_field_diff(&lv, &mm);
+	print_message("1 image voxel vs 1.5 mm: max |difference| %g mm; 1 voxel "
+		      "of each level vs 1.5 mm: %.3g mm\n", div, dlv);
+	assert_true(div == 0);
+	assert_true(dlv > 1e-3);
+	reg_free(&iv);
+	reg_free(&lv);
+	reg_free(&mm);
+}
+
 /*
  * The pyramid smooths fields by sigma_field at every level, i.e. by well
  * under a voxel on coarse grids (1.5 mm on a 4 mm grid).  fimg_smooth must
@@ -541,6 +582,7 @@ int main(void)
 		cmocka_unit_test(test_bad_input),
 		cmocka_unit_test(test_local_bias),
 		cmocka_unit_test(test_sigma_unit),
+		cmocka_unit_test(test_sigma_image_voxel),
 		cmocka_unit_test(test_smooth_subvoxel),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
