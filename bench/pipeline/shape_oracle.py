@@ -19,8 +19,8 @@ bench/pipeline/eval_phantom.ini):
     k (the push depth [tune] picks stands in for k);
   - the same per distance bin;
   - both oracles scaled by s (0.5, 0.6, 0.8: a growth that pushes a fraction
-    s of the true field, as the flat push does, about 0.6): mean |s u_shape -
-    u_shape| against min_k |s k u_ball - u_shape|.
+    s of what it should, as the flat push does, about 0.6): mean |s u_shape -
+    u_shape| against |s k u_ball - u_shape| with the ball's best k above.
 All fields in RAS mm (files on disk are ITK 5-D LPS, converted here).
 """
 import os
@@ -102,7 +102,7 @@ def compare(shape, ball):
         print("  %2d-%2d mm: truth |u| %.2f, ball oracle (best k) %.2f" % (
             lo, hi, np.linalg.norm(T, axis=-1)[b].mean(), err(kb * B, b)))
     for s in (0.5, 0.6, 0.8):
-        e2 = best(s)[1]
+        e2 = err(s * kb * B)
         print("  scaled %.1f: shape oracle %.3f, ball oracle %.3f, ball - shape %+.3f"
               % (s, err(s * T), e2, e2 - err(s * T)))
 
