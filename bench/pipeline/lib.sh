@@ -153,8 +153,11 @@ export_phantom() {
 	_ep_p=""
 	for _ep_w in ${PHANTOM_SET:-}; do _ep_p="$_ep_p --set $_ep_w"; done
 	# shellcheck disable=SC2086
-	run_graph bench/pipeline/phantom_export.ini "$_ep_d" \
-		--set phantom.seed="$_ep_s" "$@" $_ep_p >/dev/null
+	if ! run_graph bench/pipeline/phantom_export.ini "$_ep_d" \
+		--set phantom.seed="$_ep_s" "$@" $_ep_p >/dev/null; then
+		echo "$0: the phantom of seed $_ep_s was not made: $(tail -1 "$_ep_d.log")" >&2
+		exit 2
+	fi
 	phantom_env "$_ep_d"
 }
 
