@@ -32,7 +32,6 @@ BASE="--set phantom.deform_mm=0 --set phantom.noise=0 --set phantom.bias=0"
 centroid() { $PY centroid "$1" | awk '{print $3, $4, $5, $9}'; }
 for seed in $SEEDS; do
 	d=$OUT/ph$seed
-	# shellcheck disable=SC2086
 	shape=""
 	for w in ${SHAPE_SET:-phantom.lobulation=0.9 phantom.two_components=true}; do
 		shape="$shape --set $w"
