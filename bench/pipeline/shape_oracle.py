@@ -42,9 +42,18 @@ def need(path):
     return path
 
 
+def load(path, dtype=None):
+    """(array, affine) of a NIfTI file; an empty, truncated or unreadable
+    one ends the script with its name and the reason."""
+    try:
+        im = nib.load(need(path))
+        return np.asarray(im.dataobj, dtype=dtype), im.affine
+    except (OSError, EOFError, ValueError, nib.filebasedimages.ImageFileError) as e:
+        fail("cannot read %s: %s" % (path, e))
+
+
 def field(path):
-    im = nib.load(need(path))
-    a = np.asarray(im.dataobj, dtype=np.float64)
+    a, aff = load(path, np.float64)
     if a.size != np.prod(a.shape[:3]) * 3:
         fail("%s: not a 3-component field" % path)
     a = a.reshape(a.shape[:3] + (3,)).copy()
@@ -52,15 +61,15 @@ def field(path):
     a[..., 1] *= -1
     if not np.isfinite(a).all():
         fail("%s: non-finite values" % path)
-    return a, im.affine
+    return a, aff
 
 
 def core_of(d):
-    im = nib.load(need(d + "/patient_tumour.nii.gz"))
-    core = np.isin(np.asarray(im.dataobj), [1, 3, 4])
+    lab, aff = load(d + "/patient_tumour.nii.gz")
+    core = np.isin(lab, [1, 3, 4])
     if not core.any():
         fail("%s/patient_tumour.nii.gz has no tumour core (labels 1, 3, 4)" % d)
-    return core, im.affine
+    return core, aff
 
 
 def centroid(dirs):
@@ -79,7 +88,9 @@ def compare(shape, ball):
     if T.shape != B.shape or not np.allclose(aff, aff2, atol=1e-4):
         fail("%s and %s are not on the same grid" % (shape, ball))
     core, _ = core_of(shape)
-    mask = np.asarray(nib.load(need(shape + "/patient_mask.nii.gz")).dataobj) > 0
+    mask = load(shape + "/patient_mask.nii.gz")[0] > 0
+    if mask.shape != core.shape:
+        fail("%s/patient_mask.nii.gz is not on the tumour's grid" % shape)
     vox = np.sqrt((aff[:3, :3] ** 2).sum(0))
     dist = ndi.distance_transform_edt(~core, sampling=vox)
     band = (~core) & mask & (dist <= 15)
