@@ -29,18 +29,7 @@ import nibabel as nib
 import numpy as np
 from scipy import ndimage as ndi
 
-
-def field(path):
-    im = nib.load(path)
-    a = np.asarray(im.dataobj, dtype=np.float64)
-    a = a.reshape(a.shape[:3] + (3,)).copy()
-    a[..., 0] *= -1  # LPS -> RAS
-    a[..., 1] *= -1
-    return a, im.affine
-
-
-def fail(msg):
-    sys.exit("growth_push.py: " + msg)
+from phantom_io import fail, field
 
 
 def main():

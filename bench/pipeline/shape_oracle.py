@@ -23,45 +23,12 @@ bench/pipeline/eval_phantom.ini):
     u_shape| against |s k u_ball - u_shape| with the ball's best k above.
 All fields in RAS mm (files on disk are ITK 5-D LPS, converted here).
 """
-import os
 import sys
 
-import nibabel as nib
 import numpy as np
 from scipy import ndimage as ndi
 
-
-def fail(msg):
-    sys.exit("shape_oracle.py: " + msg)
-
-
-def need(path):
-    if not os.path.isfile(path):
-        fail("missing %s (a phantom written by bench/pipeline/phantom_export.ini?)"
-             % path)
-    return path
-
-
-def load(path, dtype=None):
-    """(array, affine) of a NIfTI file; an empty, truncated or unreadable
-    one ends the script with its name and the reason."""
-    try:
-        im = nib.load(need(path))
-        return np.asarray(im.dataobj, dtype=dtype), im.affine
-    except (OSError, EOFError, ValueError, nib.filebasedimages.ImageFileError) as e:
-        fail("cannot read %s: %s" % (path, e))
-
-
-def field(path):
-    a, aff = load(path, np.float64)
-    if a.size != np.prod(a.shape[:3]) * 3:
-        fail("%s: not a 3-component field" % path)
-    a = a.reshape(a.shape[:3] + (3,)).copy()
-    a[..., 0] *= -1  # LPS -> RAS
-    a[..., 1] *= -1
-    if not np.isfinite(a).all():
-        fail("%s: non-finite values" % path)
-    return a, aff
+from phantom_io import fail, field, load
 
 
 def core_of(d):
