@@ -1203,8 +1203,8 @@ static int mls_at(const buckets_t *b, const double *xyz, const double *vec,
 }
 
 int field_from_points(const double *xyz, const double *vec, int64_t n,
-		      double sigma_mm, double taper_mm, fimg_t *out,
-		      int64_t *n_unsupported, int nthreads)
+		      double sigma_mm, double taper_mm, int passes,
+		      fimg_t *out, int64_t *n_unsupported, int nthreads)
 {
 	if (taper_mm == 0) {
 		/* auto: 2 sigma, and at least 3 x the largest nodal |d|, so the
@@ -1219,7 +1219,7 @@ int field_from_points(const double *xyz, const double *vec, int64_t n,
 		}
 	}
 	if (!out || out->nc != 3 || !(sigma_mm > 0) || !(taper_mm > 0) ||
-	    !isfinite(taper_mm) || n < 0 ||
+	    !isfinite(taper_mm) || n < 0 || passes < 1 || passes > 8 ||
 	    (n > 0 && (!xyz || !vec)))
 		return ARMSTG_EINVAL;
 	const fgrid_t *g = &out->g;
@@ -1246,25 +1246,58 @@ int field_from_points(const double *xyz, const double *vec, int64_t n,
 	if (fgrid_make(&cg, cn[0], cn[1], cn[2], A))
 		return ARMSTG_EINVAL;
 	const int64_t cnv = fgrid_nvox(&cg);
-	double *cv = malloc(sizeof(double) * (size_t)cnv * 3);
+	double *cv = calloc((size_t)cnv * 3, sizeof(double));
+	double *pv = passes > 1 ? malloc(sizeof(double) * (size_t)cnv * 3) : NULL;
+	double *res = passes > 1 ? malloc(sizeof(double) * (size_t)n * 3) : NULL;
+	double *fit = passes > 1 ? malloc(sizeof(double) * (size_t)n * 3) : NULL;
 	uint8_t *ok = malloc((size_t)cnv);
 	buckets_t b;
 	int rc = buckets_build(&b, xyz, n, 3 * sigma_mm);
-	if (!cv || !ok || rc) {
+	if (!cv || !ok || rc || (passes > 1 && (!pv || !res || !fit))) {
 		free(cv);
+		free(pv);
+		free(res);
+		free(fit);
 		free(ok);
 		buckets_free(&b);
 		return ARMSTG_ENOMEM;
 	}
+	/* pass k fits vk (pass 0: the values; then the residuals at the
+	 * points) and adds the fit to cv */
+	const double *vk = vec;
+	if (passes > 1)
+		memcpy(res, vec, sizeof(double) * (size_t)n * 3);
+	for (int k = 0; k < passes; k++) {
+		double *dst = k ? pv : cv;
 #pragma omp parallel for num_threads(NT(nthreads)) schedule(dynamic, 64)
-	for (int64_t e = 0; e < cnv; e++) {
-		double p[3] = { (double)(e % cn[0]), (double)(e / cn[0] % cn[1]),
-				(double)(e / ((int64_t)cn[0] * cn[1])) },
-		       y[3];
-		aff_apply(cg.v2w, p, y);
-		ok[e] = (uint8_t)mls_at(&b, xyz, vec, y, sigma_mm, taper_mm,
-					cv + 3 * e);
+		for (int64_t e = 0; e < cnv; e++) {
+			double p[3] = { (double)(e % cn[0]),
+					(double)(e / cn[0] % cn[1]),
+					(double)(e / ((int64_t)cn[0] * cn[1])) },
+			       y[3];
+			aff_apply(cg.v2w, p, y);
+			int o = mls_at(&b, xyz, vk, y, sigma_mm, taper_mm,
+				       dst + 3 * e);
+			if (!k)
+				ok[e] = (uint8_t)o;
+		}
+		if (k)
+			for (int64_t e = 0; e < 3 * cnv; e++)
+				cv[e] += pv[e];
+		if (k + 1 == passes)
+			break;
+		/* residuals at the points: r -= S r */
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(dynamic, 64)
+		for (int64_t q = 0; q < n; q++)
+			mls_at(&b, xyz, res, xyz + 3 * q, sigma_mm, taper_mm,
+			       fit + 3 * q);
+		for (int64_t q = 0; q < 3 * n; q++)
+			res[q] -= fit[q];
+		vk = res;
 	}
+	free(pv);
+	free(res);
+	free(fit);
 	buckets_free(&b);
 	/* trilinear refinement onto the output grid (exact for linear) */
 	int64_t nuns = 0;

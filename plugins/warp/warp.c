@@ -52,6 +52,7 @@ typedef struct warp_priv {
 	double tol;
 	double sigma;
 	double taper;
+	int passes;
 	const char *attr;
 	int points_are;
 } warp_priv_t;
@@ -105,6 +106,12 @@ static const armstg_param_t warp_params[] = {
 	  "3 x largest point |d|), shorter than ~1.5 |d| folds); where the points "
 	  "are one-sided the fit becomes a bounded weighted mean",
 	  NULL, OFF(taper), 0 },
+	{ "passes", PT_INT, "1", 1, 8, "passes",
+	  "from_points: 1 = one moving least-squares fit; 2 = the fit of its "
+	  "residuals at the points is added (twicing, Tukey 1977): a steep "
+	  "profile between the points (the push next to a grown tumour) is "
+	  "damped much less, linear fields stay exact (field.h)", NULL,
+	  OFF(passes), 0 },
 	{ "attr", PT_STRING, "u", 0, 0, "",
 	  "from_points: name of the 3-component displacement attribute", NULL,
 	  OFF(attr), 0 },
@@ -350,10 +357,11 @@ static int do_points(armstg_stage_t *st, warp_priv_t *p, int nt)
 	int64_t row = 0, nuns = 0;
 	if ((rc = fimg_alloc(&o, &g, 3)))
 		goto fail;
-	h->progress(st, 0, "dense field from %lld points, sigma %g mm",
-		    (long long)ps->n, p->sigma);
-	if ((rc = field_from_points(xyz, vec, ps->n, p->sigma, p->taper, &o,
-				    &nuns, nt)))
+	h->progress(st, 0, "dense field from %lld points, sigma %g mm, %d "
+		    "pass%s", (long long)ps->n, p->sigma, p->passes,
+		    p->passes > 1 ? "es" : "");
+	if ((rc = field_from_points(xyz, vec, ps->n, p->sigma, p->taper,
+				    p->passes, &o, &nuns, nt)))
 		goto fail;
 	out = h->vol_new(g.nx, g.ny, g.nz, 3, DT_F32, ref->affine);
 	t = one_row(st, &row);
