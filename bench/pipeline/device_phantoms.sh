@@ -10,9 +10,16 @@
 # two components); def: the default ones.  The machine has no compiler
 # headers or Debian libraries: the build (BUILD, default carry/build: armstg
 # and plugins/*.so) and the runtime libraries travel with the checkout
-# (debs/*.deb: `apt-get download` of the packages that own what `ldd
-# build/armstg build/plugins/*.so` lists; carry/ and debs/ are listed in
-# .git/info/exclude); BENCH_PREBUILT=1 tells lib.sh not to rebuild.
+# (debs/*.deb: every package that owns a library `ldd` lists, libcurl's
+# dependencies included, not libc6:
+#   ldd build/armstg build/plugins/*.so | awk '/=>/{print $3}' | sort -u |
+#     xargs -n1 readlink -f | xargs dpkg -S | cut -d: -f1 | sort -u |
+#     grep -vx libc6 | (cd debs && xargs apt-get download)
+# plus libcom-err2 libkeyutils1 zlib1g, which dpkg -S misses under /lib;
+# carry/ and debs/ are listed in .git/info/exclude); BENCH_PREBUILT=1 tells
+# lib.sh not to rebuild.  A library still missing there stops the batch
+# before any run, naming it (2026-11-23: 80 runs had failed in a second
+# each, silently, on libssh2 and libldap).
 # EXTRA: more run_phantom.sh options for every run (e.g. "--set
 # grow.push_mm=6 --set nodes.spacing=4"); the environment reaches the graphs
 # (e.g. PUSH_VALUES, the depths [tune] tries); TAG names the batch, so that two
@@ -43,6 +50,8 @@ fi
 export LD_LIBRARY_PATH=/tmp/dl/usr/lib/x86_64-linux-gnu:/tmp/dl/lib/x86_64-linux-gnu
 export BUILD="${BUILD:-carry/build}" OMP_NUM_THREADS="${THREADS:-1}"
 export BENCH_PREBUILT=1
+miss=$(ldd "$BUILD/armstg" "$BUILD"/plugins/*.so 2>&1 | awk '/not found/{print $1}' | sort -u | tr '\n' ' ')
+[ -z "$miss" ] || die "libraries not found on this machine (add their packages to debs/): $miss"
 # PHANTOM_MORE: more phantom options (e.g. phantom.mass_effect=8)
 if [ "$KIND" = irr ]; then
 	export PHANTOM_SET="phantom.lobulation=0.9 phantom.two_components=true ${PHANTOM_MORE:-}"
@@ -72,6 +81,9 @@ for s in $SEEDS; do
 		d=$KIND-$v-$s
 		echo "== $d"
 		tail -n +2 "$W/$d/phantom.tsv"
+		# a run without its row: the end of its log says why
+		[ "$(tail -n +2 "$W/$d/phantom.tsv" 2>/dev/null | wc -l)" -gt 0 ] ||
+			{ echo "-- no row; end of $d.log:"; tail -5 "$W/$d.log"; }
 		for t in "$W/$d"/ph*/tune.tsv; do
 			[ -f "$t" ] && { echo "-- $t"; cat "$t"; }
 		done
