@@ -110,7 +110,10 @@ static const armstg_param_t warp_params[] = {
 	  "from_points: 1 = one moving least-squares fit; 2 = the fit of its "
 	  "residuals at the points is added (twicing, Tukey 1977): a steep "
 	  "profile between the points (the push next to a grown tumour) is "
-	  "damped much less, linear fields stay exact (field.h)", NULL,
+	  "damped much less, linear fields stay exact away from the points' "
+	  "outer face (field.h); after the registration it made the irregular "
+	  "phantoms worse: the graphs use 1 (bench/pipeline/results.md, "
+	  "Session 10)", NULL,
 	  OFF(passes), 0 },
 	{ "attr", PT_STRING, "u", 0, 0, "",
 	  "from_points: name of the 3-component displacement attribute", NULL,
