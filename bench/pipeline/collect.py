@@ -4,7 +4,7 @@
   collect.py row KEY METHOD WALL_S EVAL_TSV [RUN_METRICS_TSV]
       one TSV row: the numbers of the metrics plugin's long tables, and the
       push depth [tune] chose (tune.tsv beside RUN_METRICS_TSV; "-": none)
-  collect.py trade FACTOR SPACING K SAFETY WALL_S RUN_DIR
+  collect.py trade FACTOR SPACING K SAFETY WALL_S RUN_DIR [IP_FACTOR]
       one row of bench/pipeline/run_tradeoff.sh
   collect.py summary ROWS_TSV
       mean over the first column's keys (seeds or cases) per method, Markdown
@@ -77,7 +77,8 @@ def read_rows(path):
 
 
 def trade(args):
-    factor, spacing, k, safety, wall, run = args
+    factor, spacing, k, safety, wall, run = args[:6]
+    ip = args[6] if len(args) > 6 else ""
     ev = read_metrics(run + "/eval/eval.tsv")
     tled = math.nan
     for r in read_rows(run + "/run.tsv"):
@@ -101,7 +102,7 @@ def trade(args):
     print("\t".join([factor, spacing, k, safety, nodes, str(steps), str(iters),
                      fmt(tled), wall, fmt(ev.get(("err_mean", "band"), math.nan)),
                      fmt(ev.get(("err_p95", "band"), math.nan)),
-                     fmt(ev.get(("S", "ventricles"), math.nan))]))
+                     fmt(ev.get(("S", "ventricles"), math.nan)), ip]))
 
 
 def summary(args):

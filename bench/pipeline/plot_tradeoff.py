@@ -19,7 +19,8 @@ def main(tsv, png):
                 if r.get("nodes") not in (None, "failed")]
     fig, ax = plt.subplots(1, 2, figsize=(11, 4.2))
     marks = {"spacing": ("o", "tab:blue"), "support_k": ("s", "tab:orange"),
-             "dt_safety": ("^", "tab:green")}
+             "dt_safety": ("^", "tab:green"),
+             "ip_factor": ("D", "tab:red")}
     for fac, (mk, col) in marks.items():
         rs = [r for r in rows if r["factor"] == fac]
         if not rs:
@@ -30,7 +31,8 @@ def main(tsv, png):
         for r, xi, yi in zip(rs, x, y):
             lab = {"spacing": r["spacing_mm"] + " mm",
                    "support_k": "K " + r["support_k"],
-                   "dt_safety": "safety " + r["dt_safety"]}[fac]
+                   "dt_safety": "safety " + r["dt_safety"],
+                   "ip_factor": "ip " + r.get("ip_factor", "")}[fac]
             ax[0].annotate(lab, (xi, yi), textcoords="offset points",
                            xytext=(4, 4), fontsize=8)
     ax[0].set_xscale("log")
