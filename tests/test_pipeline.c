@@ -6,9 +6,11 @@
  * baseline on the same phantom, through graph_load + graph_run exactly as
  * `armstg run` does.
  *
- * Reduced size (so the test runs in well under a minute on 2 cores): the
- * phantom on a 64x64x48 grid at 3 mm (the same anatomy, coarser); the rest
- * as graphs/demo.ini (nodes 6 mm apart, level-set layers 3 mm apart).
+ * Reduced size: the phantom on a 64x64x48 grid at 3 mm (the same anatomy,
+ * coarser) and two push depths for [tune] (4.5 and 6 mm, of five); the
+ * rest as graphs/demo.ini (nodes 6 mm apart, level-set layers 3 mm apart,
+ * the integration grid at 0.75 x the node spacing).  About 2.5 min on the
+ * 2-core box (three growths: two candidates and the final run).
  *
  * Asserted:
  *   - every output a user needs exists (atlas T1 and labels in patient space,
@@ -31,8 +33,13 @@
 #include "testutil.h"
 #include "graph.h"
 
+/* the graph's [tune] tries two push depths instead of five: the growth
+ * is the cost (6 mm nodes over the same brain as the full demo, about 50 s
+ * a depth on 2 cores with the graphs' ip_factor 0.75), and [tune] itself
+ * is tested in tests/test_tune.c; `make demo` runs all five */
 static const char *small[] = {
 	"phantom.spacing=3", "phantom.nx=64", "phantom.ny=64", "phantom.nz=48",
+	"tune.values=4.5, 6",
 };
 #define NSMALL ((int)(sizeof small / sizeof small[0]))
 
