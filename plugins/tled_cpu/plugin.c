@@ -145,8 +145,10 @@ static const armstg_param_t params[] = {
 	{ "ip_factor", PT_DOUBLE, "1", 0.25, 2, "",
 	  "integration grid spacing / mean node spacing, used when "
 	  "ip_spacing is 0 (1: about one point per node; the graphs use 0.75, "
-	  "2.4 points per node: the growth's band error on phantom 1 falls "
-	  "from 1.72 to 1.42 mm, bench/pipeline/results.md Session 11)",
+	  "2.4 points per node: on phantom 1 the band error of the growth "
+	  "alone falls from 1.72 to 1.42 mm at 0.74, and of the registered "
+	  "run from 1.342 to 1.278 mm at 0.75; bench/pipeline/results.md "
+	  "Session 11)",
 	  NULL, offsetof(priv_t, ip_factor), 0 },
 	{ "dt", PT_DOUBLE, "0", 0, 10, "s",
 	  "explicit time step (0: dt_safety x the critical time step)", NULL,
