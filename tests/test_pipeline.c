@@ -9,7 +9,7 @@
  * Reduced size: the phantom on a 64x64x48 grid at 3 mm (the same anatomy,
  * coarser) and two push depths for [tune] (4.5 and 6 mm, of five); the
  * rest as graphs/demo.ini (nodes 6 mm apart, level-set layers 3 mm apart,
- * the integration grid at 0.75 x the node spacing).  About 2.5 min on the
+ * the integration grid at 0.75 x the node spacing).  About 2 min (122-125 s) on the
  * 2-core box (three growths: two candidates and the final run).
  *
  * Asserted:
