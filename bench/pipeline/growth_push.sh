@@ -8,7 +8,9 @@
 # (deform_mm 0), noise and bias (so the true field is the mass effect
 # alone); graphs/armstg.ini and graphs/spherical.ini with
 # register.iterations=0 (the total warp is the growth alone); then
-# growth_push.py compares the warp and the nodes with the truth.  --set
+# growth_push.py compares the warp and the nodes with the truth, and
+# push_direction.py splits the nodes' push by direction (towards the
+# ventricles / away).  --set
 # options go to both graphs (e.g. --set grow.drive=collocated);
 # PHANTOM_SET="phantom.lobulation=0.9 ..." changes the phantom; PUSH_MM
 # the push depth (6).  Needs
@@ -48,4 +50,7 @@ for seed in $SEEDS; do
 	echo "seed $seed"
 	# shellcheck disable=SC2086
 	[ -z "$runs" ] || bench/.venv/bin/python bench/pipeline/growth_push.py "$ph" $runs
+	# the push towards the ventricles and away from them (Session 12)
+	# shellcheck disable=SC2086
+	[ -z "$runs" ] || bench/.venv/bin/python bench/pipeline/push_direction.py "$ph" $runs
 done
