@@ -38,6 +38,8 @@
  *                converged, dt_s, dt_crit_s, kinetic_energy_J,
  *                strain_energy_J, residual_N, err_est_mm, jmin, driven,
  *                swept, collocated, contacts, integration_points, wall_s
+ *                (front = expand: growth_stretch and core_volume_fraction,
+ *                the core's deformed volume / the tumour's)
  *
  * Growth replay (thesis section 3.6, in 3-D).  Layers are replayed from the
  * innermost to layer 0.  At the innermost layer of a component the tumour
@@ -62,6 +64,12 @@
  * spacings of the layer (unless the winding number of the layer's
  * oriented points clearly disagrees: a wrong normal), the winding number
  * farther away (layer_side).
+ *
+ * front = expand (experimental; measured worse, bench/pipeline/results.md
+ * Session 13) replaces the replay: the core inside the innermost kept layer
+ * grows by a volumetric growth stretch (F = F_e g I, tled_ip_stress_c)
+ * until its deformed volume is the tumour's; see the block in
+ * tled_process.
  */
 #include <math.h>
 #include <stddef.h>
@@ -212,8 +220,16 @@ static const armstg_param_t params[] = {
 	  "13-24 % of the phantom's true mass effect) or push (default: the "
 	  "tissue at the front stays attached to it and is pushed over the "
 	  "last push_mm of growth; with nodal driving: collocated driving "
-	  "inverted under the push; bench/pipeline/results.md)",
-	  "sweep|push", offsetof(priv_t, front), 0 },
+	  "inverted under the push; bench/pipeline/results.md) or expand "
+	  "(experimental, not for use: nothing is driven; the core push_mm "
+	  "deep inside the tumour grows by an isotropic growth stretch until "
+	  "its deformed volume is the tumour's, so it pushes further where "
+	  "the tissue is soft; after registration it was worse than push on "
+	  "default phantoms 1-8, 1.294 against 1.212 mm at a fixed depth, and "
+	  "lost to the sphere grown the same way on 7 of 8; a component "
+	  "thinner than 2 push_mm is refused; bench/pipeline/results.md, "
+	  "Session 13)",
+	  "sweep|push|expand", offsetof(priv_t, front), 0 },
 	{ "push_mm", PT_DOUBLE, "6", 0, 1000, "mm",
 	  "front=push: depth of growth that pushes tissue: the tumour starts "
 	  "as the surface this deep inside the final tumour (a contour "
@@ -460,9 +476,16 @@ static void on_progress(void *ctx, int iter, int max_iter, double err_m)
 	double f = h->nsteps > 0 ? (h->step + (double)iter / max_iter) /
 					   h->nsteps
 				 : -1;
-	h->st->host->progress(h->st, f, "growth step %d/%d iteration %d "
-			      "error %.3g mm", h->step + 1, h->nsteps, iter,
-			      err_m / TLED_MM);
+	/* nsteps < 0: the number of steps is not known in advance
+	 * (front = expand stops at the tumour's volume) */
+	if (h->nsteps < 0)
+		h->st->host->progress(h->st, f, "growth step %d iteration %d "
+				      "error %.3g mm", h->step + 1, iter,
+				      err_m / TLED_MM);
+	else
+		h->st->host->progress(h->st, f, "growth step %d/%d iteration "
+				      "%d error %.3g mm", h->step + 1, h->nsteps,
+				      iter, err_m / TLED_MM);
 }
 
 /*
@@ -572,7 +595,7 @@ static int tled_process(armstg_stage_t *st)
 	 * nodal driving the parameter u_a is not it); front=sweep keeps the
 	 * legacy reading of the parameter (tled_solver_nodal_u: u^h only
 	 * with collocated driving), with which its figures were measured */
-	node_u_fn pos_u = pv->front == 1 ? tled_solver_uh : tled_solver_nodal_u;
+	node_u_fn pos_u = pv->front >= 1 ? tled_solver_uh : tled_solver_nodal_u;
 
 	if (!pn || pn->base.type != MSG_POINTSET)
 		return H->fail(st, ARMSTG_EINVAL, "input 'nodes' is not a "
@@ -863,7 +886,7 @@ static int tled_process(armstg_stage_t *st)
 	 * md_k: linear between layer k and its parent) and becomes the
 	 * innermost; deeper layers are dropped.  (Until 2026-11 the depth was
 	 * rounded to whole layers: push_mm 2-4 all gave 3 mm.) */
-	if (pv->front == 1) {
+	if (pv->front >= 1) {
 		int w = 0;
 		for (int j = 0; j < nl;) {
 			int c = L[j].comp, e = j;
@@ -971,6 +994,280 @@ static int tled_process(armstg_stage_t *st)
 	double h = m.h_mean;
 	double margin = pv->sweep_margin * h;
 	int64_t ndriven = 0;
+	if (pv->front == 2) {
+		/* front = expand: the tumour core (inside the innermost kept
+		 * layer, push_mm deep) grows by an isotropic growth stretch g
+		 * at its integration points (volumetric growth, F = F_e g I;
+		 * tled_ip_stress_c), ramped from 1 to g_c with
+		 * g_c^3 = V(outer layer) / V(core) per component c, so the
+		 * core reaches the final tumour's volume if the tissue did not
+		 * resist.  Nothing is driven: the push is set by the load, so
+		 * the core grows further where the tissue beside it is soft
+		 * (the kinematic front pushes the same distance everywhere;
+		 * bench/pipeline/results.md, Session 12).  The final outline is
+		 * left to the registration. */
+		int nc = 0;
+		for (int j = 0; j < nl; j++)
+			if (L[j].comp + 1 > nc)
+				nc = L[j].comp + 1;
+		int *inner = malloc((size_t)(nc > 0 ? nc : 1) * sizeof *inner);
+		int *outer0 = malloc((size_t)(nc > 0 ? nc : 1) * sizeof *outer0);
+		double *vin = calloc((size_t)(nc > 0 ? nc : 1), sizeof *vin);
+		double *vout = calloc((size_t)(nc > 0 ? nc : 1), sizeof *vout);
+		double *gc = calloc((size_t)(nc > 0 ? nc : 1), sizeof *gc);
+		int32_t *ipc = malloc((size_t)(m.nip > 0 ? m.nip : 1) * sizeof *ipc);
+		double *gto = malloc((size_t)(m.nip > 0 ? m.nip : 1) * sizeof *gto);
+		m.ipg = malloc((size_t)(m.nip > 0 ? m.nip : 1) * sizeof *m.ipg);
+		if (!inner || !outer0 || !vin || !vout || !gc || !ipc || !gto ||
+		    !m.ipg) {
+			free(inner); free(outer0); free(vin); free(vout);
+			free(gc); free(ipc); free(gto);
+			goto oom;
+		}
+		for (int c = 0; c < nc; c++)
+			inner[c] = outer0[c] = -1;
+		for (int j = 0; j < nl; j++) {
+			int c = L[j].comp;
+			if (L[j].layer == 0)
+				outer0[c] = j;
+			if (inner[c] < 0 || L[j].layer > L[inner[c]].layer)
+				inner[c] = j;
+		}
+		for (int64_t p = 0; p < m.nip; p++) {
+			const double *X = m.ipX + 3 * p;
+			m.ipg[p] = 1;
+			ipc[p] = -1;
+			for (int c = 0; c < nc; c++) {
+				if (inner[c] < 0 || outer0[c] < 0)
+					continue;
+				if (layer_side(&L[outer0[c]], X, h) < 0)
+					vout[c] += m.ipV[p];
+				if (ipc[p] < 0 &&
+				    layer_side(&L[inner[c]], X, h) < 0) {
+					ipc[p] = c;
+					vin[c] += m.ipV[p];
+				}
+			}
+		}
+		const char *bad = NULL;
+		int cbad = -1;
+		for (int c = 0; c < nc && !bad; c++) {
+			if (inner[c] < 0 || outer0[c] < 0)
+				continue;
+			if (!(vin[c] > 0)) {
+				bad = "no integration point lies inside its core "
+				      "(push_mm as deep as the tumour, or the tumour "
+				      "thinner than the integration grid)";
+				cbad = c;
+				break;
+			}
+			gc[c] = cbrt(vout[c] / vin[c]);
+			if (!(gc[c] >= 1) || gc[c] > 3) {
+				bad = "its core would have to grow more than 27x in "
+				      "volume (lower push_mm)";
+				cbad = c;
+			}
+		}
+		if (bad) {
+			rc = H->fail(st, ARMSTG_EINVAL, "front=expand, push_mm %g: "
+				     "tumour component %d: %s (core %.3g ml, "
+				     "tumour %.3g ml)", pv->push_mm, cbad, bad,
+				     vin[cbad] * 1e6, vout[cbad] * 1e6);
+			free(inner); free(outer0); free(vin); free(vout);
+			free(gc); free(ipc); free(gto);
+			goto out;
+		}
+		for (int64_t p = 0; p < m.nip; p++)
+			if (ipc[p] >= 0)
+				m.ipmat[p] = MAT_TUMOUR;
+		/* the core's nodes are the tumour (output 'tumour').  Seed
+		 * nodes (a cluster a fraction of a spacing wide, placed for
+		 * the kinematic growth) are held where they are: free, their
+		 * relative motion is a nearly zero-energy mode and dynamic
+		 * relaxation did not settle in 10 000 iterations */
+		int ncomp = 0;
+		for (int c = 0; c < nc; c++)
+			ncomp += inner[c] >= 0 && outer0[c] >= 0;
+		for (int64_t a = 0; a < m.n; a++) {
+			if (m.kind[a] == TLED_FIXED)
+				continue;
+			if (m.label[a] == TL_SEED)
+				m.kind[a] = TLED_DRIVEN;
+			for (int c = 0; c < nc; c++)
+				if (inner[c] >= 0 && outer0[c] >= 0 &&
+				    layer_side(&L[inner[c]], m.X + 3 * a, h) < 0) {
+					dcomp[a] = c;
+					dstep[a] = 0;
+					ndriven++;
+					break;
+				}
+		}
+		/* Volume control.  Component c's core grows until its deformed
+		 * volume V_c(g) = sum_p V_p det(I + grad u)_p (its integration
+		 * points; m^3) reaches the tumour's, V_t = vout[c], within
+		 * EXPAND_VTOL: the same amount of growth as the kinematic
+		 * fronts, whose last layer is the tumour's outline, while the
+		 * tissue decides where it goes.  Unresisted, V_c = V_in g^3
+		 * (gc[c]); the tissue's resistance makes more growth necessary.
+		 * Each step takes g along the secant of log V against log g
+		 * (slope 3 at the start, clamped to [0.3, 3]), by at most
+		 * EXPAND_DG: an increment is ramped over ramp_iter iterations (a
+		 * sudden one made the adaptive damping's Rayleigh estimate
+		 * collapse: undamped ringing).  A core that cannot reach V_t at
+		 * g = EXPAND_GMAX (27x its volume) stops there with a warning. */
+		const double EXPAND_DG = 0.08, EXPAND_VTOL = 0.01,
+			     EXPAND_GMAX = 3;
+		const int EXPAND_MAXSTEPS = 64;
+		double *gcur = malloc((size_t)(nc > 0 ? nc : 1) * sizeof *gcur);
+		double *gprev = malloc((size_t)(nc > 0 ? nc : 1) * sizeof *gprev);
+		double *vcur = malloc((size_t)(nc > 0 ? nc : 1) * sizeof *vcur);
+		double *vprev = malloc((size_t)(nc > 0 ? nc : 1) * sizeof *vprev);
+		double *gradu = malloc((size_t)(m.nip > 0 ? m.nip : 1) * 9 *
+				       sizeof *gradu);
+#define EXPAND_FREE()                                                      \
+	do {                                                               \
+		free(inner); free(outer0); free(vin); free(vout); free(gc); \
+		free(ipc); free(gto); free(gcur); free(gprev); free(vcur);   \
+		free(vprev); free(gradu);                                  \
+	} while (0)
+		if (!gcur || !gprev || !vcur || !vprev || !gradu) {
+			EXPAND_FREE();
+			goto oom;
+		}
+		for (int c = 0; c < nc; c++) {
+			gcur[c] = gprev[c] = 1;
+			vcur[c] = vprev[c] = vin[c];
+		}
+		double gun = 1;
+		for (int c = 0; c < nc; c++)
+			if (inner[c] >= 0 && outer0[c] >= 0 && gc[c] > gun)
+				gun = gc[c];
+		H->log(st, LOG_INFO, "front=expand, push_mm %g: %d component(s); "
+		       "unresisted, a growth stretch of %.3f (core volume x %.2f) "
+		       "would reach the tumour's volume", pv->push_mm, ncomp,
+		       gun, gun * gun * gun);
+		hk.nsteps = -1;
+		int step = 0, capped = 0;
+		for (;; step++) {
+			/* the next stretch per component */
+			int grow_any = 0;
+			double gshow = 1, vfrac = INFINITY;
+			for (int c = 0; c < nc; c++) {
+				if (inner[c] < 0 || outer0[c] < 0)
+					continue;
+				double fr = vcur[c] / vout[c];
+				if (fr < vfrac)
+					vfrac = fr;
+				if (fr >= 1 - EXPAND_VTOL || gcur[c] >= EXPAND_GMAX) {
+					if (fr < 1 - EXPAND_VTOL)
+						capped = 1;
+					continue;
+				}
+				double slope = 3;
+				if (gcur[c] > gprev[c] && vcur[c] > vprev[c])
+					slope = log(vcur[c] / vprev[c]) /
+						log(gcur[c] / gprev[c]);
+				if (!(slope >= 0.3))
+					slope = 0.3;
+				if (slope > 3)
+					slope = 3;
+				double gn = gcur[c] * exp(log(1 / fr) / slope);
+				if (gn > gcur[c] + EXPAND_DG)
+					gn = gcur[c] + EXPAND_DG;
+				if (gn > EXPAND_GMAX)
+					gn = EXPAND_GMAX;
+				gprev[c] = gcur[c];
+				vprev[c] = vcur[c];
+				gcur[c] = gn;
+				grow_any = 1;
+			}
+			if (!grow_any || step >= EXPAND_MAXSTEPS) {
+				if (capped || step >= EXPAND_MAXSTEPS)
+					H->log(st, LOG_WARN, "front=expand: the core "
+					       "reached %.0f %% of the tumour's volume "
+					       "(growth stretch %.3g, %d steps): the "
+					       "push is weaker than the tumour's; a "
+					       "deeper push_mm helps", 100 * vfrac,
+					       EXPAND_GMAX, step);
+				break;
+			}
+			double ts = now_s();
+			hk.step = step;
+			for (int64_t p = 0; p < m.nip; p++) {
+				gto[p] = ipc[p] >= 0 ? gcur[ipc[p]] : 1;
+				if (gto[p] > gshow)
+					gshow = gto[p];
+			}
+			so.ipg_to = gto;
+			char tag[64];
+			snprintf(tag, sizeof tag, "growth step %d (expand, g %.3f)",
+				 step + 1, gshow);
+			tled_relax_stats_t rs;
+			memset(&rs, 0, sizeof rs);
+			int r = tled_relax(&s, &so, NULL, tag, &rs, err, sizeof err);
+			if (r) {
+				EXPAND_FREE();
+				rc = r == -2 ? H->fail(st, ARMSTG_ECANCELLED, "%s", err)
+					     : H->fail(st, strstr(err, "above the critical")
+							       ? ARMSTG_EINVAL
+							       : ARMSTG_ENUMERIC,
+						       "%s", err);
+				goto out;
+			}
+			if (!rs.converged)
+				H->log(st, LOG_WARN, "%s: not converged after "
+				       "%d iterations (estimated error %.3g mm)",
+				       tag, rs.iters, rs.err_est / TLED_MM);
+			/* the cores' deformed volumes */
+			tled_model_grad(&m, s.u, gradu);
+			for (int c = 0; c < nc; c++)
+				vcur[c] = 0;
+			for (int64_t p = 0; p < m.nip; p++) {
+				if (ipc[p] < 0)
+					continue;
+				const double *G = gradu + 9 * p;
+				double F0 = 1 + G[0], F4 = 1 + G[4], F8 = 1 + G[8];
+				double dJ = F0 * (F4 * F8 - G[5] * G[7]) -
+					    G[1] * (G[3] * F8 - G[5] * G[6]) +
+					    G[2] * (G[3] * G[7] - F4 * G[6]);
+				vcur[ipc[p]] += m.ipV[p] * dJ;
+			}
+			vfrac = INFINITY;
+			for (int c = 0; c < nc; c++)
+				if (inner[c] >= 0 && outer0[c] >= 0 &&
+				    vcur[c] / vout[c] < vfrac)
+					vfrac = vcur[c] / vout[c];
+			int64_t row = H->tab_add_row(tab);
+			H->tab_set_num(tab, row, "step", step + 1);
+			H->tab_set_num(tab, row, "layer", -1);
+			H->tab_set_num(tab, row, "growth_stretch", gshow);
+			H->tab_set_num(tab, row, "core_volume_fraction", vfrac);
+			H->tab_set_num(tab, row, "iterations", rs.iters);
+			H->tab_set_num(tab, row, "converged", rs.converged);
+			H->tab_set_num(tab, row, "dt_s", rs.dt);
+			H->tab_set_num(tab, row, "dt_crit_s", rs.dt_crit);
+			H->tab_set_num(tab, row, "kinetic_energy_J", rs.ke);
+			H->tab_set_num(tab, row, "strain_energy_J", rs.W);
+			H->tab_set_num(tab, row, "residual_N", rs.res);
+			H->tab_set_num(tab, row, "err_est_mm", rs.err_est / TLED_MM);
+			H->tab_set_num(tab, row, "jmin", rs.jmin);
+			H->tab_set_num(tab, row, "driven", 0);
+			H->tab_set_num(tab, row, "swept", 0);
+			H->tab_set_num(tab, row, "collocated", 0);
+			H->tab_set_num(tab, row, "attached", 0);
+			H->tab_set_num(tab, row, "contacts", (double)rs.contacts);
+			H->tab_set_num(tab, row, "integration_points", (double)m.nip);
+			H->tab_set_num(tab, row, "wall_s", now_s() - ts);
+			H->progress(st, vfrac < 1 ? vfrac : 1, "growth step %d "
+				    "(expand, g %.3f): core at %.1f %% of the "
+				    "tumour's volume, %d iterations", step + 1,
+				    gshow, 100 * vfrac, rs.iters);
+		}
+		H->log(st, LOG_INFO, "front=expand: %d growth steps", step);
+		EXPAND_FREE();
+#undef EXPAND_FREE
+		so.ipg_to = NULL;
+	} else
 	for (int step = 0; step <= lmax; step++) {
 		int l = lmax - step;
 		double ts = now_s();
@@ -1247,7 +1544,7 @@ static int tled_process(armstg_stage_t *st)
 	 * smaller than the tumour (phantom tumour Dice 0.75 without the
 	 * outline, 0.88 with it) */
 	int64_t nouter = 0;
-	if (pv->front == 1)
+	if (pv->front >= 1)
 		for (int j = 0; j < nl; j++)
 			if (L[j].layer == 0)
 				nouter += L[j].n;

@@ -485,6 +485,7 @@ void tled_model_free(tled_model_t *m)
 	free(m->ipX);
 	free(m->ipV);
 	free(m->ipmat);
+	free(m->ipg);
 	free(m->ipptr);
 	free(m->ipnode);
 	free(m->entip);

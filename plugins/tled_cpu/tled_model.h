@@ -184,6 +184,11 @@ typedef struct tled_model {
 	double *ipX;        /* 3*nip reference positions, m */
 	double *ipV;        /* nip volumes (weights), m^3 */
 	int32_t *ipmat;     /* nip tled_mat_id */
+	double *ipg;        /* nip isotropic growth stretch g (NULL: 1
+	                       everywhere; front = expand).  F = F_e F_g,
+	                       F_g = g I: the stress is that of F_e = F / g
+	                       (Rodriguez, Hoger & McCulloch 1994, J Biomech
+	                       27:455), see tled_ip_stress_c */
 	int64_t *ipptr;     /* nip+1: CSR into the support arrays */
 	int64_t *ipnode;    /* support node ids */
 	int64_t *entip;     /* ip of each support entry */

@@ -55,6 +55,7 @@ void tled_solver_free(tled_solver_t *s)
 	free(s->s0);
 	free(s->ipact);
 	free(s->ipoff);
+	free(s->ipg0);
 	free(s->dkind);
 	free(s->cnode);
 	free(s->cbar);
@@ -847,7 +848,27 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	if (s->lmax > 0 && lam < 1e-10 * s->lmax)
 		lam = 1e-10 * s->lmax;
 	double c = o->damping >= 0 ? o->damping : 2 * sqrt(lam);
-	int ramp = target ? (o->ramp_iter > 0 ? o->ramp_iter : 1) : 0;
+	int grow = o->ipg_to && m->ipg;
+	if (grow) {
+		if (!s->ipg0)
+			s->ipg0 = malloc((size_t)(m->nip > 0 ? m->nip : 1) *
+					 sizeof *s->ipg0);
+		if (!s->ipg0)
+			return errf(err, errsize, "%s: out of memory (growth)",
+				    tag);
+		memcpy(s->ipg0, m->ipg, (size_t)m->nip * sizeof *s->ipg0);
+	}
+	double Wgrow = 0; /* strain energy the growth adds at the start state */
+	if (grow) {
+		tled_force_info_t f0 = { 0 }, f1 = { 0 };
+		ops->forces(m, s->ipact, s->u, s->VP, s->f, &f0);
+		memcpy(m->ipg, o->ipg_to, (size_t)m->nip * sizeof *m->ipg);
+		ops->forces(m, s->ipact, s->u, s->VP, s->f, &f1);
+		memcpy(m->ipg, s->ipg0, (size_t)m->nip * sizeof *m->ipg);
+		if (isfinite(f1.W - f0.W))
+			Wgrow = fabs(f1.W - f0.W);
+	}
+	int ramp = target || grow ? (o->ramp_iter > 0 ? o->ramp_iter : 1) : 0;
 	double Eh2 = m->mat[MAT_BRAIN].E * m->h_mean * m->h_mean;
 	double E0 = -1, Wext = 0, Wfloor = 1e-30;
 	double blow = o->blowup > 1 ? o->blowup : 100;
@@ -868,7 +889,17 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	int it;
 	s->contacts = 0;
 	for (it = 1; it <= o->max_iter; it++) {
-		double r = !target ? 1 : it > ramp ? 1 : (double)it / ramp;
+		double r = !target && !grow ? 1 : it > ramp ? 1 : (double)it / ramp;
+		/* growth stretches (linear ramp); the strain energy they add
+		 * (estimated at the start state, Wgrow) is work supplied: it
+		 * enters the energy watchdog like the driver's work */
+		if (grow && it <= ramp + 1) {
+			for (int64_t p = 0; p < m->nip; p++)
+				m->ipg[p] = s->ipg0[p] +
+					    r * (o->ipg_to[p] - s->ipg0[p]);
+			if (it == ramp + 1 || it == 1)
+				Wext += 0.5 * Wgrow;
+		}
 		/* prescribed displacements of driven nodes (linear ramp) */
 		if (!ebc && target && it <= ramp + 1) {
 			for (int64_t a = 0; a < n; a++)

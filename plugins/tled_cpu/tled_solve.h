@@ -88,6 +88,11 @@ typedef struct tled_solver_opts {
 	void (*progress)(void *ctx, int iter, int max_iter, double err_m);
 	void *hook_ctx;
 	const tled_ops_t *ops;
+	/* volumetric growth (front = expand): nip growth stretches the ips
+	 * are ramped to over ramp_iter iterations, from the model's current
+	 * m->ipg (NULL: no growth change).  The growth's work enters the
+	 * energy watchdog as the rise of the strain energy at fixed u. */
+	const double *ipg_to;
 } tled_solver_opts_t;
 
 void tled_solver_opts_default(tled_solver_opts_t *o);
@@ -97,6 +102,7 @@ void tled_solver_opts_default(tled_solver_opts_t *o);
 typedef struct tled_solver {
 	tled_model_t *m;    /* kinds (m->kind) are read live */
 	double *u, *v, *f, *fprev, *VP, *ustart, *tmp, *tmp2, *s0;
+	double *ipg0;       /* nip: growth stretches at the start of a ramp */
 	uint8_t *ipact;
 	uint8_t *ipoff;     /* nip: 1 = integration point switched off (inside
 	                       the grown tumour: a cavity carries no stress) */

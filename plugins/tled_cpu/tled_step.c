@@ -73,8 +73,21 @@ void tled_ip_stress_c(const tled_model_t *m, const uint8_t *ipact,
 			}
 			const tled_material_t *mt = &m->mat[m->ipmat[p]];
 			double S[9], W;
-			double J = tled_neohooke(F, mt->mu, mt->kappa, S, &W);
-			double V = m->ipV[p];
+			/* volumetric growth F = F_e F_g, F_g = g I: S_e from
+			 * F_e = F / g; per reference volume P = J_g F_e S_e
+			 * F_g^-T = g F S_e and W = g^3 W_e; J below is det F_e */
+			double g = m->ipg ? m->ipg[p] : 1, V = m->ipV[p];
+			double J;
+			if (g != 1) {
+				double Fe[9];
+				for (int i = 0; i < 9; i++)
+					Fe[i] = F[i] / g;
+				J = tled_neohooke(Fe, mt->mu, mt->kappa, S, &W);
+				W *= g * g * g;
+				V *= g;
+			} else {
+				J = tled_neohooke(F, mt->mu, mt->kappa, S, &W);
+			}
 			if (!(J > 0) || !isfinite(W)) {
 				nbad++;
 				if (badl < 0)
@@ -84,7 +97,7 @@ void tled_ip_stress_c(const tled_model_t *m, const uint8_t *ipact,
 				jl = J;
 				ipl = p;
 			}
-			Wsum += V * W;
+			Wsum += m->ipV[p] * W;
 			for (int i = 0; i < 3; i++)
 				for (int j = 0; j < 3; j++)
 					P[3 * i + j] = V * (F[3 * i] * S[j] +

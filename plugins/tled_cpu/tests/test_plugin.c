@@ -422,6 +422,118 @@ static void test_ip_factor(void **state)
 	assert_true(r0[1] > 0.8 && r0[1] < 3.25);
 }
 
+static void print_steps(const grow_out_t *g)
+{
+	for (int64_t r = 0; r < g->tb->nrows; r++)
+		print_message("  step %g: g %.3f, %g iterations, converged %g, "
+			      "error estimate %.3g mm, jmin %.3f, dt %.3g s\n",
+			      tab_num(g->tb, "step", r),
+			      tab_num(g->tb, "growth_stretch", r),
+			      tab_num(g->tb, "iterations", r),
+			      tab_num(g->tb, "converged", r),
+			      tab_num(g->tb, "err_est_mm", r),
+			      tab_num(g->tb, "jmin", r),
+			      tab_num(g->tb, "dt_s", r));
+}
+
+/* mean radial displacement of the non-boundary nodes 5-9 mm from the
+ * centre within 45 degrees of +x (towards a soft ball) and of -x */
+static void cone_push(const grow_out_t *g, double *plus, double *minus)
+{
+	double sp = 0, sm = 0;
+	int np = 0, nm = 0;
+	for (int64_t i = 0; i < g->on->n; i++) {
+		const double *x = g->nodes->xyz + 3 * i, *d = g->u->data + 3 * i;
+		if (g->nodes->label[i] == TL_BOUNDARY ||
+		    g->nodes->label[i] == TL_SEED)
+			continue;
+		double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+		if (r < 5 || r > 9)
+			continue;
+		double ur = (d[0] * x[0] + d[1] * x[1] + d[2] * x[2]) / r;
+		double c = x[0] / r;
+		if (c > 0.7) {
+			sp += ur;
+			np++;
+		} else if (c < -0.7) {
+			sm += ur;
+			nm++;
+		}
+	}
+	assert_true(np > 3 && nm > 3);
+	*plus = sp / np;
+	*minus = sm / nm;
+}
+
+/*
+ * front = expand (experimental): the tumour core grows by an isotropic
+ * growth stretch g and nothing is driven, so the push follows the load.
+ * Ball of 24 mm (quick 20), h 3, tumour 7 mm, a soft ball (E 10 Pa,
+ * radius 4.5 mm) at x = 13 mm beside it, as in test_soft_ventricles.
+ * Asserted: every step converges with det F > 0; the volume control stops
+ * with the core's deformed volume at 99-103 % of the tumour's, at a
+ * stretch no lower than the unresisted one (g^3 = tumour / core volume,
+ * 2.0 here: the tissue resists); with expand the push 5-9 mm from the
+ * centre towards the soft ball is more than 1.3x the push away from it,
+ * and the push front's ratio is lower than expand's (the kinematic front
+ * moves the tumour boundary by the same distance in every direction;
+ * bench/pipeline/results.md, Sessions 12-13).  Measured (2-core box,
+ * full size): push 1.896 / 1.891 mm, ratio 1.00; expand 1.551 / 1.138 mm,
+ * ratio 1.36, 13 steps to g 2.033 and 100.1 % of the volume.
+ */
+static void test_grow_expand(void **state)
+{
+	(void)state;
+	const double Rb = tled_quick() ? 20 : 24, h = 3, Rt = 7;
+	double rat[2], pl[2], mi[2];
+	const char *front[] = { "front=push", "front=expand" };
+	for (int k = 0; k < 2; k++) {
+		teardown(NULL);
+		g_csf[0] = 13;
+		g_csf[3] = 4.5;
+		grow_out_t g;
+		const char *params[] = { "tol=0.005", "e_csf=10", front[k],
+					 "push_mm=3", NULL };
+		grow_ok(Rb, h, Rt, 3, params, &g);
+		for (int64_t r = 0; r < g.tb->nrows; r++) {
+			assert_true(tab_num(g.tb, "converged", r) == 1);
+			assert_true(tab_num(g.tb, "jmin", r) > 0);
+		}
+		if (k == 1) {
+			print_steps(&g);
+			int64_t last = g.tb->nrows - 1;
+			double fr = tab_num(g.tb, "core_volume_fraction", last);
+			double gl = tab_num(g.tb, "growth_stretch", last);
+			print_message("expand: core at %.4f of the tumour's volume, "
+				      "g %.4f\n", fr, gl);
+			assert_true(fr >= 0.99 && fr <= 1.03);
+			assert_true(gl >= 2.0 && gl < 2.4);
+		}
+		cone_push(&g, &pl[k], &mi[k]);
+		rat[k] = pl[k] / mi[k];
+		print_message("%s: push 5-9 mm towards the soft ball %.3f mm, "
+			      "away %.3f mm, ratio %.2f (%lld steps)\n",
+			      front[k], pl[k], mi[k], rat[k],
+			      (long long)g.tb->nrows);
+	}
+	assert_true(mi[1] > 0.2);
+	assert_true(rat[1] > 1.3);
+	assert_true(rat[1] > rat[0] + 0.1);
+	/* a core too small to grow (push_mm 6.5 of the 7 mm tumour: the
+	 * innermost layer, 1.5 mm, holds no integration point or would have
+	 * to grow more than 27x) is refused, naming the front and the
+	 * component, before any step */
+	teardown(NULL);
+	grow_out_t g;
+	char err[1024] = "";
+	const char *thin[] = { "front=expand", "push_mm=6.5", NULL };
+	int rc = grow(Rb, h, Rt, 3, thin, &g, err, sizeof err);
+	print_message("push_mm 6.5: %s\n", err);
+	assert_int_not_equal(rc, 0);
+	assert_non_null(strstr(err, "front=expand, push_mm 6.5"));
+	assert_non_null(strstr(err, "tumour component"));
+}
+
 /* push_mm between layers: the starting layer is moved out along its map
  * to the requested depth, so the push is continuous in push_mm.  Same
  * ball as test_grow_push, layers 1.625 mm apart: push_mm 1.625 (one
@@ -829,6 +941,7 @@ int main(void)
 		cmocka_unit_test_teardown(test_grow_collocated, teardown),
 		cmocka_unit_test_teardown(test_grow_push, teardown),
 		cmocka_unit_test_teardown(test_push_depth, teardown),
+		cmocka_unit_test_teardown(test_grow_expand, teardown),
 		cmocka_unit_test_teardown(test_ip_factor, teardown),
 		cmocka_unit_test_teardown(test_soft_ventricles, teardown),
 		cmocka_unit_test_teardown(test_touch_boundary, teardown),
@@ -836,5 +949,8 @@ int main(void)
 		cmocka_unit_test_teardown(test_labels_domain, teardown),
 		cmocka_unit_test_teardown(test_wrong_normals, teardown),
 	};
+	/* TEST_FILTER=test_grow_expand: one test (cmocka's glob filter) */
+	if (getenv("TEST_FILTER"))
+		cmocka_set_test_filter(getenv("TEST_FILTER"));
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
