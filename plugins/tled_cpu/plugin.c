@@ -580,6 +580,47 @@ static int cmp_layer(const void *a, const void *b)
 
 /* ------------------------------------------------------------ process */
 
+/* One growth step's dynamic relaxation (tled_relax) with the stage's error
+ * mapping: cancelled, a time step above the critical one (bad parameter)
+ * or a numerical failure (NaN, inversion, energy blow-up); a step that
+ * did not converge is logged.  0, or the rc of H->fail. */
+static int relax_step(armstg_stage_t *st, tled_solver_t *s,
+		      const tled_solver_opts_t *so, const double *tgt,
+		      const char *tag, tled_relax_stats_t *rs, char *err,
+		      size_t errsize)
+{
+	const armstg_host_t *H = st->host;
+	memset(rs, 0, sizeof *rs);
+	int r = tled_relax(s, so, tgt, tag, rs, err, errsize);
+	if (r == -2)
+		return H->fail(st, ARMSTG_ECANCELLED, "%s", err);
+	if (r)
+		return H->fail(st, strstr(err, "above the critical")
+					   ? ARMSTG_EINVAL
+					   : ARMSTG_ENUMERIC,
+			       "%s", err);
+	if (!rs->converged)
+		H->log(st, LOG_WARN, "%s: not converged after %d iterations "
+		       "(estimated error %.3g mm)", tag, rs->iters,
+		       rs->err_est / TLED_MM);
+	return 0;
+}
+
+/* the relaxation's columns of a stats row (units in the column names) */
+static void tab_relax(const armstg_host_t *H, tab_t *tab, int64_t row,
+		      const tled_relax_stats_t *rs)
+{
+	H->tab_set_num(tab, row, "iterations", rs->iters);
+	H->tab_set_num(tab, row, "converged", rs->converged);
+	H->tab_set_num(tab, row, "dt_s", rs->dt);
+	H->tab_set_num(tab, row, "dt_crit_s", rs->dt_crit);
+	H->tab_set_num(tab, row, "kinetic_energy_J", rs->ke);
+	H->tab_set_num(tab, row, "strain_energy_J", rs->W);
+	H->tab_set_num(tab, row, "residual_N", rs->res);
+	H->tab_set_num(tab, row, "err_est_mm", rs->err_est / TLED_MM);
+	H->tab_set_num(tab, row, "jmin", rs->jmin);
+}
+
 static int tled_process(armstg_stage_t *st)
 {
 	const armstg_host_t *H = st->host;
@@ -1203,21 +1244,11 @@ static int tled_process(armstg_stage_t *st)
 			snprintf(tag, sizeof tag, "growth step %d (expand, g %.3f)",
 				 step + 1, gshow);
 			tled_relax_stats_t rs;
-			memset(&rs, 0, sizeof rs);
-			int r = tled_relax(&s, &so, NULL, tag, &rs, err, sizeof err);
-			if (r) {
+			rc = relax_step(st, &s, &so, NULL, tag, &rs, err, sizeof err);
+			if (rc) {
 				EXPAND_FREE();
-				rc = r == -2 ? H->fail(st, ARMSTG_ECANCELLED, "%s", err)
-					     : H->fail(st, strstr(err, "above the critical")
-							       ? ARMSTG_EINVAL
-							       : ARMSTG_ENUMERIC,
-						       "%s", err);
 				goto out;
 			}
-			if (!rs.converged)
-				H->log(st, LOG_WARN, "%s: not converged after "
-				       "%d iterations (estimated error %.3g mm)",
-				       tag, rs.iters, rs.err_est / TLED_MM);
 			/* the cores' deformed volumes */
 			tled_model_grad(&m, s.u, gradu);
 			for (int c = 0; c < nc; c++)
@@ -1242,15 +1273,7 @@ static int tled_process(armstg_stage_t *st)
 			H->tab_set_num(tab, row, "layer", -1);
 			H->tab_set_num(tab, row, "growth_stretch", gshow);
 			H->tab_set_num(tab, row, "core_volume_fraction", vfrac);
-			H->tab_set_num(tab, row, "iterations", rs.iters);
-			H->tab_set_num(tab, row, "converged", rs.converged);
-			H->tab_set_num(tab, row, "dt_s", rs.dt);
-			H->tab_set_num(tab, row, "dt_crit_s", rs.dt_crit);
-			H->tab_set_num(tab, row, "kinetic_energy_J", rs.ke);
-			H->tab_set_num(tab, row, "strain_energy_J", rs.W);
-			H->tab_set_num(tab, row, "residual_N", rs.res);
-			H->tab_set_num(tab, row, "err_est_mm", rs.err_est / TLED_MM);
-			H->tab_set_num(tab, row, "jmin", rs.jmin);
+			tab_relax(H, tab, row, &rs);
 			H->tab_set_num(tab, row, "driven", 0);
 			H->tab_set_num(tab, row, "swept", 0);
 			H->tab_set_num(tab, row, "collocated", 0);
@@ -1397,23 +1420,10 @@ static int tled_process(armstg_stage_t *st)
 			char tag[64];
 			snprintf(tag, sizeof tag, "growth step %d (layer %d)",
 				 step + 1, l);
-			int r = tled_relax(&s, &so, moved ? tgt : NULL, tag, &rs,
-					   err, sizeof err);
-			if (r == -2) {
-				rc = H->fail(st, ARMSTG_ECANCELLED, "%s", err);
+			rc = relax_step(st, &s, &so, moved ? tgt : NULL, tag, &rs,
+					err, sizeof err);
+			if (rc)
 				goto out;
-			}
-			if (r) {
-				rc = H->fail(st, strstr(err, "above the critical")
-						     ? ARMSTG_EINVAL
-						     : ARMSTG_ENUMERIC,
-					     "%s", err);
-				goto out;
-			}
-			if (!rs.converged)
-				H->log(st, LOG_WARN, "%s: not converged after "
-				       "%d iterations (estimated error %.3g mm)",
-				       tag, rs.iters, rs.err_est / TLED_MM);
 		}
 		/* sweep: free nodes now inside layer l join the tumour */
 		int64_t swept = 0;
@@ -1475,15 +1485,7 @@ static int tled_process(armstg_stage_t *st)
 		double wall = now_s() - ts;
 		H->tab_set_num(tab, row, "step", step + 1);
 		H->tab_set_num(tab, row, "layer", l);
-		H->tab_set_num(tab, row, "iterations", rs.iters);
-		H->tab_set_num(tab, row, "converged", rs.converged);
-		H->tab_set_num(tab, row, "dt_s", rs.dt);
-		H->tab_set_num(tab, row, "dt_crit_s", rs.dt_crit);
-		H->tab_set_num(tab, row, "kinetic_energy_J", rs.ke);
-		H->tab_set_num(tab, row, "strain_energy_J", rs.W);
-		H->tab_set_num(tab, row, "residual_N", rs.res);
-		H->tab_set_num(tab, row, "err_est_mm", rs.err_est / TLED_MM);
-		H->tab_set_num(tab, row, "jmin", rs.jmin);
+		tab_relax(H, tab, row, &rs);
 		H->tab_set_num(tab, row, "driven", (double)ndriven);
 		H->tab_set_num(tab, row, "swept", (double)swept);
 		H->tab_set_num(tab, row, "collocated", (double)ncol);
