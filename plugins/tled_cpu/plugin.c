@@ -1103,7 +1103,11 @@ static int tled_process(armstg_stage_t *st)
 				break;
 			}
 			gc[c] = cbrt(vout[c] / vin[c]);
-			if (!(gc[c] >= 1) || gc[c] > 3) {
+			if (!(gc[c] > 1 + 1e-9)) {
+				bad = "its core is the whole tumour: nothing would "
+				      "grow (push_mm > 0 needed)";
+				cbad = c;
+			} else if (gc[c] > 3) {
 				bad = "its core would have to grow more than 27x in "
 				      "volume (lower push_mm)";
 				cbad = c;

@@ -849,6 +849,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		lam = 1e-10 * s->lmax;
 	double c = o->damping >= 0 ? o->damping : 2 * sqrt(lam);
 	int grow = o->ipg_to && m->ipg;
+	double Wgrow = 0; /* strain energy the growth adds at the start state */
 	if (grow) {
 		if (!s->ipg0)
 			s->ipg0 = malloc((size_t)(m->nip > 0 ? m->nip : 1) *
@@ -857,9 +858,6 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			return errf(err, errsize, "%s: out of memory (growth)",
 				    tag);
 		memcpy(s->ipg0, m->ipg, (size_t)m->nip * sizeof *s->ipg0);
-	}
-	double Wgrow = 0; /* strain energy the growth adds at the start state */
-	if (grow) {
 		tled_force_info_t f0 = { 0 }, f1 = { 0 };
 		ops->forces(m, s->ipact, s->u, s->VP, s->f, &f0);
 		memcpy(m->ipg, o->ipg_to, (size_t)m->nip * sizeof *m->ipg);

@@ -532,6 +532,13 @@ static void test_grow_expand(void **state)
 	assert_int_not_equal(rc, 0);
 	assert_non_null(strstr(err, "front=expand, push_mm 6.5"));
 	assert_non_null(strstr(err, "tumour component"));
+	/* push_mm 0: the core is the whole tumour, nothing would grow */
+	teardown(NULL);
+	const char *none[] = { "front=expand", "push_mm=0", NULL };
+	rc = grow(Rb, h, Rt, 3, none, &g, err, sizeof err);
+	print_message("push_mm 0: %s\n", err);
+	assert_int_not_equal(rc, 0);
+	assert_non_null(strstr(err, "nothing would grow"));
 }
 
 /* push_mm between layers: the starting layer is moved out along its map
