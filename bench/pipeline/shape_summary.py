@@ -8,7 +8,8 @@ sphere have a row: mean band error (mm) of each, the paired mean difference
 ARMSTG - sphere with its standard error (sd / sqrt(n)), on how many seeds
 ARMSTG is lower, and the registered tumour's Dice of each model against the
 patient's tumour (the sphere's is how far the tumour is from a ball).  With
-direct demons rows: its mean and ARMSTG's percentage below it.  A later row
+direct demons rows: its mean and ARMSTG's percentage below it.  With
+`balls` rows (one ball per tumour component): their mean and ARMSTG - balls.  A later row
 of the same (lobulation, seed, method) replaces an earlier one; "failed"
 rows are counted and left out.  Markdown on stdout.
 """
@@ -58,8 +59,8 @@ def main():
     lobs = sorted({k[0] for k in rows} | {k[0] for k in failed})
     print("| lobulation | pairs | ARMSTG (mm) | sphere (mm) | ARMSTG - sphere (SE) "
           "| ARMSTG lower | tumour Dice ARMSTG / sphere | direct (mm) | ARMSTG vs direct "
-          "| failed runs |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "| balls (mm) | ARMSTG - balls (SE), n | failed runs |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for lob in lobs:
         seeds = sorted({k[1] for k in rows if k[0] == lob})
         pairs = [s for s in seeds if (lob, s, "armstg") in rows and (lob, s, "sphere") in rows]
@@ -75,10 +76,18 @@ def main():
             direct = f"{dm:.3f} | {100 * (am - dm) / dm:+.1f} % ({len(dseeds)})"
         else:
             direct = "- | -"
+        bseeds = [s for s in pairs if (lob, s, "balls") in rows]
+        if bseeds:
+            db_ = [rows[(lob, s, "armstg")]["band"] - rows[(lob, s, "balls")]["band"]
+                   for s in bseeds]
+            bm = mean([rows[(lob, s, "balls")]["band"] for s in bseeds])
+            balls = f"{bm:.3f} | {mean(db_):+.3f} ({se(db_):.3f}), {len(bseeds)}"
+        else:
+            balls = "- | -"
         nf = sum(1 for k in failed if k[0] == lob)
         print(f"| {lob:g} | {len(pairs)} | {mean(a):.3f} | {mean(b):.3f} "
               f"| {mean(d):+.3f} ({se(d):.3f}) | {sum(1 for x in d if x < 0)} of {len(d)} "
-              f"| {mean(da):.2f} / {mean(db):.2f} | {direct} | {nf} |")
+              f"| {mean(da):.2f} / {mean(db):.2f} | {direct} | {balls} | {nf} |")
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 #!/bin/sh
 # How much is the tumour's own shape worth?  ARMSTG against the semi-spherical
-# model (and optionally direct demons) on phantoms whose tumour goes from a
+# model (and optionally direct demons, or `balls`: the semi-spherical graph
+# with one ball per tumour component, labelmap components=each) on phantoms whose tumour goes from a
 # ball (phantom.lobulation=0) to strongly lobulated (0.9), everything else of
 # the phantom unchanged (the same seed gives the same atlas, inter-subject
 # warp, tumour centre and size, and the same mass_effect: the largest push of
@@ -25,8 +26,8 @@ SEEDS=${SEEDS:-1 2 3 4 5 6 7 8}
 VARIANTS=${VARIANTS:-base sphere}
 JOBS=${JOBS:-2}
 for v in $VARIANTS; do
-	case $v in base | sphere | direct) ;;
-	*) die "unknown variant '$v' (base, sphere or direct)" ;; esac
+	case $v in base | sphere | balls | direct) ;;
+	*) die "unknown variant '$v' (base, sphere, balls or direct)" ;; esac
 done
 for l in $LOBS; do
 	awk -v l="$l" 'BEGIN { exit !(l ~ /^[0-9.]+$/ && l >= 0 && l <= 1) }' ||
@@ -70,13 +71,19 @@ export TSV W EXTRA
 # shellcheck disable=SC2016
 xargs -P "$JOBS" -L 1 sh -c '
 	l=$1 s=$2 v=$3
-	case $v in base) m=armstg ;; *) m=$v ;; esac
+	x=""
+	case $v in
+	base) m=armstg ;;
+	balls) m=sphere x="--set sphere.components=each" ;;
+	*) m=$v ;;
+	esac
 	d=$W/l$l-$v-$s
 	PHANTOM_SET="phantom.lobulation=$l ${PHANTOM_MORE:-}" METHODS=$m \
-		sh bench/pipeline/run_phantom.sh --out "$d" --seeds "$s" $EXTRA \
+		sh bench/pipeline/run_phantom.sh --out "$d" --seeds "$s" $EXTRA $x \
 		>"$d.log" 2>&1
 	row=$(tail -n +2 "$d/phantom.tsv" 2>/dev/null | head -1)
-	[ -n "$row" ] || row="$s	$m	failed"
+	[ "$v" != balls ] || row=$(echo "$row" | sed "s/	sphere	/	balls	/")
+	[ -n "$row" ] || row="$s	$v	failed"
 	printf "%s\t%s\n" "$l" "$row" >>"$TSV"
 	echo "lobulation $l seed $s $m: $(echo "$row" | cut -f3)"
 ' task <"$W/tasks"

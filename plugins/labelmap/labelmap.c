@@ -11,6 +11,9 @@
  *   sphere  out = a ball with the same volume (mm^3) and centroid
  *           (world mm) as the input's non-zero voxels: the tumour of the
  *           semi-spherical baseline (thesis section 4.3.3)          (u8)
+ *           components=each: one such ball per 26-connected component
+ *           (a tumour's placement without its outline; Session 14 of
+ *           bench/pipeline/results.md)
  *   points  out = the solid body enclosed by the `points` input's points
  *           whose labels are in `labels` ('all' = every point,
  *           'nonzero' = label != 0, or a list '3-5'), rasterised on the
@@ -82,6 +85,7 @@ typedef struct {
 	double close;
 	int outline;
 	double offset;
+	int components;
 } priv_t;
 
 /* ports are referenced by name in graphs; new ones go at the end */
@@ -118,6 +122,11 @@ static const armstg_param_t params[] = {
 	  "op=points: outline moved outward by this, to cancel its mean sag "
 	  "between points; -1 = 0.15 x the mean nearest-neighbour distance",
 	  NULL, offsetof(priv_t, offset), 0 },
+	{ "components", PT_ENUM, "joint", 0, 0, "",
+	  "op=sphere: joint = one ball for the whole mask (the thesis's "
+	  "semi-spherical model); each = one ball per 26-connected component, "
+	  "of its volume at its centroid (balls that overlap are united)",
+	  "joint|each", offsetof(priv_t, components), 0 },
 };
 
 /* Parse "a,b-c,d" into ranges; 0 or -1. */
@@ -747,52 +756,115 @@ static int process(armstg_stage_t *st)
 		st->out[0] = &o->base;
 		return 0;
 	}
-	/* sphere of equal volume and centroid */
-	double c[3] = { 0, 0, 0 }, sp[3];
-	int64_t cnt = 0;
-	for (int k = 0; k < in->nz; k++)
-		for (int j = 0; j < in->ny; j++)
-			for (int i = 0; i < in->nx; i++)
-				if (vol_get(in, vol_idx(in, i, j, k)) != 0) {
-					double w[3];
-					vol_to_world(in, i, j, k, w);
-					c[0] += w[0];
-					c[1] += w[1];
-					c[2] += w[2];
-					cnt++;
-				}
-	if (!cnt)
+	/* sphere(s) of equal volume and centroid */
+	int32_t *lab = malloc((size_t)nv * sizeof *lab);
+	int64_t *q = malloc((size_t)nv * sizeof *q);
+	if (!lab || !q) {
+		free(lab);
+		free(q);
+		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
+	}
+	/* component labels: 0 outside, 1.. inside (all 1 for joint) */
+	int32_t ncomp = 0;
+	for (int64_t e = 0; e < nv; e++)
+		lab[e] = vol_get(in, e) != 0 ? -1 : 0;
+	for (int64_t e = 0; e < nv; e++) {
+		if (lab[e] != -1)
+			continue;
+		if (p->components == 0 && ncomp == 1) {
+			lab[e] = 1;
+			continue;
+		}
+		int32_t id = ++ncomp;
+		int64_t qh = 0, qt = 0;
+		q[qt++] = e;
+		lab[e] = id;
+		while (qh < qt && p->components == 1) {
+			int64_t v = q[qh++];
+			int i = (int)(v % in->nx), j = (int)((v / in->nx) % in->ny),
+			    k = (int)(v / ((int64_t)in->nx * in->ny));
+			for (int dk = -1; dk <= 1; dk++)
+				for (int dj = -1; dj <= 1; dj++)
+					for (int di = -1; di <= 1; di++) {
+						int a = i + di, b = j + dj, c = k + dk;
+						if (a < 0 || b < 0 || c < 0 ||
+						    a >= in->nx || b >= in->ny ||
+						    c >= in->nz)
+							continue;
+						int64_t w = vol_idx(in, a, b, c);
+						if (lab[w] == -1) {
+							lab[w] = id;
+							q[qt++] = w;
+						}
+					}
+		}
+	}
+	free(q);
+	if (!ncomp) {
+		free(lab);
 		return st->host->fail(st, ARMSTG_EINVAL,
 				      "input mask is empty: no sphere to fit");
-	for (int a = 0; a < 3; a++)
-		c[a] /= (double)cnt;
-	vol_spacing(in, sp);
+	}
+	double *cs = calloc((size_t)ncomp * 4, sizeof *cs); /* x y z count */
+	if (!cs) {
+		free(lab);
+		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
+	}
+	for (int k = 0; k < in->nz; k++)
+		for (int j = 0; j < in->ny; j++)
+			for (int i = 0; i < in->nx; i++) {
+				int32_t id = lab[vol_idx(in, i, j, k)];
+				if (id <= 0)
+					continue;
+				double w[3];
+				vol_to_world(in, i, j, k, w);
+				double *c = cs + 4 * (id - 1);
+				c[0] += w[0];
+				c[1] += w[1];
+				c[2] += w[2];
+				c[3]++;
+			}
+	free(lab);
 	double A = fabs(in->affine[0] * (in->affine[5] * in->affine[10] -
 					 in->affine[6] * in->affine[9]) -
 			in->affine[1] * (in->affine[4] * in->affine[10] -
 					 in->affine[6] * in->affine[8]) +
 			in->affine[2] * (in->affine[4] * in->affine[9] -
 					 in->affine[5] * in->affine[8]));
-	double volume = (double)cnt * A;                      /* mm^3 */
-	double R = cbrt(3.0 * volume / (4.0 * M_PI));         /* mm */
+	for (int32_t m = 0; m < ncomp; m++) {
+		double *c = cs + 4 * m;
+		for (int a = 0; a < 3; a++)
+			c[a] /= c[3];
+		double volume = c[3] * A;                          /* mm^3 */
+		c[3] = cbrt(3.0 * volume / (4.0 * M_PI));          /* mm */
+		st->host->log(st, LOG_INFO, "sphere %d of %d: centre (%.1f, "
+			      "%.1f, %.1f) mm, radius %.2f mm (volume %.0f "
+			      "mm^3)", m + 1, ncomp, c[0], c[1], c[2], c[3],
+			      volume);
+	}
 	vol_t *o = st->host->vol_new(in->nx, in->ny, in->nz, 1, DT_U8,
 				     in->affine);
-	if (!o)
+	if (!o) {
+		free(cs);
 		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
+	}
 	uint8_t *d = o->data;
 	for (int k = 0; k < in->nz; k++)
 		for (int j = 0; j < in->ny; j++)
 			for (int i = 0; i < in->nx; i++) {
 				double w[3];
 				vol_to_world(in, i, j, k, w);
-				double r2 = (w[0] - c[0]) * (w[0] - c[0]) +
-					    (w[1] - c[1]) * (w[1] - c[1]) +
-					    (w[2] - c[2]) * (w[2] - c[2]);
-				d[vol_idx(in, i, j, k)] = r2 <= R * R;
+				uint8_t hit = 0;
+				for (int32_t m = 0; m < ncomp && !hit; m++) {
+					const double *c = cs + 4 * m;
+					double r2 = (w[0] - c[0]) * (w[0] - c[0]) +
+						    (w[1] - c[1]) * (w[1] - c[1]) +
+						    (w[2] - c[2]) * (w[2] - c[2]);
+					hit = r2 <= c[3] * c[3];
+				}
+				d[vol_idx(in, i, j, k)] = hit;
 			}
-	st->host->log(st, LOG_INFO, "sphere: centre (%.1f, %.1f, %.1f) mm, "
-		      "radius %.2f mm (volume %.0f mm^3)", c[0], c[1], c[2], R,
-		      volume);
+	free(cs);
 	st->out[0] = &o->base;
 	return 0;
 }

@@ -111,6 +111,63 @@ static void test_sphere(void **s)
 	msg_unref(&v->base);
 }
 
+/* components=each: two separate cubes (1000 and 343 mm^3) give two balls of
+ * their own volumes at their own centroids; joint gives one ball of the
+ * total volume at the common centroid, which lies between them */
+static void test_sphere_each(void **s)
+{
+	(void)s;
+	double A[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
+	vol_t *v = vol_new(60, 40, 40, 1, DT_U8, A);
+	for (int k = 15; k < 25; k++)
+		for (int j = 15; j < 25; j++)
+			for (int i = 5; i < 15; i++)
+				((uint8_t *)v->data)[vol_idx(v, i, j, k)] = 1;
+	for (int k = 16; k < 23; k++)
+		for (int j = 16; j < 23; j++)
+			for (int i = 40; i < 47; i++)
+				((uint8_t *)v->data)[vol_idx(v, i, j, k)] = 1;
+	msg_freeze(&v->base);
+	const msg_t *in[3] = { &v->base, NULL };
+	msg_t *out[1];
+	char err[512];
+	const char *pe[] = { "op=sphere", "components=each", NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), pe, in, out, err, sizeof err), 0);
+	const vol_t *o = (const vol_t *)out[0];
+	double n[2] = { 0, 0 }, cx[2] = { 0, 0 }, cy = 0;
+	for (int k = 0; k < 40; k++)
+		for (int j = 0; j < 40; j++)
+			for (int i = 0; i < 60; i++)
+				if (((uint8_t *)o->data)[vol_idx(o, i, j, k)]) {
+					int h = i >= 30;
+					n[h]++;
+					cx[h] += i;
+					cy += j;
+				}
+	/* voxelised balls: volumes within 5 % (a 343 mm^3 ball: 8 %) */
+	assert_true(fabs(n[0] - 1000) < 50);
+	assert_true(fabs(n[1] - 343) < 28);
+	assert_float_equal(cx[0] / n[0], 9.5, 0.05);
+	assert_float_equal(cx[1] / n[1], 43.0, 0.05);
+	assert_float_equal(cy / (n[0] + n[1]), (1000 * 19.5 + 343 * 19.0) / 1343,
+			   0.1);
+	msg_unref(out[0]);
+	/* joint: one ball of 1343 mm^3 at x = (1000 9.5 + 343 43) / 1343 */
+	const char *pj[] = { "op=sphere", "components=joint", NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), pj, in, out, err, sizeof err), 0);
+	o = (const vol_t *)out[0];
+	double nj = 0, xj = 0;
+	for (int64_t e = 0; e < vol_nvox(o); e++)
+		if (((uint8_t *)o->data)[e]) {
+			nj++;
+			xj += (double)(e % 60);
+		}
+	assert_true(fabs(nj - 1343) < 60);
+	assert_float_equal(xj / nj, (1000 * 9.5 + 343 * 43.0) / 1343, 0.1);
+	msg_unref(out[0]);
+	msg_unref(&v->base);
+}
+
 static void test_nan(void **s)
 {
 	(void)s;
@@ -624,6 +681,7 @@ int main(void)
 		cmocka_unit_test(test_select),
 		cmocka_unit_test(test_paint_world),
 		cmocka_unit_test(test_sphere),
+		cmocka_unit_test(test_sphere_each),
 		cmocka_unit_test(test_nan),
 		cmocka_unit_test(test_points_ball),
 		cmocka_unit_test(test_points_shell),
