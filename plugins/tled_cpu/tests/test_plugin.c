@@ -468,7 +468,7 @@ static void cone_push(const grow_out_t *g, double *plus, double *minus)
 /*
  * front = expand (experimental): the tumour core grows by an isotropic
  * growth stretch g and nothing is driven, so the push follows the load.
- * Ball of 24 mm (quick 20), h 3, tumour 7 mm, a soft ball (E 10 Pa,
+ * Ball of 24 mm (also in the quick run), h 3, tumour 7 mm, a soft ball (E 10 Pa,
  * radius 4.5 mm) at x = 13 mm beside it, as in test_soft_ventricles.
  * Asserted: every step converges with det F > 0; the volume control stops
  * with the core's deformed volume at 99-103 % of the tumour's, at a
@@ -484,7 +484,11 @@ static void cone_push(const grow_out_t *g, double *plus, double *minus)
 static void test_grow_expand(void **state)
 {
 	(void)state;
-	const double Rb = tled_quick() ? 20 : 24, h = 3, Rt = 7;
+	/* full size in the quick (asan-test) run too: in the 20 mm ball the
+	 * soft ball reaches within 2.5 mm of the fixed boundary and the
+	 * expand step 12 did not converge (10 000 iterations, estimated
+	 * error 2.8 mm; session 14) */
+	const double Rb = 24, h = 3, Rt = 7;
 	double rat[2], pl[2], mi[2];
 	const char *front[] = { "front=push", "front=expand" };
 	for (int k = 0; k < 2; k++) {
