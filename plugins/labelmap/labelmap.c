@@ -679,6 +679,47 @@ static int op_points(armstg_stage_t *st)
 	return 0;
 }
 
+/* 26-connected components of the non-zero voxels: lab[e] = 0 outside,
+ * 1..n inside; returns n, or -1 when out of memory */
+static int32_t label_26(const vol_t *in, int32_t *lab)
+{
+	int64_t nv = vol_nvox(in);
+	int64_t *q = malloc((size_t)nv * sizeof *q);
+	if (!q)
+		return -1;
+	int32_t n = 0;
+	for (int64_t e = 0; e < nv; e++)
+		lab[e] = vol_get(in, e) != 0 ? -1 : 0;
+	for (int64_t e = 0; e < nv; e++) {
+		if (lab[e] != -1)
+			continue;
+		int64_t qh = 0, qt = 0;
+		q[qt++] = e;
+		lab[e] = ++n;
+		while (qh < qt) {
+			int64_t v = q[qh++];
+			int i = (int)(v % in->nx), j = (int)((v / in->nx) % in->ny),
+			    k = (int)(v / ((int64_t)in->nx * in->ny));
+			for (int dk = -1; dk <= 1; dk++)
+				for (int dj = -1; dj <= 1; dj++)
+					for (int di = -1; di <= 1; di++) {
+						int a = i + di, b = j + dj, c = k + dk;
+						if (a < 0 || b < 0 || c < 0 ||
+						    a >= in->nx || b >= in->ny ||
+						    c >= in->nz)
+							continue;
+						int64_t w = vol_idx(in, a, b, c);
+						if (lab[w] == -1) {
+							lab[w] = n;
+							q[qt++] = w;
+						}
+					}
+		}
+	}
+	free(q);
+	return n;
+}
+
 static int process(armstg_stage_t *st)
 {
 	priv_t *p = st->priv;
@@ -758,48 +799,17 @@ static int process(armstg_stage_t *st)
 	}
 	/* sphere(s) of equal volume and centroid */
 	int32_t *lab = malloc((size_t)nv * sizeof *lab);
-	int64_t *q = malloc((size_t)nv * sizeof *q);
-	if (!lab || !q) {
+	if (!lab)
+		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
+	int32_t ncomp = p->components == 1 ? label_26(in, lab) : 0;
+	if (ncomp < 0) {
 		free(lab);
-		free(q);
 		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
 	}
-	/* component labels: 0 outside, 1.. inside (all 1 for joint) */
-	int32_t ncomp = 0;
-	for (int64_t e = 0; e < nv; e++)
-		lab[e] = vol_get(in, e) != 0 ? -1 : 0;
-	for (int64_t e = 0; e < nv; e++) {
-		if (lab[e] != -1)
-			continue;
-		if (p->components == 0 && ncomp == 1) {
-			lab[e] = 1;
-			continue;
-		}
-		int32_t id = ++ncomp;
-		int64_t qh = 0, qt = 0;
-		q[qt++] = e;
-		lab[e] = id;
-		while (qh < qt && p->components == 1) {
-			int64_t v = q[qh++];
-			int i = (int)(v % in->nx), j = (int)((v / in->nx) % in->ny),
-			    k = (int)(v / ((int64_t)in->nx * in->ny));
-			for (int dk = -1; dk <= 1; dk++)
-				for (int dj = -1; dj <= 1; dj++)
-					for (int di = -1; di <= 1; di++) {
-						int a = i + di, b = j + dj, c = k + dk;
-						if (a < 0 || b < 0 || c < 0 ||
-						    a >= in->nx || b >= in->ny ||
-						    c >= in->nz)
-							continue;
-						int64_t w = vol_idx(in, a, b, c);
-						if (lab[w] == -1) {
-							lab[w] = id;
-							q[qt++] = w;
-						}
-					}
-		}
-	}
-	free(q);
+	if (p->components == 0)
+		for (int64_t e = 0; e < nv; e++)
+			if ((lab[e] = vol_get(in, e) != 0))
+				ncomp = 1;
 	if (!ncomp) {
 		free(lab);
 		return st->host->fail(st, ARMSTG_EINVAL,

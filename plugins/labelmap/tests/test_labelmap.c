@@ -165,6 +165,30 @@ static void test_sphere_each(void **s)
 	assert_true(fabs(nj - 1343) < 60);
 	assert_float_equal(xj / nj, (1000 * 9.5 + 343 * 43.0) / 1343, 0.1);
 	msg_unref(out[0]);
+	/* the same voxels under a flipped x axis (world x = 59 - i, as an
+	 * LPS-stored image): the balls land on the same voxels */
+	double F[16] = { -1, 0, 0, 59, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
+	vol_t *f = vol_new(60, 40, 40, 1, DT_U8, F);
+	memcpy(f->data, v->data, (size_t)vol_nvox(v));
+	msg_freeze(&f->base);
+	const msg_t *inf[3] = { &f->base, NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), pe, inf, out, err, sizeof err), 0);
+	const uint8_t *a = ((const vol_t *)out[0])->data;
+	msg_t *out2[1];
+	assert_int_equal(tu_run(TU_PLUGIN(), pe, in, out2, err, sizeof err), 0);
+	const uint8_t *b0 = ((const vol_t *)out2[0])->data;
+	assert_memory_equal(a, b0, (size_t)vol_nvox(v));
+	msg_unref(out[0]);
+	msg_unref(out2[0]);
+	msg_unref(&f->base);
+	/* an empty mask: the same error as joint */
+	vol_t *z = vol_new(5, 5, 5, 1, DT_U8, A);
+	msg_freeze(&z->base);
+	const msg_t *inz[3] = { &z->base, NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), pe, inz, out, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_string_equal(err, "input mask is empty: no sphere to fit");
+	msg_unref(&z->base);
 	msg_unref(&v->base);
 }
 
