@@ -38,20 +38,11 @@ for v in $VARIANTS; do
 done
 [ -x "${BUILD:-carry/build}/armstg" ] || die "no ${BUILD:-carry/build}/armstg (carry the build)"
 KIND=$1
-# the libraries are put in place by rename, so that
-# batches started together never load a half-written library (SIGBUS)
-# (no debs/: the machine's own libraries)
-set -- debs/*.deb
-if [ ! -d /tmp/dl ] && [ -e "$1" ]; then
-	t=$(mktemp -d /tmp/dl.XXXXXX)
-	for f in debs/*.deb; do dpkg -x "$f" "$t"; done
-	mv -T "$t" /tmp/dl 2>/dev/null || rm -rf "$t"
-fi
-export LD_LIBRARY_PATH=/tmp/dl/usr/lib/x86_64-linux-gnu:/tmp/dl/lib/x86_64-linux-gnu
+. bench/pipeline/carried_libs.sh
+carried_libs
 export BUILD="${BUILD:-carry/build}" OMP_NUM_THREADS="${THREADS:-1}"
 export BENCH_PREBUILT=1
-miss=$(ldd "$BUILD/armstg" "$BUILD"/plugins/*.so 2>&1 | awk '/not found/{print $1}' | sort -u | tr '\n' ' ')
-[ -z "$miss" ] || die "libraries not found on this machine (add their packages to debs/): $miss"
+check_libs
 # PHANTOM_MORE: more phantom options (e.g. phantom.mass_effect=8)
 if [ "$KIND" = irr ]; then
 	export PHANTOM_SET="phantom.lobulation=0.9 phantom.two_components=true ${PHANTOM_MORE:-}"

@@ -33,16 +33,8 @@ for l in $LOBS; do
 	awk -v l="$l" 'BEGIN { exit !(l ~ /^[0-9.]+$/ && l >= 0 && l <= 1) }' ||
 		die "lobulation '$l' is not a number in [0, 1]"
 done
-havedebs=0
-for f in debs/*.deb; do [ -e "$f" ] && havedebs=1; break; done
-if [ $havedebs = 1 ]; then
-	if [ ! -d /tmp/dl ]; then
-		t=$(mktemp -d /tmp/dl.XXXXXX)
-		for f in debs/*.deb; do dpkg -x "$f" "$t"; done
-		mv -T "$t" /tmp/dl 2>/dev/null || rm -rf "$t"
-	fi
-	export LD_LIBRARY_PATH=/tmp/dl/usr/lib/x86_64-linux-gnu:/tmp/dl/lib/x86_64-linux-gnu
-fi
+. bench/pipeline/carried_libs.sh
+carried_libs
 export OMP_NUM_THREADS="${THREADS:-1}"
 [ "${BENCH_PREBUILT:-0}" = 1 ] || {
 	# build once here, not in every parallel run
@@ -51,8 +43,7 @@ export OMP_NUM_THREADS="${THREADS:-1}"
 }
 BUILD=${BUILD:-build}
 export BUILD
-miss=$(ldd "$BUILD/armstg" "$BUILD"/plugins/*.so 2>&1 | awk '/not found/{print $1}' | sort -u | tr '\n' ' ')
-[ -z "$miss" ] || die "libraries not found on this machine: $miss"
+check_libs
 OUT=${OUT:-out/shape_sweep}
 W=${W:-/tmp/shape_sweep}
 mkdir -p "$OUT" "$W"
