@@ -47,8 +47,11 @@ static const armstg_param_t params[] = {
 	  "spacing", NULL, offsetof(priv_t, steps), 0 },
 	{ "scheme", PT_ENUM, "exact", 0, 0, "",
 	  "exact: Euclidean distance to the sub-voxel boundary; weno: WENO5 "
-	  "Godunov level-set evolution with reinitialisation",
-	  "exact|weno", offsetof(priv_t, scheme), 0 },
+	  "Godunov level-set evolution with reinitialisation; inclusion: "
+	  "layer 0 and seeds as exact, deeper layers along the displacement "
+	  "of a uniformly expanding inclusion (Eshelby), spacing = mean "
+	  "travel between layers (README)",
+	  "exact|weno|inclusion", offsetof(priv_t, scheme), 0 },
 	{ "max_layers", PT_INT, "500", 2, 1000000, "layers",
 	  "most layers per component; the spacing grows when a tumour is "
 	  "deeper than max_layers-1 spacings", NULL,
@@ -161,7 +164,8 @@ static int ls_process(armstg_stage_t *st)
 		/* steps per layer: spacing = steps a dt, a dt = cfl/sum(1/h) */
 		.spacing = pv->steps > 0 ? pv->steps * pv->cfl / isum
 					 : pv->spacing,
-		.scheme = pv->scheme == 1 ? LS_WENO : LS_EXACT,
+		.scheme = pv->scheme == 2 ? LS_INCLUSION
+			  : pv->scheme == 1 ? LS_WENO : LS_EXACT,
 		.max_layers = pv->max_layers,
 		.min_voxels = pv->min_voxels,
 		.seed_spacing = pv->seed_spacing,

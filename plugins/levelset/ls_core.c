@@ -8,6 +8,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "ls_incl.h"
 #include "ls_kdtree.h"
 #include "ls_weno.h"
 
@@ -771,6 +772,7 @@ typedef struct comp_ctx {
 	ls_result_t *r;
 	int32_t label;
 	double spacing;
+	double dmax;         /* inscribed radius of the component (mm) */
 	double *prev;        /* WENO: phi at the previous layer */
 	int prev_k;
 	int nlayers;
@@ -1069,6 +1071,87 @@ static int weno_layer(void *ctxp, int k, const double *phi)
 	return 0;
 }
 
+/* inclusion scheme (ls_incl.h): layer-0 points flowed by the inclusion's
+ * field; seeds as for exact (pieces of the distance levels that vanish) */
+static int incl_emit(void *ctx, int k, int64_t n, const double *x,
+		     const double *parent, const double *normal, double depth)
+{
+	comp_ctx_t *cx = ctx;
+	ls_pts_t *o = &cx->r->contours;
+	if (pts_reserve(o, n))
+		return ARMSTG_ENOMEM;
+	for (int64_t q = 0; q < n; q++) {
+		int64_t i = o->n++;
+		memcpy(o->xyz + 3 * i, x + 3 * q, 3 * sizeof(double));
+		memcpy(o->parent + 3 * i, parent + 3 * q, 3 * sizeof(double));
+		memcpy(o->normal + 3 * i, normal + 3 * q, 3 * sizeof(double));
+		o->label[i] = cx->label;
+		o->layer[i] = k;
+		o->level[i] = depth;
+	}
+	if (cx->p->progress)
+		cx->p->progress(cx->p->user, fmin(1, depth / cx->dmax),
+				"inclusion layer");
+	if (cx->p->cancelled && cx->p->cancelled(cx->p->user))
+		return ARMSTG_ECANCELLED;
+	return 0;
+}
+
+static int incl_layers(comp_ctx_t *cx, int64_t i0, double *f)
+{
+	box_t *b = cx->b;
+	const ls_params_t *p = cx->p;
+	ls_result_t *r = cx->r;
+	const double spacing = cx->spacing;
+	int64_t ns = r->contours.n - i0;
+	double *x0 = malloc((size_t)(3 * ns) * sizeof *x0);
+	double *n0 = malloc((size_t)(3 * ns) * sizeof *n0);
+	double *g = malloc((size_t)b->nv * sizeof *g);
+	int rc = ARMSTG_ENOMEM;
+	if (!x0 || !n0 || !g)
+		goto out;
+	memcpy(x0, r->contours.xyz + 3 * i0, (size_t)(3 * ns) * sizeof *x0);
+	memcpy(n0, r->contours.normal + 3 * i0, (size_t)(3 * ns) * sizeof *n0);
+	ls_incl_grid_t gr = { { b->n[0], b->n[1], b->n[2] }, { 0 }, b->in };
+	memcpy(gr.A, b->A, sizeof gr.A);
+	for (int a = 0; a < 3; a++)
+		gr.A[4 * a + 3] += b->A[4 * a] * b->lo[0] +
+				   b->A[4 * a + 1] * b->lo[1] +
+				   b->A[4 * a + 2] * b->lo[2];
+	ls_incl_out_t out = { incl_emit, cx };
+	int nl = 1;
+	rc = ls_incl_flow(&gr, x0, n0, ns, spacing, cx->dmax, p->max_layers,
+			  &out, &nl);
+	if (rc) {
+		if (rc == -1) /* ls_incl_flow: out of memory */
+			rc = ARMSTG_ENOMEM;
+		if (rc == ARMSTG_ECANCELLED)
+			fail(r, rc, "cancelled");
+		goto out;
+	}
+	cx->nlayers = nl;
+	/* seeds as for exact: the distance levels' vanishing pieces */
+	int k = 1;
+	while (k * spacing < cx->dmax && k < p->max_layers)
+		k++;
+	for (int j = 0; j < k; j++) {
+		double L = j * spacing, Ln = (j + 1) * spacing;
+		for (int64_t v = 0; v < b->nv; v++) {
+			f[v] = b->d[v] - L;
+			g[v] = j + 1 < k ? b->d[v] - Ln : -1;
+		}
+		if (find_seeds(b, f, g, L, j < nl ? j : nl - 1, cx->label,
+			       p->seed_spacing, &r->seeds))
+			goto out;
+	}
+	rc = 0;
+out:
+	free(x0);
+	free(n0);
+	free(g);
+	return rc;
+}
+
 static int run_component(const ls_mask_t *mk, const int32_t *lab,
 			 const comp_t *c, int32_t label, const ls_params_t *p,
 			 ls_result_t *r, int ci)
@@ -1090,13 +1173,19 @@ static int run_component(const ls_mask_t *mk, const int32_t *lab,
 	r->comp_spacing[ci] = spacing;
 	r->comp_depth[ci] = dmax;
 	comp_ctx_t cx = { .b = &b, .p = p, .r = r, .label = label,
-			  .spacing = spacing };
+			  .spacing = spacing, .dmax = dmax };
+	int64_t i0 = r->contours.n;
 	if (emit_layer0(&cx))
 		goto out;
 	f = malloc((size_t)b.nv * sizeof *f);
 	if (!f)
 		goto out;
-	if (p->scheme == LS_EXACT) {
+	if (p->scheme == LS_INCLUSION) {
+		rc = incl_layers(&cx, i0, f);
+		if (rc)
+			goto out;
+		rc = ARMSTG_ENOMEM;
+	} else if (p->scheme == LS_EXACT) {
 		double *g = malloc((size_t)b.nv * sizeof *g);
 		if (!g)
 			goto out;

@@ -28,12 +28,14 @@
 
 #include <stdint.h>
 
-enum { LS_EXACT = 0, LS_WENO = 1 };
+enum { LS_EXACT = 0, LS_WENO = 1, LS_INCLUSION = 2 };
 
 typedef struct ls_params {
 	double speed;        /* a, mm per unit time (> 0) */
 	double spacing;      /* mm between recorded layers (> 0) */
-	int scheme;          /* LS_EXACT or LS_WENO */
+	int scheme;          /* LS_EXACT, LS_WENO or LS_INCLUSION (ls_incl.h:
+	                        layer 0 and seeds as exact, deeper layers
+	                        by the inclusion flow) */
 	int max_layers;      /* per component; spacing grows beyond */
 	int64_t min_voxels;  /* components with fewer voxels are ignored */
 	double seed_spacing; /* mm between seeds along a collapse curve */

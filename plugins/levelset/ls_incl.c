@@ -1,0 +1,321 @@
+/* SPDX-License-Identifier: MIT */
+/* The inclusion scheme: equations (1) and (2) of ls_incl.h. */
+#include "ls_incl.h"
+
+#include <fftw3.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "armstg/volmath.h"
+
+int ls_incl_field(const ls_incl_grid_t *g, double *v)
+{
+	const int n0 = g->n[0], n1 = g->n[1], n2 = g->n[2];
+	const int P0 = 2 * n0, P1 = 2 * n1, P2 = 2 * n2;
+	const int64_t nv = (int64_t)n0 * n1 * n2;
+	const int64_t np = (int64_t)P0 * P1 * P2;
+	const int64_t nh = (int64_t)P2 * P1 * (P0 / 2 + 1);
+	double *re = fftw_alloc_real((size_t)np);
+	fftw_complex *mh = fftw_alloc_complex((size_t)nh);
+	fftw_complex *kh = fftw_alloc_complex((size_t)nh);
+	int rc = -1;
+	fftw_plan fwd = NULL, bwd = NULL;
+	if (!re || !mh || !kh)
+		goto out;
+	/* FFTW is row-major with the last dimension fastest: (P2, P1, P0) */
+	fwd = fftw_plan_dft_r2c_3d(P2, P1, P0, re, kh, FFTW_ESTIMATE);
+	bwd = fftw_plan_dft_c2r_3d(P2, P1, P0, kh, re, FFTW_ESTIMATE);
+	if (!fwd || !bwd)
+		goto out;
+	/* the indicator, zero-padded */
+	memset(re, 0, (size_t)np * sizeof *re);
+	for (int e = 0; e < n2; e++)
+		for (int c = 0; c < n1; c++)
+			for (int a = 0; a < n0; a++)
+				re[((int64_t)e * P1 + c) * P0 + a] =
+					g->in[((int64_t)e * n1 + c) * n0 + a] ? 1 : 0;
+	fftw_execute_dft_r2c(fwd, re, mh);
+	const double *M = g->A;
+	const double dV = fabs(M[0] * (M[5] * M[10] - M[6] * M[9]) -
+			       M[1] * (M[4] * M[10] - M[6] * M[8]) +
+			       M[2] * (M[4] * M[9] - M[5] * M[8]));
+	static const double sub[4] = { -0.375, -0.125, 0.125, 0.375 };
+	for (int comp = 0; comp < 3; comp++) {
+		/* kernel K(o) = dV (A o)_comp / |A o|^3, o the wrapped offset,
+		 * averaged over 4^3 points of the source voxel near the origin */
+		for (int e = 0; e < P2; e++) {
+			int oe = e < n2 ? e : e - P2;
+			for (int c = 0; c < P1; c++) {
+				int oc = c < n1 ? c : c - P1;
+				for (int a = 0; a < P0; a++) {
+					int oa = a < n0 ? a : a - P0;
+					int near = abs(oa) <= 2 && abs(oc) <= 2 &&
+						   abs(oe) <= 2;
+					int ns = near ? 4 : 1;
+					double s = 0;
+					for (int i = 0; i < ns; i++)
+						for (int j = 0; j < ns; j++)
+							for (int k = 0; k < ns; k++) {
+								double o[3] = {
+									oa + (near ? sub[i] : 0),
+									oc + (near ? sub[j] : 0),
+									oe + (near ? sub[k] : 0)
+								};
+								double w[3];
+								for (int r = 0; r < 3; r++)
+									w[r] = g->A[4 * r] * o[0] +
+									       g->A[4 * r + 1] * o[1] +
+									       g->A[4 * r + 2] * o[2];
+								double r2 = w[0] * w[0] + w[1] * w[1] +
+									    w[2] * w[2];
+								if (r2 > 0)
+									s += w[comp] / (r2 * sqrt(r2));
+							}
+					re[((int64_t)e * P1 + c) * P0 + a] =
+						dV * s / (ns * ns * ns);
+				}
+			}
+		}
+		fftw_execute_dft_r2c(fwd, re, kh);
+		for (int64_t q = 0; q < nh; q++) {
+			double xr = kh[q][0] * mh[q][0] - kh[q][1] * mh[q][1];
+			double xi = kh[q][0] * mh[q][1] + kh[q][1] * mh[q][0];
+			kh[q][0] = xr / (double)np;
+			kh[q][1] = xi / (double)np;
+		}
+		fftw_execute_dft_c2r(bwd, kh, re);
+		for (int e = 0; e < n2; e++)
+			for (int c = 0; c < n1; c++)
+				for (int a = 0; a < n0; a++)
+					v[3 * (((int64_t)e * n1 + c) * n0 + a) + comp] =
+						re[((int64_t)e * P1 + c) * P0 + a];
+	}
+	rc = 0;
+	(void)nv;
+out:
+	if (fwd)
+		fftw_destroy_plan(fwd);
+	if (bwd)
+		fftw_destroy_plan(bwd);
+	fftw_free(re);
+	fftw_free(mh);
+	fftw_free(kh);
+	return rc;
+}
+
+typedef struct samp {
+	const ls_incl_grid_t *g;
+	double inv[16];
+	const double *f;    /* nv x nc */
+	int nc;
+} samp_t;
+
+/* trilinear value of the nc-component grid f at world x (clamped to the
+ * box) */
+static void sample(const samp_t *S, const double x[3], double *out)
+{
+	const int *n = S->g->n;
+	double t[3];
+	int i0[3];
+	for (int a = 0; a < 3; a++) {
+		double q = S->inv[4 * a] * x[0] + S->inv[4 * a + 1] * x[1] +
+			   S->inv[4 * a + 2] * x[2] + S->inv[4 * a + 3];
+		if (q < 0)
+			q = 0;
+		if (q > n[a] - 1)
+			q = n[a] - 1;
+		i0[a] = (int)floor(q);
+		if (i0[a] > n[a] - 2)
+			i0[a] = n[a] - 2 < 0 ? 0 : n[a] - 2;
+		t[a] = q - i0[a];
+	}
+	for (int c = 0; c < S->nc; c++)
+		out[c] = 0;
+	for (int k = 0; k < 2; k++)
+		for (int j = 0; j < 2; j++)
+			for (int i = 0; i < 2; i++) {
+				int a = i0[0] + i, b = i0[1] + j, e = i0[2] + k;
+				if (a >= n[0] || b >= n[1] || e >= n[2])
+					continue;
+				double w = (i ? t[0] : 1 - t[0]) *
+					   (j ? t[1] : 1 - t[1]) *
+					   (k ? t[2] : 1 - t[2]);
+				const double *p =
+					S->f + (size_t)S->nc *
+						       (size_t)(((int64_t)e * n[1] + b) * n[0] + a);
+				for (int c = 0; c < S->nc; c++)
+					out[c] += w * p[c];
+			}
+}
+
+/* world gradient of the 3-component field v at every voxel: gv[9 q + 3 c
+ * + r] = d v_c / d x_r (central differences, one-sided at the box faces) */
+static void field_grad(const ls_incl_grid_t *g, const double *v, double *gv)
+{
+	const int *n = g->n;
+	double inv[16];
+	aff_invert(g->A, inv);
+	for (int e = 0; e < n[2]; e++)
+		for (int b = 0; b < n[1]; b++)
+			for (int a = 0; a < n[0]; a++) {
+				int ijk[3] = { a, b, e };
+				int64_t q = ((int64_t)e * n[1] + b) * n[0] + a;
+				double di[3][3]; /* [c][axis] */
+				for (int ax = 0; ax < 3; ax++) {
+					int p[3] = { a, b, e }, m[3] = { a, b, e };
+					if (ijk[ax] + 1 < n[ax])
+						p[ax]++;
+					if (ijk[ax] > 0)
+						m[ax]--;
+					double den = p[ax] - m[ax];
+					int64_t qp = ((int64_t)p[2] * n[1] + p[1]) * n[0] + p[0];
+					int64_t qm = ((int64_t)m[2] * n[1] + m[1]) * n[0] + m[0];
+					for (int c = 0; c < 3; c++)
+						di[c][ax] = den > 0 ? (v[3 * qp + c] - v[3 * qm + c]) / den
+								    : 0;
+				}
+				/* d/dx_r = sum_ax d/di_ax * d i_ax / d x_r */
+				for (int c = 0; c < 3; c++)
+					for (int r = 0; r < 3; r++)
+						gv[9 * q + 3 * c + r] =
+							di[c][0] * inv[r] +
+							di[c][1] * inv[4 + r] +
+							di[c][2] * inv[8 + r];
+			}
+}
+
+static double mean_dist(const double *p, const double *q, int64_t n)
+{
+	double s = 0;
+	for (int64_t i = 0; i < n; i++) {
+		double dx = p[3 * i] - q[3 * i], dy = p[3 * i + 1] - q[3 * i + 1],
+		       dz = p[3 * i + 2] - q[3 * i + 2];
+		s += sqrt(dx * dx + dy * dy + dz * dz);
+	}
+	return n ? s / (double)n : 0;
+}
+
+/* one midpoint step of (2) of length dt (mm of boundary travel) for every
+ * point, with the deformation gradient J (row-major 3x3 per point);
+ * returns the mean speed |v| / vbar at the midpoints */
+static double flow_step(const samp_t *SV, const samp_t *SG, double ivb,
+			double dt, double *p, double *J, int64_t n)
+{
+	double sp = 0;
+	for (int64_t i = 0; i < n; i++) {
+		double *x = p + 3 * i, v1[3], xm[3], v2[3], G[9], Jn[9];
+		sample(SV, x, v1);
+		for (int c = 0; c < 3; c++)
+			xm[c] = x[c] - 0.5 * dt * ivb * v1[c];
+		sample(SV, xm, v2);
+		sample(SG, xm, G);
+		double *Ji = J + 9 * i;
+		/* J += -dt ivb G J  (G[c][r] = d v_c / d x_r) */
+		for (int r = 0; r < 3; r++)
+			for (int c = 0; c < 3; c++) {
+				double s = 0;
+				for (int k = 0; k < 3; k++)
+					s += G[3 * r + k] * Ji[3 * k + c];
+				Jn[3 * r + c] = Ji[3 * r + c] - dt * ivb * s;
+			}
+		memcpy(Ji, Jn, sizeof Jn);
+		for (int c = 0; c < 3; c++)
+			x[c] -= dt * ivb * v2[c];
+		sp += ivb * sqrt(v2[0] * v2[0] + v2[1] * v2[1] + v2[2] * v2[2]);
+	}
+	return n ? sp / (double)n : 0;
+}
+
+int ls_incl_flow(const ls_incl_grid_t *g, const double *x0, const double *n0,
+		 int64_t ns, double spacing, double dmax, int max_layers,
+		 const ls_incl_out_t *out, int *nlayers)
+{
+	const int64_t nv = (int64_t)g->n[0] * g->n[1] * g->n[2];
+	double *v = malloc((size_t)nv * 3 * sizeof *v);
+	double *gv = malloc((size_t)nv * 9 * sizeof *gv);
+	double *p = malloc((size_t)ns * 3 * sizeof *p);
+	double *prev = malloc((size_t)ns * 3 * sizeof *prev);
+	double *J = malloc((size_t)ns * 9 * sizeof *J);
+	double *nk = malloc((size_t)ns * 3 * sizeof *nk);
+	int rc = -1;
+	*nlayers = 1;
+	if (!v || !gv || !p || !prev || !J || !nk || ls_incl_field(g, v))
+		goto out;
+	field_grad(g, v, gv);
+	samp_t SV = { g, { 0 }, v, 3 }, SG = { g, { 0 }, gv, 9 };
+	aff_invert(g->A, SV.inv);
+	memcpy(SG.inv, SV.inv, sizeof SG.inv);
+	double vb = 0;
+	for (int64_t i = 0; i < ns; i++) {
+		double w[3];
+		sample(&SV, x0 + 3 * i, w);
+		vb += sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+	}
+	vb = ns ? vb / (double)ns : 0;
+	rc = 0;
+	if (!(vb > 0))
+		goto out; /* nothing to flow: layer 0 only */
+	const double ivb = 1 / vb;
+	memcpy(p, x0, (size_t)ns * 3 * sizeof *p);
+	memcpy(prev, x0, (size_t)ns * 3 * sizeof *p);
+	for (int64_t i = 0; i < ns; i++) {
+		double *Ji = J + 9 * i;
+		memset(Ji, 0, 9 * sizeof *Ji);
+		Ji[0] = Ji[4] = Ji[8] = 1;
+	}
+	const double hstep = spacing / 20;
+	double depth = 0, speed = 1;
+	for (int k = 1; k < max_layers && depth + spacing < dmax; k++) {
+		double m = 0;
+		int it = 0;
+		for (; it < 100000; it++) {
+			m = mean_dist(p, prev, ns);
+			double rem = spacing - m;
+			if (rem <= 1e-4 * spacing)
+				break;
+			double dt = rem / fmax(speed, 1e-9);
+			if (dt > hstep)
+				dt = hstep;
+			speed = flow_step(&SV, &SG, ivb, dt, p, J, ns);
+			if (!(speed > 1e-6))
+				break; /* the flow has stopped */
+		}
+		if (!(speed > 1e-6) || it >= 100000)
+			break;
+		depth += m;
+		for (int64_t i = 0; i < ns; i++) {
+			/* n_k ~ J^-T n_0 = cofactor(J) n_0 (det J > 0) */
+			const double *a = J + 9 * i, *q = n0 + 3 * i;
+			double C[9] = {
+				a[4] * a[8] - a[5] * a[7], a[5] * a[6] - a[3] * a[8],
+				a[3] * a[7] - a[4] * a[6], a[2] * a[7] - a[1] * a[8],
+				a[0] * a[8] - a[2] * a[6], a[1] * a[6] - a[0] * a[7],
+				a[1] * a[5] - a[2] * a[4], a[2] * a[3] - a[0] * a[5],
+				a[0] * a[4] - a[1] * a[3]
+			};
+			double *o = nk + 3 * i, nn = 0;
+			for (int r = 0; r < 3; r++) {
+				o[r] = C[3 * r] * q[0] + C[3 * r + 1] * q[1] +
+				       C[3 * r + 2] * q[2];
+				nn += o[r] * o[r];
+			}
+			nn = sqrt(nn);
+			for (int r = 0; r < 3; r++)
+				o[r] = nn > 0 ? o[r] / nn : q[r];
+		}
+		rc = out->layer(out->ctx, k, ns, p, prev, nk, depth);
+		if (rc)
+			goto out;
+		*nlayers = k + 1;
+		memcpy(prev, p, (size_t)ns * 3 * sizeof *p);
+	}
+out:
+	free(v);
+	free(gv);
+	free(p);
+	free(prev);
+	free(J);
+	free(nk);
+	return rc;
+}
