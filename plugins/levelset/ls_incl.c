@@ -227,6 +227,141 @@ static double flow_step(const samp_t *SV, const samp_t *SG, double ivb,
 	return n ? sp / (double)n : 0;
 }
 
+
+/* neighbours within r of every point of x (n x 3): CSR lists (start[n+1],
+ * nb) through a hash of cells of size r.  0 or -1 (out of memory). */
+typedef struct cell_key {
+	int64_t key, i;
+} cell_key_t;
+
+static int cmp_key(const void *a, const void *b)
+{
+	const cell_key_t *x = a, *y = b;
+	return x->key < y->key ? -1 : x->key > y->key ? 1 : (x->i > y->i) - (x->i < y->i);
+}
+
+static int64_t cell_of(const double *p, const double lo[3], double r, int c[3])
+{
+	for (int a = 0; a < 3; a++)
+		c[a] = (int)floor((p[a] - lo[a]) / r);
+	return ((int64_t)c[2] * 2097152 + c[1]) * 2097152 + c[0];
+}
+
+static int neighbours(const double *x, int64_t n, double r, int64_t **start,
+		      int64_t **nb)
+{
+	double lo[3] = { INFINITY, INFINITY, INFINITY };
+	for (int64_t i = 0; i < n; i++)
+		for (int a = 0; a < 3; a++)
+			lo[a] = fmin(lo[a], x[3 * i + a]);
+	cell_key_t *k = malloc((size_t)n * sizeof *k);
+	*start = calloc((size_t)n + 1, sizeof **start);
+	*nb = NULL;
+	if (!k || !*start) {
+		free(k);
+		return -1;
+	}
+	for (int64_t i = 0; i < n; i++) {
+		int c[3];
+		k[i].key = cell_of(x + 3 * i, lo, r, c);
+		k[i].i = i;
+	}
+	qsort(k, (size_t)n, sizeof *k, cmp_key);
+	int64_t cap = 32 * n + 16, m = 0;
+	*nb = malloc((size_t)cap * sizeof **nb);
+	if (!*nb) {
+		free(k);
+		return -1;
+	}
+	for (int64_t i = 0; i < n; i++) {
+		int c[3];
+		cell_of(x + 3 * i, lo, r, c);
+		for (int dz = -1; dz <= 1; dz++)
+			for (int dy = -1; dy <= 1; dy++)
+				for (int dx = -1; dx <= 1; dx++) {
+					if (c[0] + dx < 0 || c[1] + dy < 0 || c[2] + dz < 0)
+						continue;
+					int64_t key = ((int64_t)(c[2] + dz) * 2097152 +
+						       (c[1] + dy)) * 2097152 + (c[0] + dx);
+					/* first entry with this key */
+					int64_t a = 0, b = n;
+					while (a < b) {
+						int64_t h = (a + b) / 2;
+						if (k[h].key < key)
+							a = h + 1;
+						else
+							b = h;
+					}
+					for (; a < n && k[a].key == key; a++) {
+						int64_t j = k[a].i;
+						double d2 = 0;
+						for (int q = 0; q < 3; q++) {
+							double e = x[3 * j + q] - x[3 * i + q];
+							d2 += e * e;
+						}
+						if (d2 > r * r)
+							continue;
+						if (m == cap) {
+							cap *= 2;
+							int64_t *t = realloc(*nb, (size_t)cap * sizeof *t);
+							if (!t) {
+								free(k);
+								return -1;
+							}
+							*nb = t;
+						}
+						(*nb)[m++] = j;
+					}
+				}
+		(*start)[i + 1] = m;
+	}
+	free(k);
+	return 0;
+}
+
+/* unit normal of the point cloud p[nb[s..e)] (the smallest principal axis
+ * of its covariance, by power iteration on tr(C) I - C from t), oriented
+ * like t; t itself when fewer than 6 points */
+static void pca_normal(const double *p, const int64_t *nb, int64_t s,
+		       int64_t e, const double t[3], double out[3])
+{
+	memcpy(out, t, 3 * sizeof *out);
+	if (e - s < 6)
+		return;
+	double m[3] = { 0, 0, 0 }, C[9] = { 0 };
+	for (int64_t q = s; q < e; q++)
+		for (int a = 0; a < 3; a++)
+			m[a] += p[3 * nb[q] + a] / (double)(e - s);
+	for (int64_t q = s; q < e; q++) {
+		double d[3];
+		for (int a = 0; a < 3; a++)
+			d[a] = p[3 * nb[q] + a] - m[a];
+		for (int a = 0; a < 3; a++)
+			for (int b = 0; b < 3; b++)
+				C[3 * a + b] += d[a] * d[b];
+	}
+	double tr = C[0] + C[4] + C[8];
+	if (!(tr > 0))
+		return;
+	double y[3] = { t[0], t[1], t[2] };
+	for (int it = 0; it < 50; it++) {
+		double z[3], nz = 0;
+		for (int a = 0; a < 3; a++) {
+			z[a] = tr * y[a] - (C[3 * a] * y[0] + C[3 * a + 1] * y[1] +
+					    C[3 * a + 2] * y[2]);
+			nz += z[a] * z[a];
+		}
+		nz = sqrt(nz);
+		if (!(nz > 0))
+			return;
+		for (int a = 0; a < 3; a++)
+			y[a] = z[a] / nz;
+	}
+	double dot = y[0] * t[0] + y[1] * t[1] + y[2] * t[2];
+	for (int a = 0; a < 3; a++)
+		out[a] = dot < 0 ? -y[a] : y[a];
+}
+
 int ls_incl_flow(const ls_incl_grid_t *g, const double *x0, const double *n0,
 		 int64_t ns, double spacing, double dmax, int max_layers,
 		 const ls_incl_out_t *out, int *nlayers)
@@ -238,11 +373,20 @@ int ls_incl_flow(const ls_incl_grid_t *g, const double *x0, const double *n0,
 	double *prev = malloc((size_t)ns * 3 * sizeof *prev);
 	double *J = malloc((size_t)ns * 9 * sizeof *J);
 	double *nk = malloc((size_t)ns * 3 * sizeof *nk);
+	int64_t *nbs = NULL, *nbl = NULL;
 	int rc = -1;
 	*nlayers = 1;
 	if (!v || !gv || !p || !prev || !J || !nk || ls_incl_field(g, v))
 		goto out;
 	field_grad(g, v, gv);
+	/* the layer normals: principal axes of each point's layer-0
+	 * neighbourhood (within 2 voxels) where the points now are */
+	double hv = 0;
+	for (int a = 0; a < 3; a++)
+		hv = fmax(hv, sqrt(g->A[a] * g->A[a] + g->A[4 + a] * g->A[4 + a] +
+				   g->A[8 + a] * g->A[8 + a]));
+	if (neighbours(x0, ns, 2 * hv, &nbs, &nbl))
+		goto out;
 	samp_t SV = { g, { 0 }, v, 3 }, SG = { g, { 0 }, gv, 9 };
 	aff_invert(g->A, SV.inv);
 	memcpy(SG.inv, SV.inv, sizeof SG.inv);
@@ -294,15 +438,16 @@ int ls_incl_flow(const ls_incl_grid_t *g, const double *x0, const double *n0,
 				a[1] * a[5] - a[2] * a[4], a[2] * a[3] - a[0] * a[5],
 				a[0] * a[4] - a[1] * a[3]
 			};
-			double *o = nk + 3 * i, nn = 0;
+			double t[3], nn = 0;
 			for (int r = 0; r < 3; r++) {
-				o[r] = C[3 * r] * q[0] + C[3 * r + 1] * q[1] +
+				t[r] = C[3 * r] * q[0] + C[3 * r + 1] * q[1] +
 				       C[3 * r + 2] * q[2];
-				nn += o[r] * o[r];
+				nn += t[r] * t[r];
 			}
 			nn = sqrt(nn);
 			for (int r = 0; r < 3; r++)
-				o[r] = nn > 0 ? o[r] / nn : q[r];
+				t[r] = nn > 0 ? t[r] / nn : q[r];
+			pca_normal(p, nbl, nbs[i], nbs[i + 1], t, nk + 3 * i);
 		}
 		rc = out->layer(out->ctx, k, ns, p, prev, nk, depth);
 		if (rc)
@@ -311,6 +456,8 @@ int ls_incl_flow(const ls_incl_grid_t *g, const double *x0, const double *n0,
 		memcpy(prev, p, (size_t)ns * 3 * sizeof *p);
 	}
 out:
+	free(nbs);
+	free(nbl);
 	free(v);
 	free(gv);
 	free(p);

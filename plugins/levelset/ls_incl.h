@@ -35,9 +35,11 @@
  * indicator with the kernel averaged over each source voxel (4^3
  * sub-points within 2 voxels of the origin, the centre beyond; 0 at the
  * origin by symmetry); v sampled trilinearly; (2) by the explicit
- * midpoint rule, steps of at most 1/20 of a spacing; normals carried by
- * the flow's deformation gradient J (dJ/dt = -grad v J / vbar,
- * n_k ~ J^-T n_0).  Pure C plus FFTW 3 (Frigo & Johnson 2005).
+ * midpoint rule, steps of at most 1/20 of a spacing; normals: the
+ * smallest principal axis of each point's layer-0 neighbourhood (within 2
+ * voxels) at its current positions, oriented like J^-T n_0 with J the
+ * flow's deformation gradient (dJ/dt = -grad v J / vbar).  Pure C plus
+ * FFTW 3 (Frigo & Johnson 2005).
  */
 #ifndef LS_INCL_H
 #define LS_INCL_H
