@@ -1071,6 +1071,25 @@ static int weno_layer(void *ctxp, int k, const double *phi)
 	return 0;
 }
 
+/* seeds of the distance levels 0, spacing, .., (k-1) spacing: the pieces
+ * of level j that vanish by level j+1 (f, g: box-sized scratch); a seed's
+ * layer is j, at most lmax.  0 or -1 (out of memory). */
+static int level_seeds(comp_ctx_t *cx, int k, int lmax, double *f, double *g)
+{
+	box_t *b = cx->b;
+	for (int j = 0; j < k; j++) {
+		double L = j * cx->spacing, Ln = (j + 1) * cx->spacing;
+		for (int64_t v = 0; v < b->nv; v++) {
+			f[v] = b->d[v] - L;
+			g[v] = j + 1 < k ? b->d[v] - Ln : -1;
+		}
+		if (find_seeds(b, f, g, L, j < lmax ? j : lmax, cx->label,
+			       cx->p->seed_spacing, &cx->r->seeds))
+			return -1;
+	}
+	return 0;
+}
+
 /* inclusion scheme (ls_incl.h): layer-0 points flowed by the inclusion's
  * field; seeds as for exact (pieces of the distance levels that vanish) */
 static int incl_emit(void *ctx, int k, int64_t n, const double *x,
@@ -1134,16 +1153,8 @@ static int incl_layers(comp_ctx_t *cx, int64_t i0, double *f)
 	int k = 1;
 	while (k * spacing < cx->dmax && k < p->max_layers)
 		k++;
-	for (int j = 0; j < k; j++) {
-		double L = j * spacing, Ln = (j + 1) * spacing;
-		for (int64_t v = 0; v < b->nv; v++) {
-			f[v] = b->d[v] - L;
-			g[v] = j + 1 < k ? b->d[v] - Ln : -1;
-		}
-		if (find_seeds(b, f, g, L, j < nl ? j : nl - 1, cx->label,
-			       p->seed_spacing, &r->seeds))
-			goto out;
-	}
+	if (level_seeds(cx, k, nl - 1, f, g))
+		goto out;
 	rc = 0;
 out:
 	free(x0);
@@ -1209,17 +1220,9 @@ static int run_component(const ls_mask_t *mk, const int32_t *lab,
 		}
 		cx.nlayers = k;
 		/* seeds: level j pieces that vanish by level j+1 */
-		for (int j = 0; j < k; j++) {
-			double L = j * spacing, Ln = (j + 1) * spacing;
-			for (int64_t v = 0; v < b.nv; v++) {
-				f[v] = b.d[v] - L;
-				g[v] = j + 1 < k ? b.d[v] - Ln : -1;
-			}
-			if (find_seeds(&b, f, g, L, j, label, p->seed_spacing,
-				       &r->seeds)) {
-				free(g);
-				goto out;
-			}
+		if (level_seeds(&cx, k, k - 1, f, g)) {
+			free(g);
+			goto out;
 		}
 		free(g);
 	} else {

@@ -352,12 +352,18 @@ static void check_general(const vol_t *m, const ps_t *co, const ps_t *se,
 	free(cnt);
 }
 
+/* the irregular tumour: four overlapping balls */
+static vol_t *irregular_mask(void)
+{
+	ball_t b[4] = { { { 20, 20, 20 }, 9 }, { { 28, 22, 18 }, 6 },
+			{ { 14, 25, 24 }, 5 }, { { 22, 12, 22 }, 4.5 } };
+	return make_mask(42, 40, 38, RAS1, b, 4, NULL, DT_F32);
+}
+
 static void test_irregular(void **state)
 {
 	(void)state;
-	ball_t b[4] = { { { 20, 20, 20 }, 9 }, { { 28, 22, 18 }, 6 },
-			{ { 14, 25, 24 }, 5 }, { { 22, 12, 22 }, 4.5 } };
-	vol_t *m = make_mask(42, 40, 38, RAS1, b, 4, NULL, DT_F32);
+	vol_t *m = irregular_mask();
 	ps_t *co, *se;
 	char err[512];
 	const char *pp[] = { "spacing=1.5", "seed_spacing=3", NULL };
@@ -524,9 +530,10 @@ static double *sorted(const ps_t *p, const double *ly)
 	return s;
 }
 
-static void test_las_vs_ras(void **state)
+/* the same world tumour on a RAS and a LAS grid gives the same world
+ * layers and seeds (scheme: the levelset parameter) */
+static void las_vs_ras(const char *scheme)
 {
-	(void)state;
 	ball_t b[2] = { { { 4, -3, 2 }, 7 }, { { 10, 0, 3 }, 4 } };
 	/* RAS grid and LAS grid over the same world box [-12,18]x[-15,15]x
 	 * [-10,14] */
@@ -538,18 +545,20 @@ static void test_las_vs_ras(void **state)
 	vol_t *m2 = make_mask(31, 31, 25, las, b, 2, NULL, DT_U8);
 	ps_t *c1, *s1, *c2, *s2;
 	char err[512];
-	const char *pp[] = { "spacing=1.5", NULL };
+	const char *pp[] = { "spacing=1.5", scheme, NULL };
 	assert_int_equal(run_ls(m1, pp, &c1, &s1, err), 0);
 	assert_int_equal(run_ls(m2, pp, &c2, &s2, err), 0);
 	assert_int_equal(c1->n, c2->n);
 	assert_int_equal(s1->n, s2->n);
+	assert_true(max_layer(c1) >= 3);
 	double *a = sorted(c1, attr(c1, "layer", 1));
 	double *bb = sorted(c2, attr(c2, "layer", 1));
 	double worst = 0;
 	for (int64_t i = 0; i < 4 * c1->n; i++)
 		worst = fmax(worst, fabs(a[i] - bb[i]));
-	print_message("LAS vs RAS: %lld contour points, worst coordinate "
-		      "difference %.2e mm\n", (long long)c1->n, worst);
+	print_message("LAS vs RAS (%s): %lld contour points in %d layers, "
+		      "worst coordinate difference %.2e mm\n", scheme,
+		      (long long)c1->n, max_layer(c1) + 1, worst);
 	assert_true(worst < 1e-6);
 	free(a);
 	free(bb);
@@ -559,14 +568,18 @@ static void test_las_vs_ras(void **state)
 		assert_true(fabs(a[i] - bb[i]) < 1e-6);
 	free(a);
 	free(bb);
-	/* and the world position is right: seed of the big ball near its
-	 * centre in both */
 	msg_unref(&c1->base);
 	msg_unref(&s1->base);
 	msg_unref(&c2->base);
 	msg_unref(&s2->base);
 	msg_unref(&m1->base);
 	msg_unref(&m2->base);
+}
+
+static void test_las_vs_ras(void **state)
+{
+	(void)state;
+	las_vs_ras("scheme=exact");
 }
 
 static void test_weno(void **state)
@@ -1023,9 +1036,7 @@ static void test_inclusion_general(void **state)
 {
 	(void)state;
 	/* the irregular tumour of test_irregular and two components */
-	ball_t b[4] = { { { 20, 20, 20 }, 9 }, { { 28, 22, 18 }, 6 },
-			{ { 14, 25, 24 }, 5 }, { { 22, 12, 22 }, 4.5 } };
-	vol_t *m = make_mask(42, 40, 38, RAS1, b, 4, NULL, DT_F32);
+	vol_t *m = irregular_mask();
 	ps_t *co, *se;
 	char err[512];
 	const char *pp[] = { "spacing=1.5", "seed_spacing=3",
@@ -1077,37 +1088,7 @@ static void test_inclusion_general(void **state)
 static void test_inclusion_las_vs_ras(void **state)
 {
 	(void)state;
-	ball_t b[2] = { { { 4, -3, 2 }, 7 }, { { 9, 0, 3 }, 4 } };
-	double ras[16] = { 1, 0, 0, -12, 0, 1, 0, -15, 0, 0, 1, -10,
-			   0, 0, 0, 1 };
-	double las[16] = { -1, 0, 0, 18, 0, 1, 0, -15, 0, 0, 1, -10,
-			   0, 0, 0, 1 };
-	vol_t *m1 = make_mask(31, 31, 25, ras, b, 2, NULL, DT_U8);
-	vol_t *m2 = make_mask(31, 31, 25, las, b, 2, NULL, DT_U8);
-	ps_t *c1, *s1, *c2, *s2;
-	char err[512];
-	const char *pp[] = { "spacing=1.5", "scheme=inclusion", NULL };
-	assert_int_equal(run_ls(m1, pp, &c1, &s1, err), 0);
-	assert_int_equal(run_ls(m2, pp, &c2, &s2, err), 0);
-	assert_int_equal(c1->n, c2->n);
-	assert_true(max_layer(c1) >= 3);
-	double *a = sorted(c1, attr(c1, "layer", 1));
-	double *bb = sorted(c2, attr(c2, "layer", 1));
-	double worst = 0;
-	for (int64_t i = 0; i < 4 * c1->n; i++)
-		worst = fmax(worst, fabs(a[i] - bb[i]));
-	print_message("inclusion, LAS vs RAS: %lld contour points in %d "
-		      "layers, worst coordinate difference %.2e mm\n",
-		      (long long)c1->n, max_layer(c1) + 1, worst);
-	assert_true(worst < 1e-6);
-	free(a);
-	free(bb);
-	msg_unref(&c1->base);
-	msg_unref(&s1->base);
-	msg_unref(&c2->base);
-	msg_unref(&s2->base);
-	msg_unref(&m1->base);
-	msg_unref(&m2->base);
+	las_vs_ras("scheme=inclusion");
 }
 
 int main(void)
