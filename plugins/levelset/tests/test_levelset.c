@@ -1091,6 +1091,37 @@ static void test_inclusion_las_vs_ras(void **state)
 	las_vs_ras("scheme=inclusion");
 }
 
+static void test_inclusion_edges(void **state)
+{
+	(void)state;
+	/* the half ball of test_border: the cut face flows in with the rest
+	 * and every layer stays inside the mask */
+	ball_t b = { { 0, 15, 15 }, 8 };
+	vol_t *m = make_mask(20, 30, 30, RAS1, &b, 1, NULL, DT_U8);
+	ps_t *co, *se;
+	char err[512];
+	const char *pp[] = { "spacing=1", "scheme=inclusion", NULL };
+	assert_int_equal(run_ls(m, pp, &co, &se, err), 0);
+	print_message("inclusion, half ball cut by the volume border:\n");
+	check_inclusion(m, co, 1.0);
+	assert_true(max_layer(co) >= 3);
+	assert_true(se->n >= 1);
+	msg_unref(&co->base);
+	msg_unref(&se->base);
+	msg_unref(&m->base);
+	/* a single voxel: layer 0 only (6 face centres), one seed */
+	m = vol_new(3, 3, 3, 1, DT_U8, RAS1);
+	((uint8_t *)m->data)[13] = 1;
+	assert_int_equal(run_ls(m, pp, &co, &se, err), 0);
+	assert_int_equal(co->n, 6);
+	assert_int_equal(max_layer(co), 0);
+	assert_int_equal(se->n, 1);
+	assert_true(dist3(se->xyz, (double[3]){ 1, 1, 1 }) < 1e-12);
+	msg_unref(&co->base);
+	msg_unref(&se->base);
+	msg_unref(&m->base);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1111,6 +1142,7 @@ int main(void)
 		cmocka_unit_test(test_inclusion_lobe),
 		cmocka_unit_test(test_inclusion_general),
 		cmocka_unit_test(test_inclusion_las_vs_ras),
+		cmocka_unit_test(test_inclusion_edges),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
