@@ -2,7 +2,9 @@
 /*
  * levelset: shrink the tumour inward at constant speed until its front
  * collapses, recording the front as layers (DESIGN.md section 6; thesis
- * section 3.3, but in full 3-D).  The algorithm is in ls_core.c.
+ * section 3.3, but in full 3-D), or (scheme = inclusion) record the layers
+ * of a uniformly expanding inclusion instead.  The algorithms are in
+ * ls_core.c and ls_incl.c.
  *
  * in   mask      volume, any dtype, > 0 = tumour, already in atlas space
  * out  contours  pointset: the layers.  label = tumour component (1 = the
@@ -223,8 +225,10 @@ static int ls_process(armstg_stage_t *st)
 static const armstg_plugin_t levelset_desc = {
 	ARMSTG_PLUGIN_HEADER,
 	.name = "levelset",
-	.description = "shrink the tumour inward at constant speed (3-D "
-		       "level set): contour layers with parents, and seeds",
+	.description = "the tumour's past outlines: a front shrinking at "
+		       "constant speed (3-D level set) or the flow of a "
+		       "uniformly expanding inclusion; contour layers with "
+		       "parents, and seeds",
 	.version = "1.0.0",
 	.license = "MIT",
 	.inputs = inputs,
