@@ -683,6 +683,28 @@ static void test_errors(void **state)
 	m = vol_new(4, 4, 4, 1, DT_U8, RAS1);
 	const char *bad[] = { "spacing=0", NULL };
 	assert_true(run_ls(m, bad, &co, &se, err) < 0);
+	const char *badscheme[] = { "scheme=eshelby", NULL };
+	assert_true(run_ls(m, badscheme, &co, &se, err) < 0);
+	assert_null(co);
+	msg_unref(&m->base);
+	/* scheme=inclusion refuses the same bad masks, with no output */
+	const char *pi[] = { "scheme=inclusion", NULL };
+	m = vol_new(8, 8, 8, 1, DT_U8, RAS1);
+	assert_int_equal(run_ls(m, pi, &co, &se, err), ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "empty"));
+	assert_null(co);
+	assert_null(se);
+	msg_unref(&m->base);
+	m = vol_new(8, 8, 8, 1, DT_F32, RAS1);
+	((float *)m->data)[5] = NAN;
+	((float *)m->data)[6] = 1;
+	assert_int_equal(run_ls(m, pi, &co, &se, err), ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "NaN"));
+	assert_null(co);
+	msg_unref(&m->base);
+	m = vol_new(8, 8, 8, 3, DT_F32, RAS1);
+	assert_int_equal(run_ls(m, pi, &co, &se, err), ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "scalar"));
 	msg_unref(&m->base);
 }
 
