@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "armstg/volmath.h"
+#include "ls_kdtree.h"
 
 int ls_incl_field(const ls_incl_grid_t *g, double *v)
 {
@@ -229,94 +230,46 @@ static double flow_step(const samp_t *SV, const samp_t *SG, double ivb,
 
 
 /* neighbours within r of every point of x (n x 3): CSR lists (start[n+1],
- * nb) through a hash of cells of size r.  0 or -1 (out of memory). */
-typedef struct cell_key {
-	int64_t key, i;
-} cell_key_t;
-
-static int cmp_key(const void *a, const void *b)
-{
-	const cell_key_t *x = a, *y = b;
-	return x->key < y->key ? -1 : x->key > y->key ? 1 : (x->i > y->i) - (x->i < y->i);
-}
-
-static int64_t cell_of(const double *p, const double lo[3], double r, int c[3])
-{
-	for (int a = 0; a < 3; a++)
-		c[a] = (int)floor((p[a] - lo[a]) / r);
-	return ((int64_t)c[2] * 2097152 + c[1]) * 2097152 + c[0];
-}
-
+ * nb), by the k-d tree's radius query.  0 or -1 (out of memory). */
 static int neighbours(const double *x, int64_t n, double r, int64_t **start,
 		      int64_t **nb)
 {
-	double lo[3] = { INFINITY, INFINITY, INFINITY };
-	for (int64_t i = 0; i < n; i++)
-		for (int a = 0; a < 3; a++)
-			lo[a] = fmin(lo[a], x[3 * i + a]);
-	cell_key_t *k = malloc((size_t)n * sizeof *k);
+	kdtree_t t;
+	int64_t cap = 32 * n + 16, m = 0, bcap = 256;
+	int64_t *buf = malloc((size_t)bcap * sizeof *buf);
 	*start = calloc((size_t)n + 1, sizeof **start);
-	*nb = NULL;
-	if (!k || !*start) {
-		free(k);
-		return -1;
-	}
-	for (int64_t i = 0; i < n; i++) {
-		int c[3];
-		k[i].key = cell_of(x + 3 * i, lo, r, c);
-		k[i].i = i;
-	}
-	qsort(k, (size_t)n, sizeof *k, cmp_key);
-	int64_t cap = 32 * n + 16, m = 0;
 	*nb = malloc((size_t)cap * sizeof **nb);
-	if (!*nb) {
-		free(k);
+	int rc = -1;
+	if (!buf || !*start || !*nb || kd_build(&t, x, n)) {
+		free(buf);
 		return -1;
 	}
 	for (int64_t i = 0; i < n; i++) {
-		int c[3];
-		cell_of(x + 3 * i, lo, r, c);
-		for (int dz = -1; dz <= 1; dz++)
-			for (int dy = -1; dy <= 1; dy++)
-				for (int dx = -1; dx <= 1; dx++) {
-					if (c[0] + dx < 0 || c[1] + dy < 0 || c[2] + dz < 0)
-						continue;
-					int64_t key = ((int64_t)(c[2] + dz) * 2097152 +
-						       (c[1] + dy)) * 2097152 + (c[0] + dx);
-					/* first entry with this key */
-					int64_t a = 0, b = n;
-					while (a < b) {
-						int64_t h = (a + b) / 2;
-						if (k[h].key < key)
-							a = h + 1;
-						else
-							b = h;
-					}
-					for (; a < n && k[a].key == key; a++) {
-						int64_t j = k[a].i;
-						double d2 = 0;
-						for (int q = 0; q < 3; q++) {
-							double e = x[3 * j + q] - x[3 * i + q];
-							d2 += e * e;
-						}
-						if (d2 > r * r)
-							continue;
-						if (m == cap) {
-							cap *= 2;
-							int64_t *t = realloc(*nb, (size_t)cap * sizeof *t);
-							if (!t) {
-								free(k);
-								return -1;
-							}
-							*nb = t;
-						}
-						(*nb)[m++] = j;
-					}
-				}
+		int64_t k = kd_within(&t, x + 3 * i, r, buf, bcap);
+		if (k > bcap) {
+			int64_t *b2 = realloc(buf, (size_t)k * sizeof *b2);
+			if (!b2)
+				goto out;
+			buf = b2;
+			bcap = k;
+			k = kd_within(&t, x + 3 * i, r, buf, bcap);
+		}
+		if (m + k > cap) {
+			cap = 2 * (m + k);
+			int64_t *t2 = realloc(*nb, (size_t)cap * sizeof *t2);
+			if (!t2)
+				goto out;
+			*nb = t2;
+		}
+		memcpy(*nb + m, buf, (size_t)k * sizeof *buf);
+		m += k;
 		(*start)[i + 1] = m;
 	}
-	free(k);
-	return 0;
+	rc = 0;
+out:
+	kd_free(&t);
+	free(buf);
+	return rc;
 }
 
 /* unit normal of the point cloud p[nb[s..e)] (the smallest principal axis

@@ -155,8 +155,11 @@ int64_t kd_nearest(const kdtree_t *t, const double q[3], double *best_d2)
 	return bi;
 }
 
+/* count the points within sqrt(r2) of q (stopping at max > 0); with out,
+ * also store the first cap of their indices */
 static void cnt_rec(const kdtree_t *t, int64_t lo, int64_t hi,
-		    const double q[3], double r2, int64_t *cnt, int64_t max)
+		    const double q[3], double r2, int64_t *cnt, int64_t max,
+		    int64_t *out, int64_t cap)
 {
 	while (hi > lo) {
 		if (max > 0 && *cnt >= max)
@@ -164,14 +167,17 @@ static void cnt_rec(const kdtree_t *t, int64_t lo, int64_t hi,
 		int64_t mid = lo + (hi - lo) / 2;
 		const double *p = t->xyz + 3 * t->idx[mid];
 		double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
-		if (dx * dx + dy * dy + dz * dz <= r2)
+		if (dx * dx + dy * dy + dz * dz <= r2) {
+			if (out && *cnt < cap)
+				out[*cnt] = t->idx[mid];
 			(*cnt)++;
+		}
 		if (hi - lo == 1)
 			return;
 		int ax = t->axis[mid];
 		double diff = q[ax] - p[ax];
 		if (diff * diff <= r2) {
-			cnt_rec(t, lo, mid, q, r2, cnt, max);
+			cnt_rec(t, lo, mid, q, r2, cnt, max, out, cap);
 			lo = mid + 1;
 		} else if (diff < 0) {
 			hi = mid;
@@ -185,6 +191,14 @@ int64_t kd_count_within(const kdtree_t *t, const double q[3], double r,
 			int64_t max)
 {
 	int64_t c = 0;
-	cnt_rec(t, 0, t->n, q, r * r, &c, max);
+	cnt_rec(t, 0, t->n, q, r * r, &c, max, NULL, 0);
+	return c;
+}
+
+int64_t kd_within(const kdtree_t *t, const double q[3], double r,
+		  int64_t *out, int64_t cap)
+{
+	int64_t c = 0;
+	cnt_rec(t, 0, t->n, q, r * r, &c, 0, out, cap);
 	return c;
 }

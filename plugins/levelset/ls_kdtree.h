@@ -36,4 +36,10 @@ int64_t kd_nearest(const kdtree_t *t, const double q[3], double *best_d2);
 int64_t kd_count_within(const kdtree_t *t, const double q[3], double r,
 			int64_t max);
 
+/* Indices of the points within distance r of q (inclusive), in no
+ * particular order: the first cap are stored in out; returns how many
+ * there are (more than cap: call again with a larger out). */
+int64_t kd_within(const kdtree_t *t, const double q[3], double r,
+		  int64_t *out, int64_t cap);
+
 #endif
