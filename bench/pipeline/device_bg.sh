@@ -1,0 +1,80 @@
+#!/bin/sh
+# Phantom batches that outlast one device call (session 16).  The GPU host
+# lends its 16 CPU cores for at most 10 minutes a command, while a pool of
+# ~60 tuned runs needs ~20 minutes; a process in its own session (setsid)
+# lives on between calls while the machine stays warm.  So:
+#
+#   sh bench/pipeline/device_bg.sh start JOBS      # first call: copy, launch, return
+#   sh bench/pipeline/device_bg.sh wait SECONDS    # later calls: wait, copy rows to $OUT
+#
+# start copies the checkout (with carry/build and debs/, see
+# device_phantoms.sh) to /tmp/bg/repo, so that the next call's re-sent
+# working tree never replaces a library a run has loaded, and runs one pool
+# of JOBS single-threaded run_phantom.sh runs over the task list
+# bench/pipeline/device_bg.tasks (or TASKS=file): one task a line,
+#   KIND SEED VARIANT [phantom.key=value ...]
+# KIND names the rows' table (/tmp/bg/KIND.tsv: run_phantom.sh's columns);
+# VARIANT is base (graphs/armstg.ini), sphere or direct.  EXTRA: more
+# run_phantom.sh options for every run.  Every finished run appends its row
+# at once, a failed one the row "SEED VARIANT failed" (its log stays in
+# /tmp/bg/w), so a batch cut short loses only the runs in flight.
+# wait returns when the pool has ended or after SECONDS, and copies every
+# KIND.tsv, the pool's progress and the ends of failed runs' logs to $OUT.
+set -u
+die() { echo "device_bg.sh: $*" >&2; exit 2; }
+B=/tmp/bg
+case ${1:-} in
+start)
+	J=${2:-16}
+	[ ! -e $B/pid ] || die "a pool is already running ($B/pid)"
+	[ -x carry/build/armstg ] || die "no carry/build/armstg (carry the build)"
+	T=${TASKS:-bench/pipeline/device_bg.tasks}
+	[ -s "$T" ] || die "no task list $T"
+	mkdir -p $B/w
+	cp -r . $B/repo
+	cd $B/repo || exit 2
+	. bench/pipeline/carried_libs.sh
+	carried_libs
+	BUILD=carry/build check_libs
+	grep -v '^#' "$T" | grep . >$B/tasks
+	cat >$B/pool.sh <<'EOF'
+k=$1 s=$2 v=$3
+shift 3
+case $v in base) m=armstg ;; *) m=$v ;; esac
+d=/tmp/bg/w/$k-$v-$s
+PHANTOM_SET="$*" METHODS=$m sh bench/pipeline/run_phantom.sh --out "$d" --seeds "$s" $EXTRA >"$d.log" 2>&1
+row=$(tail -n +2 "$d/phantom.tsv" 2>/dev/null | head -1)
+[ -n "$row" ] || row="$s	$v	failed"
+[ -s /tmp/bg/$k.tsv ] || head -1 "$d/phantom.tsv" >/tmp/bg/$k.tsv 2>/dev/null
+printf '%s\n' "$row" >>/tmp/bg/$k.tsv
+echo "$(date +%T) $k $s $v: $(echo "$row" | cut -f3)" >>/tmp/bg/progress
+EOF
+	export BUILD=carry/build BENCH_PREBUILT=1 OMP_NUM_THREADS=1 EXTRA="${EXTRA:-}"
+	setsid sh -c "echo \$\$ >$B/pid; date +%s >$B/t0; xargs -P $J -L 1 sh $B/pool.sh <$B/tasks; date +%s >$B/done" \
+		>$B/pool.log 2>&1 </dev/null &
+	sleep 5
+	echo "started $(wc -l <$B/tasks) tasks, $J at a time"
+	;;
+wait)
+	end=$(($(date +%s) + ${2:-560}))
+	while [ ! -e $B/done ] && [ "$(date +%s)" -lt "$end" ]; do sleep 10; done
+	O=${OUT:-/tmp/bg/out}
+	mkdir -p "$O"
+	cp $B/*.tsv "$O"/ 2>/dev/null
+	{
+		echo "tasks $(wc -l <$B/tasks), rows $(cat $B/*.tsv | grep -cv '^seed'), elapsed $(($(date +%s) - $(cat $B/t0))) s"
+		[ -e $B/done ] && echo "pool ended after $(($(cat $B/done) - $(cat $B/t0))) s"
+		cat $B/progress
+		for f in $(grep -l failed $B/*.tsv 2>/dev/null); do grep failed "$f"; done
+	} >"$O/progress.txt"
+	cat "$O/progress.txt"
+	for l in $B/w/*.log; do
+		d=${l%.log}
+		[ -s "$d/phantom.tsv" ] && [ "$(wc -l <"$d/phantom.tsv")" -gt 1 ] && continue
+		[ -e $B/done ] || continue
+		echo "== $l"
+		tail -5 "$l"
+	done >"$O/failed_logs.txt"
+	;;
+*) die "usage: sh $0 start JOBS | wait SECONDS" ;;
+esac

@@ -1,0 +1,164 @@
+#!/usr/bin/env python3
+"""Session 16: the inclusion layers (levelset scheme=inclusion, the graphs'
+default since Session 15) on every phantom of Session 12, against the sphere
+grown the same way, the old layers (scheme=exact) and direct demons.
+
+  python3 bench/pipeline/inclusion_summary.py [RESULTS_DIR]
+
+Reads (RESULTS_DIR, default bench/pipeline/results):
+  inclusion_full.tsv     Session 16, `[tune]` as shipped: default 17-24, irregular 1-20
+  inclusion_tuned.tsv    Session 15, `[tune]` as shipped: default (lobulation 0.4) 1-16,
+                         lobulated single tumours (0.9) 1-24
+  phantom_ip_spacing.tsv Session 11 batch t45 (the old layers; default and irregular 1-8)
+  phantom_ipf075_9to24.tsv Session 12 (the old layers; default 9-24, irregular 9-20,
+                         direct demons on irregular 9-12)
+  phantom_image_voxel.tsv Session 8 (direct demons; its graph has not changed since)
+  shape_sweep_tuned.tsv  Session 14 (the old layers, lobulation 0.9 1-16, tuned)
+
+Band error = mean displacement error within 15 mm outside the tumour, in the
+brain (mm).  Paired differences over the phantoms where both rows exist: mean
+(standard error sd/sqrt(n)), and on how many the first is lower.  Markdown on
+stdout.  Stdlib only.
+"""
+import csv
+import math
+import os
+import sys
+
+
+def rows_of(path, kind_col=True):
+    """{(kind, seed, method): band error}; kind from the 'phantom' column,
+    or from the lobulation ('def' for 0.4, 'lob' for 0.9)."""
+    out = {}
+    with open(path, newline="") as f:
+        rd = csv.DictReader(f, delimiter="\t")
+        for r in rd:
+            if r.get("err_band_mean_mm") in (None, "failed"):
+                continue
+            if "phantom" in r:
+                kind = r["phantom"]
+            else:
+                kind = {"0.4": "def", "0.9": "lob"}.get(r["lobulation"])
+                if kind is None:
+                    continue
+            out[(kind, int(r["seed"]), r["method"], r.get("batch", ""))] = float(
+                r["err_band_mean_mm"])
+    return out
+
+
+def pick(rows, kind, method, seeds, batches=None):
+    d = {}
+    for (k, s, m, b), v in rows.items():
+        if k == kind and m == method and s in seeds and (batches is None or b in batches):
+            d[s] = v
+    return d
+
+
+def mean(x):
+    return sum(x) / len(x) if x else math.nan
+
+
+def se(x):
+    if len(x) < 2:
+        return math.nan
+    m = mean(x)
+    return math.sqrt(sum((v - m) ** 2 for v in x) / (len(x) - 1) / len(x))
+
+
+def paired(a, b):
+    s = sorted(set(a) & set(b))
+    d = [a[i] - b[i] for i in s]
+    return mean(d), se(d), sum(1 for v in d if v < 0), len(s)
+
+
+def fmt(p):
+    m, e, lo, n = p
+    return f"{m:+.3f} ({e:.3f}), {lo} of {n}"
+
+
+def main():
+    R = sys.argv[1] if len(sys.argv) > 1 else "bench/pipeline/results"
+    j = lambda f: os.path.join(R, f)
+    new = rows_of(j("inclusion_full.tsv"))
+    s15 = rows_of(j("inclusion_tuned.tsv"))
+    t45 = rows_of(j("phantom_ip_spacing.tsv"))
+    s12 = rows_of(j("phantom_ipf075_9to24.tsv"))
+    s8 = rows_of(j("phantom_image_voxel.tsv"))
+    s14 = rows_of(j("shape_sweep_tuned.tsv"))
+
+    sets = {"def": range(1, 25), "irr": range(1, 21), "lob": range(1, 25)}
+    incl, old, direct = {}, {}, {}
+    for kind in sets:
+        for m in ("armstg", "sphere"):
+            d = {}
+            d.update(pick(s15, kind, m, sets[kind]))
+            d.update(pick(new, kind, m, sets[kind]))
+            incl[kind, m] = d
+            o = {}
+            o.update(pick(t45, kind, m, range(1, 9), {"t45"}))
+            o.update(pick(s12, kind, m, range(9, 25)))
+            if kind == "lob":
+                o = pick(s14, kind, m, range(1, 17))
+            old[kind, m] = o
+        dd = pick(s8, kind, "direct", sets[kind])
+        dd.update(pick(s12, kind, "direct", range(9, 13)))
+        direct[kind] = dd
+
+    names = {"def": "default (lobulation 0.4, one component)",
+             "lob": "lobulated (0.9, one component)",
+             "irr": "irregular (0.9, two components)"}
+    print("| phantoms | n | ARMSTG | sphere | direct | ARMSTG - sphere (SE), lower on"
+          " | ARMSTG vs direct | sphere vs direct |")
+    print("|---|---|---|---|---|---|---|---|")
+    pool = {}
+    for kind in ("def", "lob", "irr"):
+        a, s = incl[kind, "armstg"], incl[kind, "sphere"]
+        keys = sorted(set(a) & set(s))
+        dr = direct[kind]
+        dk = [k for k in keys if k in dr]
+        pa = mean([a[k] for k in dk]) / mean([dr[k] for k in dk]) - 1 if dk else math.nan
+        ps = mean([s[k] for k in dk]) / mean([dr[k] for k in dk]) - 1 if dk else math.nan
+        print(f"| {names[kind]} | {len(keys)} | {mean([a[k] for k in keys]):.3f} | "
+              f"{mean([s[k] for k in keys]):.3f} | "
+              + (f"{mean([dr[k] for k in dk]):.3f} ({len(dk)})" if dk else "-")
+              + f" | {fmt(paired(a, s))} | "
+              + (f"{100 * pa:+.1f} % ({sum(a[k] < dr[k] for k in dk)} of {len(dk)})" if dk else "-")
+              + " | " + (f"{100 * ps:+.1f} %" if dk else "-") + " |")
+        for k in keys:
+            pool[(kind, k)] = a[k] - s[k]
+    single = [v for (kind, _), v in pool.items() if kind in ("def", "lob")]
+    print(f"| single tumours pooled | {len(single)} | | | | "
+          f"{mean(single):+.3f} ({se(single):.3f}), {sum(v < 0 for v in single)} of "
+          f"{len(single)} | | |")
+    allp = list(pool.values())
+    print(f"| all pooled | {len(allp)} | | | | {mean(allp):+.3f} ({se(allp):.3f}), "
+          f"{sum(v < 0 for v in allp)} of {len(allp)} | | |")
+
+    print()
+    print("By set of 8 phantoms, ARMSTG - sphere (inclusion layers):")
+    print()
+    print("| phantoms | 1-8 | 9-16 | 17-24 (or 17-20) |")
+    print("|---|---|---|---|")
+    for kind in ("def", "lob", "irr"):
+        cells = []
+        for lo, hi in ((1, 8), (9, 16), (17, 24)):
+            a = {k: v for k, v in incl[kind, "armstg"].items() if lo <= k <= hi}
+            s = {k: v for k, v in incl[kind, "sphere"].items() if lo <= k <= hi}
+            cells.append(fmt(paired(a, s)) if set(a) & set(s) else "-")
+        print(f"| {names[kind]} | " + " | ".join(cells) + " |")
+
+    print()
+    print("Against the old layers (scheme=exact: Sessions 11-12, lobulated Session 14), paired:")
+    print()
+    print("| phantoms | ARMSTG: inclusion - exact | sphere: inclusion - exact"
+          " | ARMSTG (inclusion) - sphere (exact) | ARMSTG - sphere, both exact |")
+    print("|---|---|---|---|---|")
+    for kind in ("def", "lob", "irr"):
+        ai, si = incl[kind, "armstg"], incl[kind, "sphere"]
+        ao, so = old[kind, "armstg"], old[kind, "sphere"]
+        print(f"| {names[kind]} | {fmt(paired(ai, ao))} | {fmt(paired(si, so))} | "
+              f"{fmt(paired(ai, so))} | {fmt(paired(ao, so))} |")
+
+
+if __name__ == "__main__":
+    main()
