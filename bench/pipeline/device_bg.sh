@@ -17,9 +17,10 @@
 # VARIANT is base (graphs/armstg.ini), sphere or direct.  EXTRA: more
 # run_phantom.sh options for every run.  Every finished run appends its row
 # at once, a failed one the row "SEED VARIANT failed" (its log stays in
-# /tmp/bg/w), so a batch cut short loses only the runs in flight.
+# /tmp/bg/w), so a batch cut short loses only the runs in flight; the
+# candidates [tune] tried go to /tmp/bg/KIND.tune.txt (seed and variant first).
 # wait returns when the pool has ended or after SECONDS, and copies every
-# KIND.tsv, the pool's progress and the ends of failed runs' logs to $OUT.
+# KIND.tsv and KIND.tune.txt, the pool's progress and the ends of failed runs' logs to $OUT.
 set -u
 die() { echo "device_bg.sh: $*" >&2; exit 2; }
 B=/tmp/bg
@@ -47,6 +48,7 @@ row=$(tail -n +2 "$d/phantom.tsv" 2>/dev/null | head -1)
 [ -n "$row" ] || row="$s	$v	failed"
 [ -s /tmp/bg/$k.tsv ] || head -1 "$d/phantom.tsv" >/tmp/bg/$k.tsv 2>/dev/null
 printf '%s\n' "$row" >>/tmp/bg/$k.tsv
+for t in "$d"/ph*/tune.tsv; do [ -f "$t" ] && sed "s/^/$s	$v	/" "$t" >>/tmp/bg/$k.tune.txt; done
 echo "$(date +%T) $k $s $v: $(echo "$row" | cut -f3)" >>/tmp/bg/progress
 EOF
 	export BUILD=carry/build BENCH_PREBUILT=1 OMP_NUM_THREADS=1 EXTRA="${EXTRA:-}"
@@ -60,7 +62,7 @@ wait)
 	while [ ! -e $B/done ] && [ "$(date +%s)" -lt "$end" ]; do sleep 10; done
 	O=${OUT:-/tmp/bg/out}
 	mkdir -p "$O"
-	cp $B/*.tsv "$O"/ 2>/dev/null
+	cp $B/*.tsv $B/*.tune.txt "$O"/ 2>/dev/null
 	{
 		echo "tasks $(wc -l <$B/tasks), rows $(cat $B/*.tsv | grep -cv '^seed'), elapsed $(($(date +%s) - $(cat $B/t0))) s"
 		[ -e $B/done ] && echo "pool ended after $(($(cat $B/done) - $(cat $B/t0))) s"
