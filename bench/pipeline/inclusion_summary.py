@@ -14,6 +14,8 @@ Reads (RESULTS_DIR, default bench/pipeline/results):
                          direct demons on irregular 9-12)
   phantom_image_voxel.tsv Session 8 (direct demons; its graph has not changed since)
   shape_sweep_tuned.tsv  Session 14 (the old layers, lobulation 0.9 1-16, tuned)
+  shape_sweep_d45.tsv    Session 14 (direct demons, lobulation 0.9 1-16: it has no
+                         push depth, so the fixed-depth sweep's rows are its rows)
 
 Band error = mean displacement error within 15 mm outside the tumour, in the
 brain (mm).  Paired differences over the phantoms where both rows exist: mean
@@ -24,6 +26,8 @@ import csv
 import math
 import os
 import sys
+
+from shape_summary import mean, se  # noqa: E402 (this folder)
 
 
 def rows_of(path, kind_col=True):
@@ -54,17 +58,6 @@ def pick(rows, kind, method, seeds, batches=None):
     return d
 
 
-def mean(x):
-    return sum(x) / len(x) if x else math.nan
-
-
-def se(x):
-    if len(x) < 2:
-        return math.nan
-    m = mean(x)
-    return math.sqrt(sum((v - m) ** 2 for v in x) / (len(x) - 1) / len(x))
-
-
 def paired(a, b):
     s = sorted(set(a) & set(b))
     d = [a[i] - b[i] for i in s]
@@ -85,6 +78,7 @@ def main():
     s12 = rows_of(j("phantom_ipf075_9to24.tsv"))
     s8 = rows_of(j("phantom_image_voxel.tsv"))
     s14 = rows_of(j("shape_sweep_tuned.tsv"))
+    d45 = rows_of(j("shape_sweep_d45.tsv"))
 
     sets = {"def": range(1, 25), "irr": range(1, 21), "lob": range(1, 25)}
     incl, old, direct = {}, {}, {}
@@ -102,6 +96,8 @@ def main():
             old[kind, m] = o
         dd = pick(s8, kind, "direct", sets[kind])
         dd.update(pick(s12, kind, "direct", range(9, 13)))
+        if kind == "lob":
+            dd = pick(d45, kind, "direct", range(1, 17))
         direct[kind] = dd
 
     names = {"def": "default (lobulation 0.4, one component)",
