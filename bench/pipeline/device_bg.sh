@@ -12,7 +12,9 @@
 # working tree never replaces a library a run has loaded, and runs one pool
 # of JOBS single-threaded run_phantom.sh runs over the task list
 # bench/pipeline/device_bg.tasks (or TASKS=file): one task a line,
-#   KIND SEED VARIANT [phantom.key=value ...]
+#   KIND SEED VARIANT [phantom.key=value ...] [stage.key=value ...]
+# (phantom.* words change the phantom, the others are --set options of that
+# run, e.g. tune.values=1.5; no spaces inside a word)
 # KIND names the rows' table (/tmp/bg/KIND.tsv: run_phantom.sh's columns);
 # VARIANT is base (graphs/armstg.ini), sphere or direct.  EXTRA: more
 # run_phantom.sh options for every run.  Every finished run appends its row
@@ -41,9 +43,13 @@ start)
 	cat >$B/pool.sh <<'EOF'
 k=$1 s=$2 v=$3
 shift 3
+ph="" opt=""
+for w in "$@"; do
+	case $w in phantom.*) ph="$ph $w" ;; *) opt="$opt --set $w" ;; esac
+done
 case $v in base) m=armstg ;; *) m=$v ;; esac
 d=/tmp/bg/w/$k-$v-$s
-PHANTOM_SET="$*" METHODS=$m sh bench/pipeline/run_phantom.sh --out "$d" --seeds "$s" $EXTRA >"$d.log" 2>&1
+PHANTOM_SET="$ph" METHODS=$m sh bench/pipeline/run_phantom.sh --out "$d" --seeds "$s" $EXTRA $opt >"$d.log" 2>&1
 row=$(tail -n +2 "$d/phantom.tsv" 2>/dev/null | head -1)
 [ -n "$row" ] || row="$s	$v	failed"
 [ -s /tmp/bg/$k.tsv ] || head -1 "$d/phantom.tsv" >/tmp/bg/$k.tsv 2>/dev/null
@@ -59,9 +65,13 @@ EOF
 	;;
 wait)
 	end=$(($(date +%s) + ${2:-560}))
-	while [ ! -e $B/done ] && [ "$(date +%s)" -lt "$end" ]; do sleep 10; done
 	O=${OUT:-/tmp/bg/out}
 	mkdir -p "$O"
+	# the rows so far reach $O every 10 s: a call cut short still brings them
+	while [ ! -e $B/done ] && [ "$(date +%s)" -lt "$end" ]; do
+		sleep 10
+		cp $B/*.tsv $B/*.tune.txt "$O"/ 2>/dev/null
+	done
 	cp $B/*.tsv $B/*.tune.txt "$O"/ 2>/dev/null
 	{
 		echo "tasks $(wc -l <$B/tasks), rows $(cat $B/*.tsv | grep -cv '^seed'), elapsed $(($(date +%s) - $(cat $B/t0))) s"
