@@ -33,10 +33,10 @@
 #include "testutil.h"
 #include "graph.h"
 
-/* the graph's [tune] tries two push depths instead of five: the growth
+/* the graph's [tune] tries two push depths instead of six: the growth
  * is the cost (6 mm nodes over the same brain as the full demo, about 50 s
  * a depth on 2 cores with the graphs' ip_factor 0.75), and [tune] itself
- * is tested in tests/test_tune.c; `make demo` runs all five */
+ * is tested in tests/test_tune.c; `make demo` runs all six */
 static const char *small[] = {
 	"phantom.spacing=3", "phantom.nx=64", "phantom.ny=64", "phantom.nz=48",
 	"tune.values=4.5, 6",
