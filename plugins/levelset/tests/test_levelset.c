@@ -641,26 +641,38 @@ static void test_weno(void **state)
 	msg_unref(&m->base);
 }
 
+/* an empty, a NaN and a 3-component mask are refused with EINVAL, a message
+ * naming the problem and no output, whatever the scheme (params) */
+static void bad_masks(const char *const *params)
+{
+	ps_t *co, *se;
+	char err[512];
+	vol_t *m = vol_new(8, 8, 8, 1, DT_U8, RAS1);
+	assert_int_equal(run_ls(m, params, &co, &se, err), ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "empty"));
+	assert_null(co);
+	assert_null(se);
+	msg_unref(&m->base);
+	m = vol_new(8, 8, 8, 1, DT_F32, RAS1);
+	((float *)m->data)[5] = NAN;
+	((float *)m->data)[6] = 1;
+	assert_int_equal(run_ls(m, params, &co, &se, err), ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "NaN"));
+	assert_null(co);
+	msg_unref(&m->base);
+	m = vol_new(8, 8, 8, 3, DT_F32, RAS1);
+	assert_int_equal(run_ls(m, params, &co, &se, err), ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "scalar"));
+	msg_unref(&m->base);
+}
+
 static void test_errors(void **state)
 {
 	(void)state;
 	ps_t *co, *se;
 	char err[512];
-	vol_t *m = vol_new(8, 8, 8, 1, DT_U8, RAS1);
-	assert_int_equal(run_ls(m, NULL, &co, &se, err), ARMSTG_EINVAL);
-	assert_non_null(strstr(err, "empty"));
-	assert_null(co);
-	msg_unref(&m->base);
-	m = vol_new(8, 8, 8, 1, DT_F32, RAS1);
-	((float *)m->data)[5] = NAN;
-	((float *)m->data)[6] = 1;
-	assert_int_equal(run_ls(m, NULL, &co, &se, err), ARMSTG_EINVAL);
-	assert_non_null(strstr(err, "NaN"));
-	msg_unref(&m->base);
-	m = vol_new(8, 8, 8, 3, DT_F32, RAS1);
-	assert_int_equal(run_ls(m, NULL, &co, &se, err), ARMSTG_EINVAL);
-	assert_non_null(strstr(err, "scalar"));
-	msg_unref(&m->base);
+	vol_t *m;
+	bad_masks(NULL);
 	/* all specks below min_voxels */
 	m = vol_new(8, 8, 8, 1, DT_U8, RAS1);
 	((uint8_t *)m->data)[100] = 1;
@@ -689,23 +701,7 @@ static void test_errors(void **state)
 	msg_unref(&m->base);
 	/* scheme=inclusion refuses the same bad masks, with no output */
 	const char *pi[] = { "scheme=inclusion", NULL };
-	m = vol_new(8, 8, 8, 1, DT_U8, RAS1);
-	assert_int_equal(run_ls(m, pi, &co, &se, err), ARMSTG_EINVAL);
-	assert_non_null(strstr(err, "empty"));
-	assert_null(co);
-	assert_null(se);
-	msg_unref(&m->base);
-	m = vol_new(8, 8, 8, 1, DT_F32, RAS1);
-	((float *)m->data)[5] = NAN;
-	((float *)m->data)[6] = 1;
-	assert_int_equal(run_ls(m, pi, &co, &se, err), ARMSTG_EINVAL);
-	assert_non_null(strstr(err, "NaN"));
-	assert_null(co);
-	msg_unref(&m->base);
-	m = vol_new(8, 8, 8, 3, DT_F32, RAS1);
-	assert_int_equal(run_ls(m, pi, &co, &se, err), ARMSTG_EINVAL);
-	assert_non_null(strstr(err, "scalar"));
-	msg_unref(&m->base);
+	bad_masks(pi);
 }
 
 static void test_brats(void **state)
