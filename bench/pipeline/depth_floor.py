@@ -22,11 +22,11 @@ final run of a tuned graph is the chosen candidate's run, so a chosen 1.5 mm giv
 the 1.5 mm row's error (checked: depth15_tuned_check.tsv, four tuned runs with the
 extended grid, within 0.0002 mm of the emulation).  Markdown on stdout.  Stdlib only.
 """
-import csv
 import os
 import sys
 
-from inclusion_summary import pick, rows_of  # noqa: E402 (this folder)
+from inclusion_summary import fmt, pick, read_rows, rows_of, summary  # noqa: E402 (this folder)
+from inclusion_summary import paired as paired_summary  # noqa: E402
 from shape_summary import mean, se  # noqa: E402 (this folder)
 
 TOL = 3e-4
@@ -34,23 +34,12 @@ TOL = 3e-4
 
 def load(path):
     """{(kind, seed, method): (band, ncc, push)}"""
-    out = {}
-    with open(path, newline="") as f:
-        for r in csv.DictReader(f, delimiter="\t"):
-            if r.get("err_band_mean_mm") in (None, "failed"):
-                continue
-            kind = r.get("phantom") or {"0.4": "def", "0.9": "lob"}.get(r.get("lobulation"))
-            if kind is None:
-                continue
-            out[kind, int(r["seed"]), r["method"]] = (
-                float(r["err_band_mean_mm"]), float(r["ncc_band"]), r["push_mm"])
-    return out
+    return {k[:3]: (float(r["err_band_mean_mm"]), float(r["ncc_band"]), r["push_mm"])
+            for k, r in read_rows(path).items()}
 
 
 def paired(a, b):
-    k = sorted(set(a) & set(b))
-    d = [a[i] - b[i] for i in k]
-    return f"{mean(d):+.3f} ({se(d):.3f}), lower on {sum(v < 0 for v in d)} of {len(d)}"
+    return fmt(paired_summary(a, b), "lower on ")
 
 
 def main():
@@ -154,8 +143,7 @@ def main():
     for b in ("sure", "possible", "resolved"):
         d = [ext[b][k, "armstg"][i] - ext[b][k, "sphere"][i]
              for k in ("def", "lob") for i in ext[b][k, "armstg"] if i in ext[b][k, "sphere"]]
-        print(f"| single tumours pooled, {b} | {len(d)} | | | {mean(d):+.3f} ({se(d):.3f}), "
-              f"lower on {sum(v < 0 for v in d)} of {len(d)} | | |")
+        print(f"| single tumours pooled, {b} | {len(d)} | | | {fmt(summary(d), 'lower on ')} | | |")
     print()
     print("Each model, extended grid minus as shipped (paired):")
     print()

@@ -29,17 +29,24 @@ B=/tmp/bg
 case ${1:-} in
 start)
 	J=${2:-16}
+	case $J in '' | *[!0-9]* | 0) die "JOBS '$J' is not a positive whole number" ;; esac
 	[ ! -e $B/pid ] || die "a pool is already running ($B/pid)"
 	[ -x carry/build/armstg ] || die "no carry/build/armstg (carry the build)"
 	T=${TASKS:-bench/pipeline/device_bg.tasks}
 	[ -s "$T" ] || die "no task list $T"
+	[ -n "$(grep -v '^#' "$T" | grep .)" ] || die "task list $T has no task"
+	# a bad line stops the batch before anything is copied or run, naming it
+	awk '/^#/ || !NF { next }
+		!($1 ~ /^[A-Za-z0-9_]+$/ && $2 ~ /^[0-9]+$/ && $3 ~ /^(base|sphere|direct)$/) {
+		printf "device_bg.sh: %s:%d: want KIND SEED base|sphere|direct [key=value ...]: %s\n", FILENAME, FNR, $0
+		bad = 1 } END { exit bad }' "$T" >&2 || exit 2
 	mkdir -p $B/w
+	grep -v '^#' "$T" | grep . >$B/tasks
 	cp -r . $B/repo
 	cd $B/repo || exit 2
 	. bench/pipeline/carried_libs.sh
 	carried_libs
 	BUILD=carry/build check_libs
-	grep -v '^#' "$T" | grep . >$B/tasks
 	cat >$B/pool.sh <<'EOF'
 k=$1 s=$2 v=$3
 shift 3
@@ -64,6 +71,7 @@ EOF
 	echo "started $(wc -l <$B/tasks) tasks, $J at a time"
 	;;
 wait)
+	[ -e $B/t0 ] || die "no pool was started on this machine ($B/t0 missing)"
 	end=$(($(date +%s) + ${2:-560}))
 	O=${OUT:-/tmp/bg/out}
 	mkdir -p "$O"

@@ -30,24 +30,33 @@ import sys
 from shape_summary import mean, se  # noqa: E402 (this folder)
 
 
-def rows_of(path, kind_col=True):
-    """{(kind, seed, method): band error}; kind from the 'phantom' column,
-    or from the lobulation ('def' for 0.4, 'lob' for 0.9)."""
+def read_rows(path):
+    """{(kind, seed, method, batch): row} of a run_phantom.sh-style table, "failed"
+    rows left out; kind from the 'phantom' column, or from the lobulation ('def'
+    for 0.4, 'lob' for 0.9; other lobulations are left out).  Exits naming the
+    file and the row when it cannot be read."""
     out = {}
-    with open(path, newline="") as f:
-        rd = csv.DictReader(f, delimiter="\t")
-        for r in rd:
-            if r.get("err_band_mean_mm") in (None, "failed"):
-                continue
-            if "phantom" in r:
-                kind = r["phantom"]
-            else:
-                kind = {"0.4": "def", "0.9": "lob"}.get(r["lobulation"])
+    try:
+        with open(path, newline="") as f:
+            for r in csv.DictReader(f, delimiter="\t"):
+                if r.get("err_band_mean_mm") in (None, "failed"):
+                    continue
+                kind = r.get("phantom") or {"0.4": "def", "0.9": "lob"}.get(r.get("lobulation"))
                 if kind is None:
                     continue
-            out[(kind, int(r["seed"]), r["method"], r.get("batch", ""))] = float(
-                r["err_band_mean_mm"])
+                if not math.isfinite(float(r["err_band_mean_mm"])):
+                    raise ValueError("the band error is not a finite number")
+                out[kind, int(r["seed"]), r["method"], r.get("batch", "")] = r
+    except OSError as e:
+        sys.exit(f"{os.path.basename(sys.argv[0])}: cannot read {path}: {e.strerror}")
+    except (KeyError, TypeError, ValueError) as e:
+        sys.exit(f"{os.path.basename(sys.argv[0])}: {path}: unreadable row {r}: {e!r}")
     return out
+
+
+def rows_of(path):
+    """{(kind, seed, method, batch): band error (mm)}"""
+    return {k: float(r["err_band_mean_mm"]) for k, r in read_rows(path).items()}
 
 
 def pick(rows, kind, method, seeds, batches=None):
@@ -58,15 +67,20 @@ def pick(rows, kind, method, seeds, batches=None):
     return d
 
 
+def summary(d):
+    """differences -> (mean, standard error, how many < 0, count)"""
+    return mean(d), se(d), sum(1 for v in d if v < 0), len(d)
+
+
 def paired(a, b):
+    """{key: value} twice -> summary of a - b over the common keys"""
     s = sorted(set(a) & set(b))
-    d = [a[i] - b[i] for i in s]
-    return mean(d), se(d), sum(1 for v in d if v < 0), len(s)
+    return summary([a[i] - b[i] for i in s])
 
 
-def fmt(p):
+def fmt(p, lower=""):
     m, e, lo, n = p
-    return f"{m:+.3f} ({e:.3f}), {lo} of {n}"
+    return f"{m:+.3f} ({e:.3f}), {lower}{lo} of {n}"
 
 
 def main():
@@ -123,12 +137,9 @@ def main():
         for k in keys:
             pool[(kind, k)] = a[k] - s[k]
     single = [v for (kind, _), v in pool.items() if kind in ("def", "lob")]
-    print(f"| single tumours pooled | {len(single)} | | | | "
-          f"{mean(single):+.3f} ({se(single):.3f}), {sum(v < 0 for v in single)} of "
-          f"{len(single)} | | |")
+    print(f"| single tumours pooled | {len(single)} | | | | {fmt(summary(single))} | | |")
     allp = list(pool.values())
-    print(f"| all pooled | {len(allp)} | | | | {mean(allp):+.3f} ({se(allp):.3f}), "
-          f"{sum(v < 0 for v in allp)} of {len(allp)} | | |")
+    print(f"| all pooled | {len(allp)} | | | | {fmt(summary(allp))} | | |")
 
     print()
     print("By set of 8 phantoms, ARMSTG - sphere (inclusion layers):")
