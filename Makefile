@@ -8,7 +8,14 @@
 #   plugins/<name>/tests/*.c   -> build/tests/<name>_<file> (cmocka), linked
 #                                 with the plugin's objects and the runtime
 #   plugins/<name>/plugin.mk   -> optional: <name>_LDLIBS, <name>_CFLAGS,
-#                                 <name>_EXTRA_SRC (sources of other folders)
+#                                 <name>_LIBS (names of lib/ libraries)
+#   lib/<name>/*.c             -> build/lib/lib<name>.a (static, PIC): code
+#                                 shared by plugins lives here, once; a plugin
+#                                 links it by `<plugin>_LIBS := <name>` in its
+#                                 plugin.mk and includes "<name>/<file>.h"
+#   lib/<name>/lib.mk          -> optional: lib<name>_LDLIBS (what users of
+#                                 the library must also link), lib<name>_CFLAGS
+#   lib/<name>/tests/*.c       -> build/tests/lib<name>_<file> (cmocka)
 #   tests/*.c                  -> build/tests/<file>
 #   tests/plugins/<name>/*.c   -> build/test-plugins/<name>.so (test only)
 
@@ -21,7 +28,7 @@ HDF5_CFLAGS := $(shell pkg-config --cflags hdf5 2>/dev/null)
 HDF5_LIBS   := $(shell pkg-config --libs hdf5 2>/dev/null)
 CFLAGS   ?= $(OPT) -g
 CFLAGS   += -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -Wno-unused-parameter -Wno-format-truncation \
-            -fPIC -fopenmp -Iruntime/include -Iruntime -Itests -I/usr/include/nifti \
+            -fPIC -fopenmp -Iruntime/include -Iruntime -Ilib -Itests -I/usr/include/nifti \
             $(HDF5_CFLAGS)
 ifeq ($(SAN),1)
 CFLAGS   += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
@@ -73,27 +80,47 @@ $(RT_LIB): $(RT_OBJ)
 $(ARMSTG): $(BUILD)/obj/runtime/main.o $(RT_LIB)
 	$(CC) $(LDFLAGS) -o $@ $^ $(RT_LIBS)
 
+# ---- lib/<name>: shared code beneath the plugins ----
+ALL_LIBS := $(sort $(notdir $(patsubst %/,%,$(dir $(wildcard lib/*/*.c)))))
+define LIB_template
+-include lib/$(1)/lib.mk
+lib$(1)_SRC := $$(wildcard lib/$(1)/*.c)
+lib$(1)_OBJ := $$(lib$(1)_SRC:%.c=$(BUILD)/obj/%.o)
+$(BUILD)/obj/lib/$(1)/%.o: EXTRA_CFLAGS = $$(lib$(1)_CFLAGS)
+$(BUILD)/lib/lib$(1).a: $$(lib$(1)_OBJ)
+	@mkdir -p $$(dir $$@)
+	rm -f $$@ && ar rcs $$@ $$^
+lib$(1)_TESTS := $$(patsubst lib/$(1)/tests/%.c,$(BUILD)/tests/lib$(1)_%,$$(wildcard lib/$(1)/tests/*.c))
+$(BUILD)/tests/lib$(1)_%: $(BUILD)/obj/lib/$(1)/tests/%.o $(BUILD)/lib/lib$(1).a $(RT_LIB)
+	@mkdir -p $$(dir $$@)
+	$$(CC) $$(LDFLAGS) -o $$@ $$^ $$(lib$(1)_LDLIBS) $(RT_LIBS) -lcmocka
+LIB_TESTS += $$(lib$(1)_TESTS)
+endef
+$(foreach l,$(ALL_LIBS),$(eval $(call LIB_template,$(l))))
+
 # ---- plugins ----
 define PLUGIN_template
 -include plugins/$(1)/plugin.mk
 $(1)_SRC := $$(wildcard plugins/$(1)/*.c) $$($(1)_EXTRA_SRC)
 $(1)_CU  := $$(wildcard plugins/$(1)/*.cu)
 $(1)_OBJ := $$($(1)_SRC:%.c=$(BUILD)/obj/%.o) $$($(1)_CU:%.cu=$(BUILD)/obj/%.cu.o)
+$(1)_LIBA := $$(foreach l,$$($(1)_LIBS),$(BUILD)/lib/lib$$(l).a)
+$(1)_LIBDEP := $$(foreach l,$$($(1)_LIBS),$$(lib$$(l)_LDLIBS))
 $(BUILD)/obj/plugins/$(1)/%.o: EXTRA_CFLAGS = $$($(1)_CFLAGS)
-$(BUILD)/plugins/$(1).so: $$($(1)_OBJ)
+$(BUILD)/plugins/$(1).so: $$($(1)_OBJ) $$($(1)_LIBA)
 	@mkdir -p $$(dir $$@)
-	$$(CC) -shared -Wl,-z,defs $$(LDFLAGS) -o $$@ $$^ $$($(1)_LDLIBS) $$(if $$($(1)_CU),-L/usr/local/cuda/lib64 -lcudart) -lm
+	$$(CC) -shared -Wl,-z,defs $$(LDFLAGS) -o $$@ $$^ $$($(1)_LDLIBS) $$($(1)_LIBDEP) $$(if $$($(1)_CU),-L/usr/local/cuda/lib64 -lcudart) -lm
 $(1)_TESTS := $$(patsubst plugins/$(1)/tests/%.c,$(BUILD)/tests/$(1)_%,$$(wildcard plugins/$(1)/tests/*.c))
-$(BUILD)/tests/$(1)_%: $(BUILD)/obj/plugins/$(1)/tests/%.o $$($(1)_OBJ) $(RT_LIB)
+$(BUILD)/tests/$(1)_%: $(BUILD)/obj/plugins/$(1)/tests/%.o $$($(1)_OBJ) $$($(1)_LIBA) $(RT_LIB)
 	@mkdir -p $$(dir $$@)
-	$$(CC) $$(LDFLAGS) -o $$@ $$^ $$($(1)_LDLIBS) $(RT_LIBS) -lcmocka
+	$$(CC) $$(LDFLAGS) -o $$@ $$^ $$($(1)_LDLIBS) $$($(1)_LIBDEP) $(RT_LIBS) -lcmocka $$(if $$($(1)_CU),-L/usr/local/cuda/lib64 -lcudart)
 PLUGIN_TESTS += $$($(1)_TESTS)
 endef
 $(foreach p,$(PLUGINS),$(eval $(call PLUGIN_template,$(p))))
 
 $(BUILD)/obj/%.cu.o: %.cu
 	@mkdir -p $(dir $@)
-	$(NVCC) -arch=sm_90 -O3 -Xcompiler -fPIC -Iruntime/include -Iruntime -c $< -o $@
+	$(NVCC) -arch=sm_90 -O3 -Xcompiler -fPIC -Iruntime/include -Iruntime -Ilib -c $< -o $@
 
 $(BUILD)/test-plugins/%.so: $(wildcard tests/plugins/*/*.c)
 	@mkdir -p $(dir $@)
@@ -103,7 +130,7 @@ $(BUILD)/tests/%: $(BUILD)/obj/tests/%.o $(RT_LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $^ $(RT_LIBS) -lcmocka
 
-TESTS := $(TEST_BIN) $(PLUGIN_TESTS)
+TESTS := $(TEST_BIN) $(LIB_TESTS) $(PLUGIN_TESTS)
 tests: $(TESTS) $(TPLUG_SO)
 
 # ---- the two commands of the README ----
