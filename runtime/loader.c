@@ -1,8 +1,9 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * Plugin loader: dlopen a .so, call its entry with the host table, and
- * refuse anything whose magic, ABI major, struct size or name is wrong, with
- * a message naming the file.  Search path: $ARMSTG_PLUGIN_PATH
+ * refuse anything whose magic, ABI major, name or descriptor is wrong, or
+ * that was built for a newer ABI minor than this runtime's, with a message
+ * naming the file (plugin.h: versions).  Search path: $ARMSTG_PLUGIN_PATH
  * (':'-separated), then <folder of the executable>/plugins and
  * <folder of the executable>/../plugins.
  */
@@ -83,6 +84,8 @@ int plugin_check_desc(const armstg_plugin_t *d, char *err, size_t errsize)
 		BAD("bad parameter array (count %d)", d->n_params);
 	if (!d->devices)
 		BAD("no device listed");
+	if (d->citation && !*d->citation)
+		BAD("empty citation (NULL for none)");
 	for (int pass = 0; pass < 2; pass++) {
 		const armstg_port_t *ports = pass ? d->outputs : d->inputs;
 		int n = pass ? d->n_outputs : d->n_inputs;
@@ -171,6 +174,48 @@ static const char *basename_noext(const char *path, char *buf, size_t n)
 	return buf;
 }
 
+/* Descriptor size each minor promises (plugin.h's version list). */
+static const size_t desc_size_of_minor[] = {
+	ARMSTG_PLUGIN_SIZE_1_0,
+	ARMSTG_PLUGIN_SIZE_1_1,
+};
+
+/*
+ * SQLite/Redis rule: a plugin of an older minor is accepted, its struct_size
+ * bytes copied into a zero-filled descriptor of this runtime's size (members
+ * added since read 0/NULL); a plugin of a newer minor is refused by name, as
+ * is a size that does not match what its minor promises.
+ */
+static int desc_copy(const armstg_plugin_t *pd, rt_plugin_t *out,
+		     const char *path, const char *base, char *err,
+		     size_t errsize)
+{
+	_Static_assert(sizeof desc_size_of_minor / sizeof desc_size_of_minor[0]
+			       == ARMSTG_ABI_MINOR + 1,
+		       "one descriptor size per minor");
+	if (pd->abi_minor > ARMSTG_ABI_MINOR) {
+		snprintf(err, errsize, "%s: plugin '%s' was built for plugin "
+			 "ABI %u.%u, newer than this runtime's %d.%d: update "
+			 "ARMSTG or rebuild the plugin against this runtime's "
+			 "headers", path, base, pd->abi_major, pd->abi_minor,
+			 ARMSTG_ABI_MAJOR, ARMSTG_ABI_MINOR);
+		return ARMSTG_EINVAL;
+	}
+	size_t want = desc_size_of_minor[pd->abi_minor];
+	if (pd->struct_size < want || pd->struct_size > sizeof out->desc_copy) {
+		snprintf(err, errsize, "%s: plugin '%s' claims ABI %u.%u with a "
+			 "descriptor of %u bytes (that minor's is %zu, this "
+			 "runtime's at most %zu): a corrupt or hand-edited "
+			 "descriptor; rebuild the plugin", path, base,
+			 pd->abi_major, pd->abi_minor, pd->struct_size, want,
+			 sizeof out->desc_copy);
+		return ARMSTG_EINVAL;
+	}
+	memset(&out->desc_copy, 0, sizeof out->desc_copy);
+	memcpy(&out->desc_copy, pd, pd->struct_size);
+	return 0;
+}
+
 int plugin_load_file(const char *path, rt_plugin_t *out, char *err,
 		     size_t errsize)
 {
@@ -190,34 +235,34 @@ int plugin_load_file(const char *path, rt_plugin_t *out, char *err,
 		return ARMSTG_EINVAL;
 	}
 	const char *perr = NULL;
-	const armstg_plugin_t *d = entry(rt_host(), &perr);
+	const armstg_plugin_t *pd = entry(rt_host(), &perr);
 	char base[256];
 	basename_noext(path, base, sizeof base);
 	int rc = ARMSTG_EINVAL;
-	if (!d) {
+	if (!pd) {
 		snprintf(err, errsize, "%s: plugin refused to load: %s", path,
 			 perr ? perr : "no reason given");
-	} else if (d->magic != ARMSTG_PLUGIN_MAGIC) {
+	} else if (pd->magic != ARMSTG_PLUGIN_MAGIC) {
 		snprintf(err, errsize, "%s: bad magic 0x%08x (expected 0x%08x):"
-			 " not an ARMSTG plugin", path, d->magic,
+			 " not an ARMSTG plugin", path, pd->magic,
 			 ARMSTG_PLUGIN_MAGIC);
-	} else if (d->abi_major != ARMSTG_ABI_MAJOR) {
+	} else if (pd->abi_major != ARMSTG_ABI_MAJOR) {
 		snprintf(err, errsize, "%s: built for plugin ABI %u.x, this "
 			 "runtime speaks %d.x: rebuild the plugin", path,
-			 d->abi_major, ARMSTG_ABI_MAJOR);
-	} else if (d->struct_size != sizeof(armstg_plugin_t)) {
-		snprintf(err, errsize, "%s: descriptor size %u differs from "
-			 "this runtime's %zu: rebuild the plugin", path,
-			 d->struct_size, sizeof(armstg_plugin_t));
-	} else if (!d->name || strcmp(d->name, base)) {
-		snprintf(err, errsize, "%s: plugin calls itself '%s' but the "
-			 "file is named '%s.so'", path,
-			 d->name ? d->name : "(null)", base);
-	} else {
+			 pd->abi_major, ARMSTG_ABI_MAJOR);
+	} else if (!(rc = desc_copy(pd, out, path, base, err, errsize))) {
+		/* from here on only the zero-filled copy is read */
+		const armstg_plugin_t *d = &out->desc_copy;
 		char e[512];
-		if (plugin_check_desc(d, e, sizeof e)) {
+		if (!d->name || strcmp(d->name, base)) {
+			snprintf(err, errsize, "%s: plugin calls itself '%s' "
+				 "but the file is named '%s.so'", path,
+				 d->name ? d->name : "(null)", base);
+			rc = ARMSTG_EINVAL;
+		} else if (plugin_check_desc(d, e, sizeof e)) {
 			snprintf(err, errsize, "%s: invalid descriptor: %s",
 				 path, e);
+			rc = ARMSTG_EINVAL;
 		} else {
 			out->dl = dl;
 			out->desc = d;

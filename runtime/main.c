@@ -228,9 +228,11 @@ static int cmd_describe(const char *name)
 	const armstg_plugin_t *d = p.desc;
 	printf("%s %s (%s) - %s\n", d->name, d->version, d->license,
 	       d->description);
-	printf("file: %s\ndevices:%s%s\n", p.path,
-	       (d->devices & DEV_CPU) ? " cpu" : "",
+	printf("file: %s\nABI: %u.%u\ndevices:%s%s\n", p.path, d->abi_major,
+	       d->abi_minor, (d->devices & DEV_CPU) ? " cpu" : "",
 	       (d->devices & DEV_CUDA) ? " cuda" : "");
+	if (d->citation)
+		printf("method: %s\n", d->citation);
 	printf("\ninputs:\n");
 	for (int i = 0; i < d->n_inputs; i++)
 		printf("  %-14s %-9s %-9s %s\n", d->inputs[i].name,

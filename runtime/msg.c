@@ -14,40 +14,6 @@ uint64_t msg_bytes_live(void)
 	return atomic_load(&live_bytes);
 }
 
-size_t vol_dtype_size(int dtype)
-{
-	switch (dtype) {
-	case DT_U8: return 1;
-	case DT_I16: return 2;
-	case DT_I32: return 4;
-	case DT_F32: return 4;
-	case DT_F64: return 8;
-	default: return 0;
-	}
-}
-
-const char *vol_dtype_name(int dtype)
-{
-	switch (dtype) {
-	case DT_U8: return "u8";
-	case DT_I16: return "i16";
-	case DT_I32: return "i32";
-	case DT_F32: return "f32";
-	case DT_F64: return "f64";
-	default: return "?";
-	}
-}
-
-const char *msg_type_name(int type)
-{
-	switch (type) {
-	case MSG_VOLUME: return "volume";
-	case MSG_POINTSET: return "pointset";
-	case MSG_TABLE: return "table";
-	default: return "none";
-	}
-}
-
 const char *armstg_strerror(int code)
 {
 	switch (code) {
@@ -262,14 +228,6 @@ int64_t tab_add_row(tab_t *t)
 	if (!t || t->base.frozen || tab_grow(t, t->nrows + 1))
 		return -1;
 	return t->nrows++;
-}
-
-const tab_col_t *tab_col(const tab_t *t, const char *name)
-{
-	for (int c = 0; c < t->ncols; c++)
-		if (!strcmp(t->col[c].name, name))
-			return &t->col[c];
-	return NULL;
 }
 
 /* Append a column (no check for an existing name: callers decide). */

@@ -14,7 +14,6 @@
 #define ARMSTG_VERSION "0.1.0"
 
 /* ---- msg.c: messages ---- */
-size_t vol_dtype_size(int dtype);
 vol_t *vol_new(int nx, int ny, int nz, int nc, int dtype,
 	       const double affine[16]);
 vol_t *vol_clone(const vol_t *v);
@@ -27,7 +26,6 @@ tab_t *tab_new(void);
 int64_t tab_add_row(tab_t *t);
 int tab_set_num(tab_t *t, int64_t row, const char *col, double v);
 int tab_set_str(tab_t *t, int64_t row, const char *col, const char *s);
-const tab_col_t *tab_col(const tab_t *t, const char *name);
 /* append a column (even on a table with no rows); NULL when full/bad */
 tab_col_t *tab_add_col(tab_t *t, const char *name, int type);
 msg_t *msg_ref(const msg_t *m);
@@ -70,7 +68,11 @@ const armstg_host_t *rt_host(void);
 typedef struct rt_plugin {
 	char path[1024];
 	void *dl;                      /* dlopen handle (NULL if static) */
-	const armstg_plugin_t *desc;
+	const armstg_plugin_t *desc;   /* = &desc_copy once loaded */
+	/* the plugin's descriptor, zero-filled past its struct_size (an older
+	 * minor's); desc points here, so an rt_plugin_t is not copied by
+	 * value */
+	armstg_plugin_t desc_copy;
 } rt_plugin_t;
 
 /* loader.c: load build/plugins/<name>.so (search ARMSTG_PLUGIN_PATH, then

@@ -938,12 +938,12 @@ static const armstg_plugin_t demons_plugin = {
 		       "multi-resolution, masks",
 	.version = "1.0.0",
 	.license = "MIT",
-	.inputs = demons_inputs,
-	.n_inputs = ARMSTG_COUNT(demons_inputs),
-	.outputs = demons_outputs,
-	.n_outputs = ARMSTG_COUNT(demons_outputs),
-	.params = demons_params,
-	.n_params = ARMSTG_COUNT(demons_params),
+	.citation = "Vercauteren, Pennec, Perchant, Ayache, \"Diffeomorphic "
+		    "demons\", NeuroImage 45(1):S61-S72, 2009; Thirion, Med "
+		    "Image Anal 2(3):243-260, 1998",
+	ARMSTG_INPUTS(demons_inputs),
+	ARMSTG_OUTPUTS(demons_outputs),
+	ARMSTG_PARAMS(demons_params),
 	.priv_size = sizeof(demons_priv_t),
 	.devices = DEV_CPU,
 	.init = demons_init,

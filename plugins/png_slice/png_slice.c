@@ -80,13 +80,6 @@ static const uint8_t palette[][3] = {
 };
 #define NPAL ((int)(sizeof palette / sizeof palette[0]))
 
-/* msg.h's vol_dtype_size lives in the runtime, which plugins may not call */
-static int dtype_ok(int dt)
-{
-	return dt == DT_U8 || dt == DT_I16 || dt == DT_I32 || dt == DT_F32 ||
-	       dt == DT_F64;
-}
-
 static double voxel_value(const vol_t *v, int64_t e)
 {
 	if (v->nc == 1)
@@ -239,10 +232,10 @@ static int png_process(armstg_stage_t *st)
 	int rc;
 	if (!v || !v->data || v->nx < 1 || v->ny < 1 || v->nz < 1)
 		return H->fail(st, ARMSTG_EINVAL, "input volume is empty");
-	if (!dtype_ok(v->dtype))
+	if (!vol_dtype_size(v->dtype))
 		return H->fail(st, ARMSTG_EUNSUPPORTED,
 			       "input volume has unknown dtype %d", v->dtype);
-	if (lab && (!lab->data || lab->nc != 1 || !dtype_ok(lab->dtype)))
+	if (lab && (!lab->data || lab->nc != 1 || !vol_dtype_size(lab->dtype)))
 		return H->fail(st, ARMSTG_EINVAL,
 			       "labels must be a one-component volume");
 	double lbinv[16] = { 0 };
@@ -376,12 +369,8 @@ static const armstg_plugin_t png_slice_desc = {
 		       "volume as a PNG, with optional label contours",
 	.version = "1.0.0",
 	.license = "MIT",
-	.inputs = inputs,
-	.n_inputs = ARMSTG_COUNT(inputs),
-	.outputs = NULL,
-	.n_outputs = 0,
-	.params = params,
-	.n_params = ARMSTG_COUNT(params),
+	ARMSTG_INPUTS(inputs),
+	ARMSTG_PARAMS(params),
 	.priv_size = sizeof(png_priv_t),
 	.devices = DEV_CPU,
 	.init = NULL,

@@ -29,20 +29,6 @@ static int omp_default_threads(void)
 }
 #endif
 
-/* element size of a dtype (local: the runtime's vol_dtype_size is not
- * reachable from a plugin) */
-static size_t dt_size(int dtype)
-{
-	switch (dtype) {
-	case DT_U8: return 1;
-	case DT_I16: return 2;
-	case DT_I32: return 4;
-	case DT_F32: return 4;
-	case DT_F64: return 8;
-	default: return 0;
-	}
-}
-
 /* ------------------------------------------------------------------ */
 /* grids                                                               */
 /* ------------------------------------------------------------------ */
@@ -177,7 +163,7 @@ int fimg_from_vol(fimg_t *f, const vol_t *v)
 		break;
 	}
 	default:
-		if (!dt_size(v->dtype)) {
+		if (!vol_dtype_size(v->dtype)) {
 			fimg_free(f);
 			return ARMSTG_EINVAL;
 		}
@@ -204,7 +190,7 @@ int fimg_to_vol(const fimg_t *f, vol_t *v)
 		break;
 	}
 	default:
-		if (!dt_size(v->dtype))
+		if (!vol_dtype_size(v->dtype))
 			return ARMSTG_EINVAL;
 		for (int64_t e = 0; e < n; e++)
 			vol_set(v, e, f->d[e]);
@@ -224,7 +210,7 @@ int field_check_vol(const vol_t *v, const char *what, int nc_want,
 		snprintf(err, errsize, "%s is missing or not a volume", what);
 		return ARMSTG_EINVAL;
 	}
-	if (!dt_size(v->dtype) || !v->data) {
+	if (!vol_dtype_size(v->dtype) || !v->data) {
 		snprintf(err, errsize, "%s has an unknown data type (%d)", what,
 			 v->dtype);
 		return ARMSTG_EINVAL;

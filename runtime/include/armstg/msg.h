@@ -36,6 +36,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -114,10 +115,55 @@ typedef struct tab {
 	tab_col_t col[TAB_MAX_COLS];
 } tab_t;
 
+/* Helpers that plugins and the runtime share: static inline, so a plugin
+ * uses them without linking the runtime (SQLite's sqlite3ext.h rule: a
+ * plugin reaches the host only through its table). */
+
 /* Size in bytes of one element of a dtype (0 for an unknown one). */
-size_t vol_dtype_size(int dtype);
-const char *vol_dtype_name(int dtype);
-const char *msg_type_name(int type);
+static inline size_t vol_dtype_size(int dtype)
+{
+	switch (dtype) {
+	case DT_U8: return 1;
+	case DT_I16: return 2;
+	case DT_I32: return 4;
+	case DT_F32: return 4;
+	case DT_F64: return 8;
+	default: return 0;
+	}
+}
+
+/* "u8", "i16", "i32", "f32", "f64"; "?" for an unknown dtype */
+static inline const char *vol_dtype_name(int dtype)
+{
+	switch (dtype) {
+	case DT_U8: return "u8";
+	case DT_I16: return "i16";
+	case DT_I32: return "i32";
+	case DT_F32: return "f32";
+	case DT_F64: return "f64";
+	default: return "?";
+	}
+}
+
+/* "volume", "pointset", "table"; "none" otherwise */
+static inline const char *msg_type_name(int type)
+{
+	switch (type) {
+	case MSG_VOLUME: return "volume";
+	case MSG_POINTSET: return "pointset";
+	case MSG_TABLE: return "table";
+	default: return "none";
+	}
+}
+
+/* The column called name, or NULL. */
+static inline const tab_col_t *tab_col(const tab_t *t, const char *name)
+{
+	for (int c = 0; c < t->ncols; c++)
+		if (!strcmp(t->col[c].name, name))
+			return &t->col[c];
+	return NULL;
+}
 
 #ifdef __cplusplus
 }

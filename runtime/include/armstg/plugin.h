@@ -8,9 +8,27 @@
  *                                                const char **errmsg);
  *
  * which returns a constant descriptor (static data a tool can inspect without
- * running anything, as GStreamer's GstPluginDesc).  The loader refuses a
- * descriptor whose magic, abi_major or struct_size differ from its own, or
- * whose name differs from the file's basename.
+ * running anything, as GStreamer's GstPluginDesc).
+ *
+ * Versions (SQLite's sqlite3ext.h, Redis's REDISMODULE_APIVER): the
+ * descriptor and the host table only ever grow at their end, and each growth
+ * bumps ARMSTG_ABI_MINOR.  The loader
+ *   - refuses a descriptor whose magic or abi_major differ from its own, or
+ *     whose name differs from the file's basename;
+ *   - refuses a plugin built for a NEWER minor than the runtime's (it may
+ *     call host members or set descriptor fields this runtime lacks): the
+ *     message names the plugin and both versions;
+ *   - accepts an OLDER minor: it copies the plugin's struct_size bytes into
+ *     a zero-filled descriptor of its own size, so members added since read
+ *     0 / NULL (each new member's zero means "as before").
+ * A plugin built for minor m uses only the host members of minor <= m; a
+ * runtime of an older minor never loads it, so it needs no run-time check
+ * (ARMSTG_HOST_HAS tells a plugin that wants to run on older hosts too).
+ *
+ *   minor  added
+ *   1.0    the descriptor up to fini; the host table up to threads
+ *   1.1    descriptor: citation; vol_dtype_size, vol_dtype_name,
+ *          msg_type_name and tab_col became static inline (msg.h)
  *
  * Parameters are declared in a table (FFmpeg AVOption style).  The runtime
  * parses and range-checks every value against the table BEFORE init and
@@ -44,7 +62,7 @@ extern "C" {
 
 #define ARMSTG_PLUGIN_MAGIC 0x41524d53u /* "ARMS" */
 #define ARMSTG_ABI_MAJOR 1
-#define ARMSTG_ABI_MINOR 0
+#define ARMSTG_ABI_MINOR 1
 #define ARMSTG_ENTRY_SYMBOL "armstg_plugin_entry"
 
 #if defined(__GNUC__)
@@ -145,11 +163,22 @@ struct armstg_plugin {
 	int (*init)(armstg_stage_t *st);    /* may be NULL */
 	int (*process)(armstg_stage_t *st); /* required */
 	void (*fini)(armstg_stage_t *st);   /* may be NULL */
+
+	/* ---- 1.1 ---- */
+	/* the method's reference, one line ("Vercauteren et al., NeuroImage
+	 * 45(1):S61-S72, 2009"): shown by `armstg describe` and the report;
+	 * NULL: none */
+	const char *citation;
 };
+
+/* Descriptor size of each minor (the loader's floor for a plugin that
+ * claims that minor): offsetof the first member the next minor added. */
+#define ARMSTG_PLUGIN_SIZE_1_0 offsetof(armstg_plugin_t, citation)
+#define ARMSTG_PLUGIN_SIZE_1_1 sizeof(armstg_plugin_t)
 
 /*
  * The host API table.  Append-only: new members go at the end and bump
- * ARMSTG_ABI_MINOR; a plugin checks host->size before using newer members.
+ * ARMSTG_ABI_MINOR (see the version list at the top of this file).
  */
 struct armstg_host {
 	uint32_t size;           /* sizeof(armstg_host_t) of the runtime */
@@ -225,12 +254,37 @@ typedef const armstg_plugin_t *(*armstg_entry_fn)(const armstg_host_t *host,
 		return &(desc);                                               \
 	}
 
-#define ARMSTG_COUNT(a) ((int32_t)(sizeof(a) / sizeof((a)[0])))
+/* 1 when the host table has member m (a plugin meant to run on hosts of an
+ * older minor than its own checks before calling a newer member). */
+#define ARMSTG_HOST_HAS(host, m)                                              \
+	((host)->size >= offsetof(armstg_host_t, m) + sizeof((host)->m))
+
+/* Number of elements of an array; in C a pointer does not compile (it would
+ * silently count 1 or 0), as Linux's ARRAY_SIZE. */
+#if defined(__GNUC__) && !defined(__cplusplus)
+#define ARMSTG_MUST_BE_ARRAY_(a)                                              \
+	(0 * (int)sizeof(struct {                                             \
+		int must_be_an_array : 1 - 2 * __builtin_types_compatible_p(  \
+			__typeof__(a), __typeof__(&(a)[0]));                  \
+	}))
+#else
+#define ARMSTG_MUST_BE_ARRAY_(a) 0
+#endif
+#define ARMSTG_COUNT(a)                                                       \
+	((int32_t)(sizeof(a) / sizeof((a)[0])) + ARMSTG_MUST_BE_ARRAY_(a))
 
 /* Descriptor header fields, in order: magic, abi, struct_size. */
 #define ARMSTG_PLUGIN_HEADER                                                  \
 	.magic = ARMSTG_PLUGIN_MAGIC, .abi_major = ARMSTG_ABI_MAJOR,          \
 	.abi_minor = ARMSTG_ABI_MINOR, .struct_size = sizeof(armstg_plugin_t)
+
+/* Ports and parameters given as arrays with their counts (FFmpeg's
+ * FILTER_INPUTS / FILTER_OUTPUTS): a descriptor reads
+ *     ARMSTG_INPUTS(ins), ARMSTG_OUTPUTS(outs), ARMSTG_PARAMS(params),
+ * and leaves out what it does not have (NULL, 0). */
+#define ARMSTG_INPUTS(a) .inputs = (a), .n_inputs = ARMSTG_COUNT(a)
+#define ARMSTG_OUTPUTS(a) .outputs = (a), .n_outputs = ARMSTG_COUNT(a)
+#define ARMSTG_PARAMS(a) .params = (a), .n_params = ARMSTG_COUNT(a)
 
 #ifdef __cplusplus
 }
