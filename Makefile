@@ -34,7 +34,7 @@ ifeq ($(SAN),1)
 CFLAGS   += -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 LDSAN    := -fsanitize=address,undefined
 endif
-RT_LIBS  := -lniftiio -lznz -lz $(HDF5_LIBS) -lmsgpackc -linih -lpng -ldl -lpthread -lm
+RT_LIBS  := -lniftiio -lznz -lz $(HDF5_LIBS) -lmsgpackc -linih -lpng -lczmq -lzmq -ldl -lpthread -lm
 LDFLAGS  += -fopenmp $(LDSAN)
 
 RT_SRC   := $(filter-out runtime/main.c,$(wildcard runtime/*.c))

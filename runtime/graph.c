@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include "graph.h"
+#include "remote.h"
 
 #define G_MAX_STAGES 256
 #define G_MAX_PORTS 32
@@ -37,6 +38,7 @@ typedef struct g_stage {
 	int src_port[G_MAX_PORTS];
 	int conn_line[G_MAX_PORTS];
 	rt_stage_t *st;
+	int node;                  /* [node] index; NODE_UNSET, NODE_LOCAL */
 	/* run state */
 	int needed, state, consumers_left, rc;
 	int keep;                  /* outputs held across the passes of a
@@ -45,10 +47,12 @@ typedef struct g_stage {
 	double rss_mb, out_mb;
 } g_stage_t;
 
+enum { NODE_UNSET = -1, NODE_LOCAL = -2 };
+
 typedef struct g_node {
 	char name[G_NAME];
 	int line;
-	char endpoint[256];
+	remote_node_t rn;          /* endpoints, keys, time-out (remote.h) */
 } g_node_t;
 
 /* One candidate of a [tune] search, as tune.tsv reports it. */
@@ -395,6 +399,7 @@ static void on_section(graph_t *g, const char *raw)
 			g_stage_t *st = &g->stages[g->nstages];
 			memset(st, 0, sizeof *st);
 			snprintf(st->name, sizeof st->name, "%s", name);
+			st->node = NODE_UNSET;
 			st->line = g->lineno;
 			for (int i = 0; i < G_MAX_PORTS; i++)
 				st->src[i] = -1;
@@ -417,6 +422,7 @@ static void on_section(graph_t *g, const char *raw)
 			g_node_t *nd = &g->nodes[g->nnodes];
 			memset(nd, 0, sizeof *nd);
 			snprintf(nd->name, sizeof nd->name, "%s", name);
+			remote_node_init(&nd->rn, name);
 			nd->line = g->lineno;
 			g->cur_kind = 3;
 			g->cur_index = g->nnodes++;
@@ -530,12 +536,9 @@ static int handler(void *user, const char *section, const char *key,
 	}
 	if (g->cur_kind == 3) {
 		g_node_t *nd = &g->nodes[g->cur_index];
-		if (!strcmp(key, "endpoint"))
-			snprintf(nd->endpoint, sizeof nd->endpoint, "%s", val);
-		else
-			gerr(g, g->lineno, NULL, key,
-			     "unknown key in [node %s] (known: endpoint)",
-			     nd->name);
+		char e[1024];
+		if (remote_node_set(&nd->rn, key, val, e, sizeof e))
+			gerr(g, g->lineno, NULL, key, "%s", e);
 		return 1;
 	}
 	add_kv(g, &g->stages[g->cur_index], key, val, g->lineno, 0);
@@ -643,9 +646,13 @@ static void validate_stage(graph_t *g, g_stage_t *s)
 		if (!strcmp(kv->key, "node")) {
 			int found = 0;
 			for (int n = 0; n < g->nnodes; n++)
-				if (!strcmp(g->nodes[n].name, kv->val))
+				if (!strcmp(g->nodes[n].name, kv->val)) {
 					found = 1;
-			if (!found && strcmp(kv->val, "local"))
+					s->node = n;
+				}
+			if (!found && !strcmp(kv->val, "local"))
+				s->node = NODE_LOCAL;
+			else if (!found)
 				gerr(g, kv->line, s->name, kv->key,
 				     "unknown node '%s' (declare it in a "
 				     "[node %s] section)", kv->val, kv->val);
@@ -688,6 +695,18 @@ static void validate_stage(graph_t *g, g_stage_t *s)
 	}
 	if (stage_finish_params(s->st, e, sizeof e))
 		gerr(g, s->line, s->name, NULL, "%s", e);
+	/* a remote stage's files come back under --out: no absolute path */
+	for (int i = 0; s->node >= 0 && i < s->nkv; i++) {
+		g_kv_t *kv = &s->kv[i];
+		for (int k = 0; k < d->n_params; k++)
+			if (d->params[k].type == PT_STRING &&
+			    !strcmp(d->params[k].name, kv->key) &&
+			    !remote_param_ok(kv->val))
+				gerr(g, kv->line, s->name, kv->key, "'%s': a "
+				     "stage on node '%s' takes relative paths "
+				     "(its files come back under --out)",
+				     kv->val, g->nodes[s->node].name);
+	}
 }
 
 static void resolve_conns(graph_t *g, g_stage_t *s)
@@ -1153,15 +1172,11 @@ graph_t *graph_load(const char *path, const char *const *sets, int nsets,
 		if (g->stages[i].loaded)
 			resolve_conns(g, &g->stages[i]);
 	validate_tune(g);
-	for (int i = 0; i < g->nnodes; i++)
-		if (!g->nodes[i].endpoint[0])
-			gerr(g, g->nodes[i].line, NULL, NULL,
-			     "node '%s' has no endpoint", g->nodes[i].name);
-		else
-			gerr(g, g->nodes[i].line, NULL, NULL,
-			     "node '%s': remote execution over ZeroMQ is not "
-			     "in this build yet; remove the [node] section and "
-			     "'node =' keys to run locally", g->nodes[i].name);
+	for (int i = 0; i < g->nnodes; i++) {
+		char e[2048];
+		if (remote_node_check(&g->nodes[i].rn, e, sizeof e))
+			gerr(g, g->nodes[i].line, NULL, NULL, "%s", e);
+	}
 	if (!g->nerr) {
 		int *color = calloc((size_t)g->nstages, sizeof *color);
 		int *stack = calloc((size_t)g->nstages + 1, sizeof *stack);
@@ -1301,9 +1316,25 @@ static void run_one(runner_t *r, g_stage_t *s)
 		reset_peak_rss();
 	double t0 = now_s();
 	rt_log(s->name, LOG_DEBUG, "start (plugin %s)", d->name);
-	int rc = stage_init(s->st);
-	if (!rc)
-		rc = stage_process(s->st, in);
+	/* on a node, or in a batch on the case's worker (remote.h) */
+	remote_ctx_t *rx = r->o->remote;
+	const remote_node_t *rn = NULL;
+	int first = 0;
+	if (s->node >= 0) {
+		rn = &g->nodes[s->node].rn;
+	} else if (s->node == NODE_UNSET && rx && rx->pool &&
+		   remote_batch_eligible(d)) {
+		rn = rx->pool;
+		first = rx->first;
+	}
+	int rc;
+	if (rn) {
+		rc = remote_stage_run(rn, first, rx, s->st, in);
+	} else {
+		rc = stage_init(s->st);
+		if (!rc)
+			rc = stage_process(s->st, in);
+	}
 	s->wall_s = now_s() - t0;
 	s->rss_mb = peak_rss_mb();
 	double ob = 0;

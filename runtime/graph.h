@@ -49,6 +49,7 @@
 #include "rt.h"
 
 typedef struct graph graph_t;
+struct remote_ctx;
 
 /* Parse + validate.  sets: "stage.key=value" strings.  On failure returns
  * NULL and err holds every error found, one per line. */
@@ -66,6 +67,10 @@ typedef struct run_opts {
 					else all) */
 	int ntargets;
 	int quiet;                   /* no run table on stderr */
+	/* remote stages share this (NULL: none); in a batch it also holds
+	 * the case's worker pool, where stages without a node key run
+	 * (remote.h) */
+	struct remote_ctx *remote;
 } run_opts_t;
 
 /* Run the stages the targets need (after the [tune] search, if any).  0 on

@@ -21,6 +21,7 @@ static int env_parsed;
 static struct { char stage[64]; int level; } overrides[32];
 static int n_overrides;
 static pthread_mutex_t log_lock = PTHREAD_MUTEX_INITIALIZER;
+static char node_name[64] = "local"; /* a worker logs under its own name */
 
 static int parse_level(const char *s, size_t n)
 {
@@ -78,7 +79,24 @@ int rt_log_level_for(const char *stage)
 	return default_level;
 }
 
+void rt_log_set_node(const char *name)
+{
+	snprintf(node_name, sizeof node_name, "%s",
+		 name && *name ? name : "local");
+}
+
+const char *rt_log_node(void)
+{
+	return node_name;
+}
+
 void rt_vlog(const char *stage, int level, const char *fmt, va_list ap)
+{
+	rt_vlog_at(stage, NULL, level, fmt, ap);
+}
+
+void rt_vlog_at(const char *stage, const char *node, int level,
+		const char *fmt, va_list ap)
 {
 	static const char *tag[] = { "error: ", "warning: ", "", "debug: ",
 				     "trace: " };
@@ -89,8 +107,9 @@ void rt_vlog(const char *stage, int level, const char *fmt, va_list ap)
 	if (level > 4)
 		level = 4;
 	char line[2048];
-	int n = snprintf(line, sizeof line, "[%s@local] %s",
-			 stage ? stage : "armstg", tag[level]);
+	int n = snprintf(line, sizeof line, "[%s@%s] %s",
+			 stage ? stage : "armstg", node ? node : node_name,
+			 tag[level]);
 	if (n < 0)
 		return;
 	if ((size_t)n < sizeof line)
@@ -109,5 +128,14 @@ void rt_log(const char *stage, int level, const char *fmt, ...)
 	va_list ap;
 	va_start(ap, fmt);
 	rt_vlog(stage, level, fmt, ap);
+	va_end(ap);
+}
+
+void rt_log_at(const char *stage, const char *node, int level,
+	       const char *fmt, ...)
+{
+	va_list ap;
+	va_start(ap, fmt);
+	rt_vlog_at(stage, node, level, fmt, ap);
 	va_end(ap);
 }

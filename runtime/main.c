@@ -5,6 +5,8 @@
  *   armstg run GRAPH [--set stage.key=value]... [--out DIR] [--jobs N]
  *              [--target STAGE]... [-v] [-q]
  *   armstg check GRAPH [--set ...]...
+ *   armstg worker [--bind EP] [--plugins DIR] [--keys DIR] ...  (worker.c)
+ *   armstg keygen DIR NAME
  *   armstg plugins
  *   armstg describe PLUGIN
  *   armstg --help | --version
@@ -20,6 +22,7 @@
 #include <unistd.h>
 
 #include "graph.h"
+#include "remote.h"
 
 enum { EXIT_STAGE = 1, EXIT_USAGE = 2, EXIT_PLUGIN = 3, EXIT_INTR = 130 };
 
@@ -43,6 +46,10 @@ static void usage(FILE *f)
 "  plugins                 list the plugins found (ARMSTG_PLUGIN_PATH, then\n"
 "                          build/plugins beside the executable)\n"
 "  describe PLUGIN         ports, parameters (default, range, unit, help)\n"
+"  worker [--bind EP] [--plugins DIR] [--keys DIR] [--max-message MB]\n"
+"                          host this build's plugins for remote stages\n"
+"                          ([node] sections); 'armstg worker --help'\n"
+"  keygen DIR NAME         a CURVE key pair for workers and coordinators\n"
 "  --help, --version\n"
 "\n"
 "exit codes: 0 ok, 1 a stage failed, 2 usage or invalid graph,\n"
@@ -301,6 +308,10 @@ int main(int argc, char **argv)
 		return cmd_run(argc, argv, 1);
 	if (!strcmp(cmd, "plugins"))
 		return cmd_plugins();
+	if (!strcmp(cmd, "worker"))
+		return worker_main(argc, argv);
+	if (!strcmp(cmd, "keygen"))
+		return keygen_main(argc, argv);
 	if (!strcmp(cmd, "describe")) {
 		if (argc != 3) {
 			fprintf(stderr, "usage: armstg describe PLUGIN\n");

@@ -122,6 +122,15 @@ int rt_log_level_for(const char *stage);
 void rt_log(const char *stage, int level, const char *fmt, ...)
 	ARMSTG_PRINTF(3, 4);
 void rt_vlog(const char *stage, int level, const char *fmt, va_list ap);
+/* the same with "[stage@node]" for a given node (NULL: this process's) */
+void rt_log_at(const char *stage, const char *node, int level,
+	       const char *fmt, ...) ARMSTG_PRINTF(4, 5);
+void rt_vlog_at(const char *stage, const char *node, int level,
+		const char *fmt, va_list ap);
+/* this process's node name in log lines (default "local"; a worker's
+ * name in `armstg worker`) */
+void rt_log_set_node(const char *name);
+const char *rt_log_node(void);
 /* set by SIGINT/SIGTERM handler */
 extern volatile int rt_interrupted;
 

@@ -1,10 +1,11 @@
 #!/bin/sh
 # `make fuzz`: build libFuzzer targets with clang (ASan + UBSan) for the
-# MessagePack decoder and the graph file parser, run each for a bounded time
+# MessagePack decoder, the graph file parser and the worker's frame decoder
+# (runtime/wire.c), run each for a bounded time
 # and print how many inputs ran without a crash.
 #
 #   FUZZ_SECONDS=60     time per target (seconds)
-#   FUZZ_TARGETS="msgpack graph"
+#   FUZZ_TARGETS="msgpack graph wire"
 #   CLANG=clang
 #
 # Corpora and crash artifacts live in build-fuzz/ (kept between runs, so
@@ -15,7 +16,7 @@
 set -u
 CLANG=${CLANG:-clang}
 SECS=${FUZZ_SECONDS:-60}
-TARGETS=${FUZZ_TARGETS:-msgpack graph}
+TARGETS=${FUZZ_TARGETS:-msgpack graph wire}
 B=build-fuzz
 cd "$(dirname "$0")/.." || exit 2
 
@@ -39,7 +40,8 @@ SAN="-fsanitize=address,undefined -fno-sanitize-recover=undefined"
 CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -fopenmp \
  -Wall -Wno-unused-parameter -Iruntime/include -Iruntime -I/usr/include/nifti \
  $HDF5_CFLAGS"
-LIBS="-lniftiio -lznz -lz $HDF5_LIBS -lmsgpackc -linih -lpng -ldl -lpthread -lm"
+LIBS="-lniftiio -lznz -lz $HDF5_LIBS -lmsgpackc -linih -lpng -lczmq -lzmq -ldl \
+ -lpthread -lm"
 
 mkdir -p "$B/obj" "$B/artifacts" "$B/corpus" || exit 2
 
@@ -48,7 +50,8 @@ objs=""
 for src in runtime/*.c; do
     [ "$src" = runtime/main.c ] && continue
     o="$B/obj/$(basename "$src" .c).o"
-    if [ ! -f "$o" ] || [ "$src" -nt "$o" ] || [ runtime/rt.h -nt "$o" ]; then
+    if [ ! -f "$o" ] || [ "$src" -nt "$o" ] ||
+       [ -n "$(find runtime -name '*.h' -newer "$o" 2>/dev/null)" ]; then
         # shellcheck disable=SC2086
         "$CLANG" $CFLAGS $SAN -fsanitize=fuzzer-no-link -c "$src" -o "$o" ||
             exit 2
@@ -76,6 +79,10 @@ for t in $TARGETS; do
         # shellcheck disable=SC2086
         "$CLANG" $CFLAGS $SAN tests/fuzz/mkseeds.c $objs -o "$B/mkseeds" \
             $LIBS && "$B/mkseeds" "$seeds" || exit 2
+    elif [ "$t" = wire ]; then
+        # shellcheck disable=SC2086
+        "$CLANG" $CFLAGS $SAN tests/fuzz/mkseeds_wire.c $objs \
+            -o "$B/mkseeds_wire" $LIBS && "$B/mkseeds_wire" "$seeds" || exit 2
     else
         for f in graphs/*.ini tests/graphs/*/*.ini tests/graphs/*.ini; do
             [ -f "$f" ] && cp "$f" "$seeds/" 2>/dev/null
