@@ -8,6 +8,10 @@
  *     graph run locally: every NIfTI output, metrics.tsv, the nodes' points;
  *     each worker logs one line per stage it ran (a small preset: the
  *     phantom on a 48x48x36 grid at 4 mm, one push depth, nodes 8 mm apart)
+ *   - a worker SIGKILLed in the middle of the growth: the stage is retried
+ *     on the node's fallback after the node's time-out (2 s) and the run's
+ *     outputs are again the bytes of the local run; the run's remote
+ *     context records the retry (stage, dead endpoint -> new one)
  *   - a remote sink's file comes back under --out with the local bytes
  *   - a plugin's error on a worker fails the run naming the stage, node and
  *     worker, and is not retried on the fallback
@@ -19,6 +23,8 @@
  *     reason logged and, but for the last two, sent back) and the worker
  *     still serves a valid request whose output is checked
  */
+#include <pthread.h>
+
 #include "distutil.h"
 #include "graph.h"
 #include "remote.h"
@@ -29,6 +35,7 @@
 #undef LOG_DEBUG
 
 static dt_worker_t wa, wb;
+static char local_dir[600]; /* the local run of graphs/distributed.ini */
 
 static const char *small[] = {
 	"tune.values=3", "phantom.nx=48", "phantom.ny=48", "phantom.nz=36",
@@ -94,6 +101,8 @@ static void write_text(const char *path, const char *text)
 
 /* ------------------------------------------------------------------ */
 
+static void same_outputs(const char *loc, const char *rem);
+
 static void test_distributed_equals_local(void **state)
 {
 	(void)state;
@@ -124,6 +133,19 @@ static void test_distributed_equals_local(void **state)
 	}
 	assert_int_equal(rc, 0);
 	print_message("remote run %.1f s\n", dt_now() - t0);
+	snprintf(local_dir, sizeof local_dir, "%s", loc);
+	same_outputs(loc, rem);
+	/* where they ran: one line per stage in each worker's log */
+	assert_int_equal(dt_log_count(wa.log, "stage 'grow' (tled_cpu"), 1);
+	assert_int_equal(dt_log_count(wb.log, "stage 'to_atlas' (demons"), 1);
+	assert_int_equal(dt_log_count(wb.log, "stage 'register' (demons"), 1);
+	assert_int_equal(dt_log_count(wa.log, "demons"), 0);
+	assert_int_equal(dt_log_count(wb.log, "tled_cpu"), 0);
+}
+
+/* the outputs of two runs of graphs/distributed.ini are the same bytes */
+static void same_outputs(const char *loc, const char *rem)
+{
 	static const char *files[] = {
 		"atlas_t1_in_patient.nii.gz", "atlas_labels_in_patient.nii.gz",
 		"atlas_to_patient_warp.nii.gz", "grown_atlas_t1.nii.gz",
@@ -150,12 +172,87 @@ static void test_distributed_equals_local(void **state)
 	assert_true(msg_equal(&pa->base, &pb->base));
 	msg_unref(&pa->base);
 	msg_unref(&pb->base);
-	/* where they ran: one line per stage in each worker's log */
-	assert_int_equal(dt_log_count(wa.log, "stage 'grow' (tled_cpu"), 1);
-	assert_int_equal(dt_log_count(wb.log, "stage 'to_atlas' (demons"), 1);
-	assert_int_equal(dt_log_count(wb.log, "stage 'register' (demons"), 1);
-	assert_int_equal(dt_log_count(wa.log, "demons"), 0);
-	assert_int_equal(dt_log_count(wb.log, "tled_cpu"), 0);
+}
+
+typedef struct bg_run {
+	const char *const *sets;
+	int nsets;
+	char out[600];
+	remote_ctx_t ctx;
+	int rc;
+	char err[8192];
+} bg_run_t;
+
+static void *bg_main(void *arg)
+{
+	bg_run_t *b = arg;
+	graph_t *g = graph_load("graphs/distributed.ini", b->sets, b->nsets,
+				b->err, sizeof b->err);
+	b->rc = -1000;
+	if (g) {
+		run_opts_t o = { .outdir = b->out, .jobs = 2, .quiet = 1,
+				 .remote = &b->ctx };
+		b->rc = graph_run(g, &o, b->err, sizeof b->err);
+		graph_free(g);
+	}
+	return NULL;
+}
+
+/* SIGKILL the growth's worker mid-stage: retried on the fallback */
+static void test_worker_killed_mid_stage(void **state)
+{
+	(void)state;
+	if (!local_dir[0])
+		fail_msg("needs test_distributed_equals_local's local run");
+	dt_worker_t k1, k2;
+	const char *vv[] = { "-v", "-v", NULL };
+	assert_int_equal(dt_worker_start(&k1, "k1", vv), 0);
+	assert_int_equal(dt_worker_start(&k2, "k2", NULL), 0);
+	setenv("ARMSTG_GPU_WORKER", k1.ep, 1);
+	setenv("ARMSTG_GPU_FALLBACK", k2.ep, 1);
+	setenv("ARMSTG_CPU_WORKER", k2.ep, 1);
+	setenv("ARMSTG_CPU_FALLBACK", k1.ep, 1);
+	setenv("ARMSTG_NODE_TIMEOUT", "2", 1);
+	bg_run_t b;
+	memset(&b, 0, sizeof b);
+	b.sets = small;
+	b.nsets = NSMALL;
+	snprintf(b.out, sizeof b.out, "%s/killed", tu_tmpdir());
+	remote_ctx_init(&b.ctx);
+	pthread_t th;
+	assert_int_equal(pthread_create(&th, NULL, bg_main, &b), 0);
+	int started = dt_wait_log(k1.log, "start stage 'grow'", 60);
+	if (started) {
+		dt_sleep(1.0); /* well inside the growth (about 10 s) */
+		dt_worker_kill(&k1);
+	}
+	double t_kill = dt_now();
+	pthread_join(th, NULL);
+	print_message("run ended %.1f s after the kill: %s\n",
+		      dt_now() - t_kill, b.rc ? b.err : "ok");
+	print_message("retries: %s\n", b.ctx.retries);
+	setenv("ARMSTG_GPU_WORKER", wa.ep, 1);
+	setenv("ARMSTG_GPU_FALLBACK", wb.ep, 1);
+	setenv("ARMSTG_CPU_WORKER", wb.ep, 1);
+	setenv("ARMSTG_CPU_FALLBACK", wa.ep, 1);
+	unsetenv("ARMSTG_NODE_TIMEOUT");
+	dt_worker_kill(&k1);
+	assert_int_equal(dt_worker_stop(&k2), 0);
+	if (!started || b.rc) {
+		dt_print_log(k1.log);
+		dt_print_log(k2.log);
+	}
+	assert_true(started);
+	assert_int_equal(b.rc, 0);
+	/* the growth ran to its end on k2, and nowhere else */
+	assert_int_equal(dt_log_count(k2.log, "stage 'grow' (tled_cpu"), 1);
+	assert_int_equal(dt_log_count(k1.log, "stage 'grow' (tled_cpu"), 0);
+	assert_int_equal(b.ctx.nretried, 1);
+	char want[700];
+	snprintf(want, sizeof want, "grow: %s -> %s", k1.ep, k2.ep);
+	assert_string_equal(b.ctx.retries, want);
+	remote_ctx_destroy(&b.ctx);
+	same_outputs(local_dir, b.out);
 }
 
 /* tp_gen -> tp_sink on node a: the file comes back under --out */
@@ -477,6 +574,7 @@ int main(void)
 		cmocka_unit_test(test_remote_sink_file),
 		cmocka_unit_test(test_remote_stage_error),
 		cmocka_unit_test(test_distributed_equals_local),
+		cmocka_unit_test(test_worker_killed_mid_stage),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
