@@ -48,6 +48,27 @@
  * same smoothing; it is not a defect of the update.
  * A level stops after its iterations or when the MSE improved by less than
  * tol (relative) over the last 5 iterations.
+ *
+ * metric=lncc replaces the demons force by the gradient of the local
+ * normalised cross-correlation, the metric of ANTs SyN's CC and of Greedy's
+ * NCC, which works across contrasts (a local linear intensity relation of
+ * either sign):
+ *   over the window N(x) of (2 radius + 1)^3 voxels of the level, counting
+ *   only voxels inside both masks and the moving image (so the tumour
+ *   painted out of a mask takes no part in any window), with
+ *   Ft = F - mean_N F, Wt = W - mean_N W:
+ *     sFF = sum Ft^2, sWW = sum Wt^2, sFW = sum Ft Wt (box filters),
+ *     CC(x) = sFW^2 / (sFF sWW)                       (in [0,1])
+ *   and the update (Avants, Epstein, Grossman, Gee, "Symmetric
+ *   diffeomorphic image registration with cross-correlation", Med Image
+ *   Anal 12(1) 2008, eq. 6; ITK's ANTSNeighborhoodCorrelationImageToImage-
+ *   Metricv4, which keeps the centre voxel's term of the window sums):
+ *     u(x) = 2 sFW / (sFF sWW) (Ft(x) - sFW / sWW Wt(x)) grad W(x),
+ *   smoothed by sigma_fluid and scaled so that its largest vector is
+ *   max_step voxels of the level (Greedy's step epsilon; the demons bound
+ *   does not apply to a correlation gradient).  The update then goes
+ *   through the same diffeomorphic composition and field smoothing.  The
+ *   convergence test watches 1 - mean CC in place of the MSE.
  */
 #include <math.h>
 #include <stddef.h>
@@ -63,6 +84,7 @@
 #define MAX_LEVELS 8
 
 enum { FORCE_SYMMETRIC, FORCE_THIRION };
+enum { METRIC_SSD, METRIC_LNCC };
 enum { UPD_DIFFEO, UPD_ADDITIVE };
 enum { NORM_HIST, NORM_MINMAX, NORM_NONE, NORM_LOCAL };
 enum { SIGMA_MM, SIGMA_VOXEL, SIGMA_IMAGE_VOXEL };
@@ -82,6 +104,8 @@ typedef struct demons_priv {
 	double diff_threshold;
 	int normalize;
 	double local_sigma;  /* mm */
+	int metric;
+	int radius;          /* voxels of the level (lncc window) */
 	/* parsed in init */
 	int niter[MAX_LEVELS];
 	int nlist;
@@ -156,6 +180,14 @@ static const armstg_param_t demons_params[] = {
 	  "normalize=local: width of the local mean (phantom with bias and "
 	  "noise: 4 mm best; 30 mm only removes the bias)", NULL,
 	  OFF(local_sigma), 0 },
+	{ "metric", PT_ENUM, "ssd", 0, 0, "",
+	  "ssd: demons forces on intensity differences (one contrast); lncc: "
+	  "gradient of the local normalised cross-correlation (ANTs SyN CC, "
+	  "Greedy NCC: works across contrasts; give sigma_fluid > 0)",
+	  "ssd|lncc", OFF(metric), 0 },
+	{ "radius", PT_INT, "2", 1, 10, "voxels",
+	  "metric=lncc: window half-width in voxels of each level (2: 5x5x5, "
+	  "Greedy's default; ANTs SyN CC often 4)", NULL, OFF(radius), 0 },
 };
 
 #define FAIL(code, ...) st->host->fail(st, code, __VA_ARGS__)
@@ -521,6 +553,147 @@ static void compute_force(const demons_priv_t *p, const level_t *L,
 	*nused = nu;
 }
 
+/* box sums of half-width r (zero outside the grid) along every axis, in
+ * place, for nc planar images of grid g (running sums in double) */
+static void box3(float *d, int nc, const fgrid_t *g, int r, int nt)
+{
+	const int n[3] = { g->nx, g->ny, g->nz };
+	const int64_t nv = fgrid_nvox(g), st[3] = { 1, g->nx,
+						    (int64_t)g->nx * g->ny };
+	for (int a = 0; a < 3; a++) {
+		const int len = n[a];
+		const int64_t nlines = nv / len;
+		const int b = (a + 1) % 3, c = (a + 2) % 3;
+#pragma omp parallel num_threads(nt)
+		{
+			double *line = malloc(sizeof(double) * (size_t)len);
+#pragma omp for schedule(static) collapse(2)
+			for (int comp = 0; comp < nc; comp++)
+				for (int64_t li = 0; li < nlines; li++) {
+					if (!line)
+						continue;
+					const int ib = (int)(li % n[b]),
+						  ic = (int)(li / n[b]);
+					float *p = d + comp * nv + ib * st[b] +
+						   ic * st[c];
+					for (int i = 0; i < len; i++)
+						line[i] = p[i * st[a]];
+					double acc = 0;
+					for (int i = 0; i < r && i < len; i++)
+						acc += line[i];
+					for (int i = 0; i < len; i++) {
+						if (i + r < len)
+							acc += line[i + r];
+						if (i - r - 1 >= 0)
+							acc -= line[i - r - 1];
+						p[i * st[a]] = (float)acc;
+					}
+				}
+			free(line);
+		}
+	}
+}
+
+/*
+ * metric=lncc: the gradient of the local normalised cross-correlation into
+ * U (nc 3, world vectors per unit step; see the header); *score = sum of
+ * (1 - CC) and *nused the voxels used.  Returns 0 or ARMSTG_ENOMEM.
+ */
+static int compute_force_lncc(const demons_priv_t *p, const level_t *L,
+			      fimg_t *U, double *score, int64_t *nused, int nt)
+{
+	const fgrid_t *g = &L->g;
+	const int nx = g->nx, ny = g->ny, nz = g->nz;
+	const int64_t nv = fgrid_nvox(g);
+	const int64_t st[3] = { 1, nx, (int64_t)nx * ny };
+	const int dims[3] = { nx, ny, nz };
+	const float *F = L->F.d, *W = L->W.d;
+	const float *FM = L->FM.d, *WM = L->WM.d;
+	float *S = malloc(sizeof(float) * 6 * (size_t)nv);
+	if (!S)
+		return ARMSTG_ENOMEM;
+	/* window sums of V, V F, V W, V F^2, V W^2, V F W over valid voxels */
+#pragma omp parallel for num_threads(nt) schedule(static)
+	for (int64_t e = 0; e < nv; e++) {
+		float w = W[e], f = F[e];
+		int ok = !isnan(w) && !(FM && FM[e] <= 0) && !(WM && !(WM[e] > 0.5f));
+		if (!ok)
+			w = f = 0;
+		S[e] = (float)ok;
+		S[e + nv] = f;
+		S[e + 2 * nv] = w;
+		S[e + 3 * nv] = f * f;
+		S[e + 4 * nv] = w * w;
+		S[e + 5 * nv] = f * w;
+	}
+	box3(S, 6, g, p->radius, nt);
+	double Li[3][3];
+	for (int a = 0; a < 3; a++)
+		for (int c = 0; c < 3; c++)
+			Li[a][c] = g->w2v[a * 4 + c];
+	const double nmin = 0.25 * pow(2 * p->radius + 1, 3);
+	double sc = 0;
+	int64_t nu = 0;
+#pragma omp parallel for num_threads(nt) schedule(static) \
+	reduction(+ : sc, nu)
+	for (int k = 0; k < nz; k++)
+		for (int j = 0; j < ny; j++)
+			for (int i = 0; i < nx; i++) {
+				int64_t e = ((int64_t)k * ny + j) * nx + i;
+				U->d[e] = U->d[e + nv] = U->d[e + 2 * nv] = 0;
+				if (!(S[e] > 0) || isnan(W[e]) ||
+				    (FM && FM[e] <= 0) || (WM && !(WM[e] > 0.5f)))
+					continue;
+				/* too few valid voxels in the window (a mask's
+				 * edge): no statistics */
+				const double n = S[e];
+				if (n < nmin)
+					continue;
+				const double mf = S[e + nv] / n, mw = S[e + 2 * nv] / n;
+				const double sff = S[e + 3 * nv] - n * mf * mf;
+				const double sww = S[e + 4 * nv] - n * mw * mw;
+				const double sfw = S[e + 5 * nv] - n * mf * mw;
+				/* flat windows (float sums: relative precision
+				 * ~1e-5 after 125 terms) carry no correlation */
+				if (!(sff > 1e-5 * S[e + 3 * nv] + 1e-30) ||
+				    !(sww > 1e-5 * S[e + 4 * nv] + 1e-30))
+					continue;
+				const double cc = sfw * sfw / (sff * sww);
+				sc += 1 - cc;
+				nu++;
+				const double coef = 2 * sfw / (sff * sww) *
+						    ((F[e] - mf) - sfw / sww * (W[e] - mw));
+				const int idx[3] = { i, j, k };
+				double gw[3];
+				for (int a = 0; a < 3; a++) {
+					int lo = idx[a] > 0, hi = idx[a] < dims[a] - 1;
+					int64_t el = lo ? e - st[a] : e,
+						eh = hi ? e + st[a] : e;
+					double h = lo + hi;
+					float wl = W[el], wh = W[eh];
+					if (isnan(wl)) {
+						wl = W[e];
+						h -= lo;
+					}
+					if (isnan(wh)) {
+						wh = W[e];
+						h -= hi;
+					}
+					gw[a] = h > 0 ? (wh - wl) / h : 0;
+				}
+				for (int c = 0; c < 3; c++) {
+					double sw = 0;
+					for (int a = 0; a < 3; a++)
+						sw += gw[a] * Li[a][c];
+					U->d[e + c * nv] = (float)(coef * sw);
+				}
+			}
+	free(S);
+	*score = sc;
+	*nused = nu;
+	return 0;
+}
+
 static void update_stats(const fimg_t *U, double *mean, double *max)
 {
 	const int64_t nv = fgrid_nvox(&U->g);
@@ -570,7 +743,8 @@ static void exp_inplace(fimg_t *A, fimg_t *B, fimg_t **res, int nt)
 }
 
 static int add_row(armstg_stage_t *st, tab_t *t, int level, int it,
-		   double mse, double mean_u, double max_u, double secs)
+		   double mse, double mean_u, double max_u, double secs,
+		   int lncc)
 {
 	const armstg_host_t *h = st->host;
 	if (!t)
@@ -580,7 +754,10 @@ static int add_row(armstg_stage_t *st, tab_t *t, int level, int it,
 		return ARMSTG_ENOMEM;
 	h->tab_set_num(t, r, "level", level);
 	h->tab_set_num(t, r, "iteration", it);
-	h->tab_set_num(t, r, "mse", mse);
+	if (lncc)
+		h->tab_set_num(t, r, "lncc", 1 - mse);
+	else
+		h->tab_set_num(t, r, "mse", mse);
 	h->tab_set_num(t, r, "mean_update_mm", mean_u);
 	h->tab_set_num(t, r, "max_update_mm", max_u);
 	h->tab_set_num(t, r, "seconds", secs);
@@ -796,6 +973,7 @@ static int demons_process(armstg_stage_t *st)
 		const double sg_field = p->sigma_field * vs;
 		const double sg_fluid = p->sigma_fluid * vs;
 		double hist[8] = { 0 };
+		double lscale = 0; /* metric=lncc: update scale of the level */
 		h->log(st, LOG_INFO, "level %d/%d: %dx%dx%d, %.2f mm voxels, %d "
 		       "iterations", l + 1, nlev, g.nx, g.ny, g.nz, g.sp[0],
 		       iters[l]);
@@ -811,7 +989,17 @@ static int demons_process(armstg_stage_t *st)
 				fimg_resample(&MM0, &S, FIELD_NEAREST, 0, &L.WM, nt);
 			double ssd;
 			int64_t nused;
-			compute_force(p, &L, &A, sx2, &ssd, &nused, nt);
+			const int lncc = p->metric == METRIC_LNCC;
+			if (lncc) {
+				if ((rc = compute_force_lncc(p, &L, &A, &ssd, &nused,
+							     nt))) {
+					rc = FAIL(rc, "out of memory (lncc sums, "
+						  "level %d)", l + 1);
+					goto out;
+				}
+			} else {
+				compute_force(p, &L, &A, sx2, &ssd, &nused, nt);
+			}
 			if (nused == 0) {
 				rc = FAIL(ARMSTG_EINVAL,
 					  "no voxel where fixed, moving and masks "
@@ -822,6 +1010,25 @@ static int demons_process(armstg_stage_t *st)
 			double mse = ssd / (double)nused;
 			if (sg_fluid > 0)
 				fimg_smooth(&A, sg_fluid, nt);
+			if (lncc) {
+				/* the step: the level's first update is scaled to
+				 * max_step voxels at its largest, later ones by
+				 * the same factor (so they shrink as the
+				 * correlation converges; ANTs estimates its
+				 * learning rate once per level too), never beyond
+				 * max_step */
+				double mmm, mvox;
+				fimg_field_maxnorm(&A, &mmm, &mvox);
+				if (mvox > 0) {
+					if (!(lscale > 0))
+						lscale = p->max_step / mvox;
+					const float sc = (float)fmin(lscale,
+								     p->max_step / mvox);
+					const int64_t ne = fgrid_nvox(&g) * 3;
+					for (int64_t e = 0; e < ne; e++)
+						A.d[e] *= sc;
+				}
+			}
 			double mu, mx;
 			update_stats(&A, &mu, &mx);
 			if (p->update == UPD_DIFFEO) {
@@ -840,14 +1047,16 @@ static int demons_process(armstg_stage_t *st)
 			if (sg_field > 0)
 				fimg_smooth(&S, sg_field, nt);
 			double secs = now_s() - t0;
-			if ((rc = add_row(st, tab, l + 1, it + 1, mse, mu, mx, secs))) {
+			if ((rc = add_row(st, tab, l + 1, it + 1, mse, mu, mx, secs,
+					  lncc))) {
 				rc = FAIL(rc, "out of memory (table)");
 				goto out;
 			}
 			done++;
 			h->progress(st, total ? (double)done / total : 1,
-				    "level %d/%d iter %d/%d mse %.5g mean update "
-				    "%.3g mm", l + 1, nlev, it + 1, iters[l], mse, mu);
+				    "level %d/%d iter %d/%d %s %.5g mean update "
+				    "%.3g mm", l + 1, nlev, it + 1, iters[l],
+				    lncc ? "lncc" : "mse", lncc ? 1 - mse : mse, mu);
 			/* convergence: relative MSE gain over 5 iterations */
 			hist[it % 8] = mse;
 			if (p->tol > 0 && it >= 5) {

@@ -279,6 +279,66 @@ static void test_identity(void **state)
 	reg_free(&o);
 }
 
+/*
+ * metric=lncc across contrasts: the moving head remapped by exp(-2 v), a
+ * decreasing non-linear map (bright becomes dark, contrasts compressed),
+ * registered to the unmapped fixed one.  SSD demons with histogram
+ * matching (a monotone increasing map) cannot relate them; the local
+ * correlation can.  Identical inputs give a zero field, CC 1.
+ */
+static void test_lncc_contrast(void **state)
+{
+	fixture_t *fx = *state;
+	char e[1024];
+	vol_t *mv = vol_clone(fx->moving);
+	for (int64_t v = 0; v < vol_nvox(mv); v++)
+		((float *)mv->data)[v] = (float)exp(-2.0 * vol_get(fx->moving, v));
+	const char *pl[] = { "levels=3", "iterations=40,30,20", "metric=lncc",
+			     "normalize=minmax", "sigma_unit=voxel",
+			     "sigma_fluid=3", "sigma_field=1.5", NULL };
+	const char *ps[] = { "levels=3", "iterations=40,30,20", NULL };
+	reg_out_t ol = { 0 }, os = { 0 };
+	assert_int_equal(run_demons(pl, fx->fixed, mv, NULL, NULL, &ol, e,
+				    sizeof e), 0);
+	assert_int_equal(run_demons(ps, fx->fixed, mv, NULL, NULL, &os, e,
+				    sizeof e), 0);
+	double el, es, base;
+	field_error(ol.field, fx->fmask, &el, &base);
+	field_error(os.field, fx->fmask, &es, &base);
+	/* lncc over the finest level (levels differ in smoothing) */
+	const tab_col_t *lv = tab_col(ol.tab, "level");
+	int64_t r0 = 0;
+	while (r0 < ol.tab->nrows && lv->num[r0] < 3)
+		r0++;
+	assert_true(r0 < ol.tab->nrows);
+	double cc0 = tab_col(ol.tab, "lncc")->num[r0], cc1 = tab_last(ol.tab, "lncc");
+	double jm = jac_min(ol.field);
+	print_message("moving remapped by exp(-2v): true field mean %.2f mm; "
+		      "error ssd %.3f mm, lncc %.3f mm (%.2f voxel); lncc %.3f "
+		      "-> %.3f (finest level); min Jacobian %.3f\n", base, es, el, el / SP, cc0,
+		      cc1, jm);
+	assert_null(tab_col(ol.tab, "mse"));
+	assert_true(es > 0.8 * base);
+	assert_true(el < 0.45 * base);
+	assert_true(cc1 > cc0);
+	assert_true(jm > 0);
+	reg_free(&ol);
+	reg_free(&os);
+	/* identical inputs */
+	reg_out_t oi = { 0 };
+	assert_int_equal(run_demons(pl, fx->fixed, fx->fixed, NULL, NULL, &oi,
+				    e, sizeof e), 0);
+	double m = 0;
+	for (int64_t v = 0; v < vol_nvox(oi.field) * 3; v++)
+		m = fmax(m, fabs(((float *)oi.field->data)[v]));
+	print_message("lncc, identical inputs: max |field| = %g mm, lncc %.6f\n",
+		      m, tab_last(oi.tab, "lncc"));
+	assert_true(m == 0);
+	assert_float_equal(tab_last(oi.tab, "lncc"), 1, 1e-5);
+	reg_free(&oi);
+	msg_unref(&mv->base);
+}
+
 /* A->B and B->A: phi_ba o phi_ab should be the identity */
 static void test_inverse_consistency(void **state)
 {
@@ -576,6 +636,7 @@ int main(void)
 		cmocka_unit_test(test_recover_thirion_additive),
 		cmocka_unit_test(test_identity),
 		cmocka_unit_test(test_inverse_consistency),
+		cmocka_unit_test(test_lncc_contrast),
 		cmocka_unit_test(test_fixed_mask),
 		cmocka_unit_test(test_bad_input),
 		cmocka_unit_test(test_local_bias),

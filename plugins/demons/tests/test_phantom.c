@@ -5,7 +5,10 @@
  * (no tumour) deformed from the atlas by a known smooth random field.
  * Asserts the recovered atlas->patient field matches the phantom's
  * true_field to < 0.5 voxel mean inside the patient brain (< 0.3 with the
- * default bias field and normalize=local), with a positive Jacobian.  Skips cleanly when the phantom plugin is not built.
+ * default bias field and normalize=local), with a positive Jacobian; and
+ * across contrasts (patient T1 against the atlas T2 or the inverted atlas
+ * T1), where SSD demons fail and metric=lncc recovers the field to a third
+ * of its size.  Skips cleanly when the phantom plugin is not built.
  */
 #include <math.h>
 
@@ -21,9 +24,26 @@ static int port(const armstg_plugin_t *d, const char *name)
 	return -1;
 }
 
+enum { REMAP_NONE, REMAP_INVERT };
+
+static void run_case_x(const char *const *pp, const char *const *dp,
+		       int masks, const char *moving_port, int remap,
+		       double *err_vox, double *base_mm, double *jmin);
+
 /* run phantom (pp) then demons (dp); mean field error / truth in the brain */
 static void run_case(const char *const *pp, const char *const *dp, int masks,
 		     double *err_vox, double *base_mm, double *jmin)
+{
+	run_case_x(pp, dp, masks, "atlas_t1", REMAP_NONE, err_vox, base_mm,
+		   jmin);
+}
+
+/* the same with the moving image from another port of the phantom
+ * (atlas_t2: a contrast change), optionally inverted inside the atlas brain
+ * (v -> 1000 - v, the background stays 0) */
+static void run_case_x(const char *const *pp, const char *const *dp,
+		       int masks, const char *moving_port, int remap,
+		       double *err_vox, double *base_mm, double *jmin)
 {
 	char path[1024], e[1024] = "";
 	snprintf(path, sizeof path, "%s/plugins/phantom.so", tu_build_dir());
@@ -33,7 +53,7 @@ static void run_case(const char *const *pp, const char *const *dp, int masks,
 		skip();
 	}
 	const armstg_plugin_t *ph = pl.desc;
-	int o_ft1 = port(ph, "patient_t1"), o_mt1 = port(ph, "atlas_t1"),
+	int o_ft1 = port(ph, "patient_t1"), o_mt1 = port(ph, moving_port),
 	    o_mask = port(ph, "patient_mask"), o_true = port(ph, "true_field"),
 	    o_amask = port(ph, "atlas_mask");
 	assert_true(o_ft1 >= 0 && o_mt1 >= 0 && o_mask >= 0 && o_true >= 0 &&
@@ -45,6 +65,15 @@ static void run_case(const char *const *pp, const char *const *dp, int masks,
 	assert_int_equal(rc, 0);
 	vol_t *fixed = (vol_t *)po[o_ft1], *moving = (vol_t *)po[o_mt1],
 	      *mask = (vol_t *)po[o_mask], *truth = (vol_t *)po[o_true];
+	vol_t *remapped = NULL;
+	if (remap == REMAP_INVERT) {
+		const vol_t *am = (const vol_t *)po[o_amask];
+		remapped = vol_clone(moving);
+		for (int64_t v = 0; v < vol_nvox(moving); v++)
+			((float *)remapped->data)[v] = vol_get(am, v) > 0
+				? 1000.0f - (float)vol_get(moving, v) : 0.0f;
+		moving = remapped;
+	}
 	double sp[3];
 	vol_spacing(fixed, sp);
 	/* masks: forces only in both brains, as the graphs' registration */
@@ -84,6 +113,8 @@ static void run_case(const char *const *pp, const char *const *dp, int masks,
 	for (int o = 0; o < 3; o++)
 		if (out[o])
 			msg_unref(out[o]);
+	if (remapped)
+		msg_unref(&remapped->base);
 	for (int o = 0; o < ph->n_outputs; o++)
 		if (po[o])
 			msg_unref(po[o]);
@@ -178,6 +209,56 @@ static void test_phantom_graph_width(void **state)
 	assert_true(jm > 0);
 }
 
+/* a contrast change between fixed and moving: the patient's T1 (noise 3 %,
+ * bias 0.9-1.1) against the atlas's T2 (CSF bright, white matter dark) or
+ * its T1 inverted inside the brain.  SSD demons (histogram matching, a
+ * monotone map) cannot relate the two; the local normalised
+ * cross-correlation (metric=lncc, CC squared: either sign) recovers the
+ * true field.  Healthy phantom with a larger inter-subject deformation
+ * (deform_mm 6) so that the field is well above the noise. */
+static const char *const PP_CONTRAST[] = { "tumour_radius=0", "mass_effect=0",
+					   "seed=3", "deform_mm=6", NULL };
+static const char *const DP_SSD[] = { "levels=3", "iterations=40,30,20",
+				      "sigma_field=3", NULL };
+static const char *const DP_LNCC[] = { "levels=3", "iterations=40,30,20",
+				       "metric=lncc", "radius=2",
+				       "normalize=minmax", "sigma_unit=voxel",
+				       "sigma_fluid=3", "sigma_field=1.5",
+				       NULL };
+
+static void contrast_case(const char *mport, int remap, const char *what,
+			  double *e_ssd, double *e_lncc, double *base,
+			  double *jm)
+{
+	double jm_ssd;
+	run_case_x(PP_CONTRAST, DP_SSD, 1, mport, remap, e_ssd, base, &jm_ssd);
+	run_case_x(PP_CONTRAST, DP_LNCC, 1, mport, remap, e_lncc, base, jm);
+	print_message("phantom T1 vs atlas %s (2 mm voxels): true field mean "
+		      "%.2f mm; error ssd %.2f mm, lncc %.2f mm; min Jacobian "
+		      "lncc %.3f\n", what, *base, 2 * *e_ssd, 2 * *e_lncc, *jm);
+}
+
+static void test_phantom_lncc_t2(void **state)
+{
+	(void)state;
+	double es, el, base, jm;
+	contrast_case("atlas_t2", REMAP_NONE, "T2", &es, &el, &base, &jm);
+	assert_true(2 * es > 0.9 * base);  /* ssd: no better than no field */
+	assert_true(2 * el < 0.35 * base); /* lncc: a third of the field */
+	assert_true(jm > 0);
+}
+
+static void test_phantom_lncc_inverted(void **state)
+{
+	(void)state;
+	double es, el, base, jm;
+	contrast_case("atlas_t1", REMAP_INVERT, "T1 inverted", &es, &el, &base,
+		      &jm);
+	assert_true(2 * es > 0.9 * base);
+	assert_true(2 * el < 0.35 * base);
+	assert_true(jm > 0);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -185,6 +266,8 @@ int main(void)
 		cmocka_unit_test(test_phantom_noisy),
 		cmocka_unit_test(test_phantom_bias),
 		cmocka_unit_test(test_phantom_graph_width),
+		cmocka_unit_test(test_phantom_lncc_t2),
+		cmocka_unit_test(test_phantom_lncc_inverted),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
