@@ -1,5 +1,5 @@
 /* SPDX-License-Identifier: MIT */
-/* tled_cpu: integration-domain test from an atlas label volume (see
+/* TLED: integration-domain test from an atlas label volume (see
  * tled_labels.h).  Units: x in m (TLED_MM per mm), affine in mm. */
 #include "tled_labels.h"
 

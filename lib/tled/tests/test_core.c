@@ -7,7 +7,7 @@
 
 #include <math.h>
 
-#include "../tled_solve.h"
+#include "tled/tled_solve.h"
 #include "tled_synth.h"
 
 static double g_L; /* cube edge, m */
@@ -189,6 +189,7 @@ static void test_mls_nodal(void **state)
  * prescribed on the faces of a jittered cube, reproduced inside to 1e-6 */
 static void test_patch(void **state)
 {
+	TLED_TEST_REQUIRE();
 	(void)state;
 	synth_cloud_t c = { 0 };
 	/* quick (asan-test): a coarser cube, same tolerance */
@@ -215,6 +216,7 @@ static void test_patch(void **state)
 		}
 	tled_solver_opts_t so;
 	tled_solver_opts_default(&so);
+	so.ops = TLED_TEST_OPS;
 	so.tol = 1e-12;
 	so.max_iter = 20000;
 	so.contact = 0;
@@ -272,6 +274,7 @@ static void small_model(tled_model_t *m, tled_solver_t *s, double nu)
  * 1.1x caught by the watchdog with a message naming step, node, cause */
 static void test_dt_critical(void **state)
 {
+	TLED_TEST_REQUIRE();
 	(void)state;
 	for (int k = 0; k < 2; k++) {
 		double nu = k ? 0.499 : 0.49;
@@ -282,6 +285,7 @@ static void test_dt_critical(void **state)
 		memcpy(u0, s.u, (size_t)(3 * m.n) * sizeof *u0);
 		tled_solver_opts_t so;
 		tled_solver_opts_default(&so);
+	so.ops = TLED_TEST_OPS;
 		so.contact = 0;
 		double dt;
 		char err[512];
@@ -351,6 +355,7 @@ static void test_dt_critical(void **state)
 /* coincident nodes and seeds at one point: merged, never NaN */
 static void test_coincident(void **state)
 {
+	TLED_TEST_REQUIRE();
 	(void)state;
 	synth_cloud_t c = { 0 };
 	synth_cube(&c, 15, 3, 0.2, 3);

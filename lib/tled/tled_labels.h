@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * tled_cpu: integration-domain test from an atlas label volume.
+ * TLED: integration-domain test from an atlas label volume.
  *
  * An integration point (reference coordinates, m) lies in the brain when the
  * nearest voxel of the labels volume (world mm -> voxel through the inverse

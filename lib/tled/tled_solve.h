@@ -56,17 +56,66 @@ enum tled_dt_policy {
 };
 enum tled_dt_estimate { TLED_DTE_EIGEN = 0, TLED_DTE_WAVE = 1 };
 
-/* Backend hooks (CPU defaults when NULL). */
+/*
+ * A backend: one operations table (NiftyReg's cpu/cuda behind one contract;
+ * FFmpeg's `_c` reference with an optimised override).  NULL members take
+ * the plain C reference of tled_step.c.
+ *
+ * forces and cd_step work on host arrays: the Lanczos estimate of the
+ * critical time step and the diagnostics use them.
+ *
+ * The resident step engine (begin .. end, all set or all NULL) keeps the
+ * state of one tled_relax call on the backend (a GPU's memory): tled_relax
+ * runs its control logic (ramps, adaptive damping, watchdogs, convergence)
+ * on the scalars these return, and only scalars cross between host and
+ * backend per time step.  Each returns 0, or -1 with the reason in
+ * strerror(ctx).  Without it the same control logic drives host loops
+ * (OpenMP) over the solver's arrays.
+ */
+typedef struct tled_solver tled_solver_t;
+typedef struct tled_solver_opts tled_solver_opts_t;
 typedef struct tled_ops {
-	void (*forces)(const tled_model_t *m, const uint8_t *ipact,
+	const char *name; /* "cpu", "cuda": for messages */
+	void *ctx;          /* the backend's state, passed to every member */
+	void (*forces)(void *ctx, const tled_model_t *m, const uint8_t *ipact,
 		       const double *u, double *VP, double *f,
 		       tled_force_info_t *info);
-	void (*cd_step)(const tled_model_t *m, const uint8_t *kind,
+	void (*cd_step)(void *ctx, const tled_model_t *m, const uint8_t *kind,
 			const double *f, double *u, double *v, double dt,
 			double c, tled_cd_info_t *info);
+	/* state of a relax call to the backend: s->u (and ustart = u), v = 0,
+	 * f, fprev, the kinds, active ips, s0, the driven targets (3n, m;
+	 * NULL: none), the growth stretches (ipg_to: NULL none) */
+	int (*begin)(void *ctx, tled_solver_t *s, const double *target,
+		     const double *ipg_to);
+	/* driven nodes (nodal driving) to ustart + r (target - ustart); *wext
+	 * += sum f . du (the driver's work, J) */
+	int (*drive)(void *ctx, double r, double *wext);
+	/* growth stretches to ipg0 + r (ipg_to - ipg0) */
+	int (*grow)(void *ctx, double r);
+	/* f = internal forces at u */
+	int (*rforces)(void *ctx, tled_force_info_t *fi);
+	/* Rayleigh quotient terms over free dofs: du = dt v,
+	 * num = sum du . (f - fprev), den = sum m du . du */
+	int (*rayleigh)(void *ctx, double dt, double *num, double *den);
+	/* one central-difference step (tled_cd_step_c) */
+	int (*rstep)(void *ctx, double dt, double c, tled_cd_info_t *ci);
+	/* contact (tled_contact); *count nodes in contact; when any, *vmax
+	 * the largest free-node speed after it (m/s) */
+	int (*rcontact)(void *ctx, double stick_dt, int64_t *count,
+			double *vmax);
+	/* f <-> fprev */
+	int (*swap)(void *ctx);
+	/* state back to s->u, s->v, s->f (and m->ipg when growing); may be
+	 * called several times in a relax call */
+	int (*end)(void *ctx, tled_solver_t *s);
+	/* s->u, s->v to the backend (after host work on them: the collocated
+	 * conditions of drive=collocated, which run on the host) */
+	int (*push)(void *ctx, tled_solver_t *s);
+	const char *(*strerror)(void *ctx);
 } tled_ops_t;
 
-typedef struct tled_solver_opts {
+struct tled_solver_opts {
 	double dt;          /* s; 0 = dt_safety * critical */
 	double dt_safety;   /* (0,1] */
 	int dt_policy;      /* tled_dt_policy */
@@ -93,13 +142,13 @@ typedef struct tled_solver_opts {
 	 * m->ipg (NULL: no growth change).  The growth's work enters the
 	 * energy watchdog as the rise of the strain energy at fixed u. */
 	const double *ipg_to;
-} tled_solver_opts_t;
+};
 
 void tled_solver_opts_default(tled_solver_opts_t *o);
 
 #define TLED_CHOL_MAX 2500 /* largest constraint set factored densely */
 
-typedef struct tled_solver {
+struct tled_solver {
 	tled_model_t *m;    /* kinds (m->kind) are read live */
 	double *u, *v, *f, *fprev, *VP, *ustart, *tmp, *tmp2, *s0;
 	double *ipg0;       /* nip: growth stretches at the start of a ramp */
@@ -126,7 +175,8 @@ typedef struct tled_solver {
 	double dt_eigen;    /* s, 2/sqrt(lmax) */
 	int64_t nfree;
 	int64_t contacts;   /* projections in the last relax */
-} tled_solver_t;
+	double *part;       /* chunked-reduction partials (tled_solve.c) */
+};
 
 typedef struct tled_relax_stats {
 	int iters;

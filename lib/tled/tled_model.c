@@ -1362,7 +1362,9 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		     int64_t nin, const uint8_t *kind0, const uint8_t *constrain,
 		     const tled_model_opts_t *o, char *err, size_t errsize)
 {
+	static uint64_t builds;
 	memset(m, 0, sizeof *m);
+	m->gen = __atomic_add_fetch(&builds, 1, __ATOMIC_RELAXED);
 	m->nthreads = nthreads_of(o->nthreads);
 	int rc = -1;
 	int64_t *par = NULL, *ent_ip = NULL;

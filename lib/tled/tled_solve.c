@@ -22,7 +22,22 @@ static int errf(char *err, size_t n, const char *fmt, ...)
 	return -1;
 }
 
-static const tled_ops_t cpu_ops = { tled_forces_c, tled_cd_step_c };
+static void cpu_forces(void *ctx, const tled_model_t *m, const uint8_t *ipact,
+		       const double *u, double *VP, double *f,
+		       tled_force_info_t *info)
+{
+	tled_forces_c(m, ipact, u, VP, f, info);
+}
+
+static void cpu_cd_step(void *ctx, const tled_model_t *m, const uint8_t *kind,
+			const double *f, double *u, double *v, double dt,
+			double c, tled_cd_info_t *info)
+{
+	tled_cd_step_c(m, kind, f, u, v, dt, c, info);
+}
+
+static const tled_ops_t cpu_ops = { .name = "cpu", .forces = cpu_forces,
+				     .cd_step = cpu_cd_step };
 
 void tled_solver_opts_default(tled_solver_opts_t *o)
 {
@@ -71,6 +86,7 @@ void tled_solver_free(tled_solver_t *s)
 	free(s->wn);
 	free(s->chol);
 	free(s->wt);
+	free(s->part);
 	memset(s, 0, sizeof *s);
 }
 
@@ -592,7 +608,7 @@ static void op_apply(tled_solver_t *s, const tled_ops_t *ops, const double *x,
 				up[3 * a + i] = s->u[3 * a + i] +
 						(sgn ? -eps : eps) * im * x[3 * a + i];
 		}
-		ops->forces(m, s->ipact, up, s->VP, sgn ? fp : y, NULL);
+		ops->forces(ops->ctx, m, s->ipact, up, s->VP, sgn ? fp : y, NULL);
 	}
 	for (int64_t a = 0; a < n; a++) {
 		double im = s->dkind[a] == TLED_FREE ? 1 / sqrt(m->mass[a]) : 0;
@@ -806,18 +822,219 @@ static void node_mm(const tled_solver_t *s, int64_t a, double out[3])
 		out[i] = (s->m->X[3 * a + i] + s->u[3 * a + i]) / TLED_MM;
 }
 
+/* Host engine: the resident-step operations of tled_ops_t over the solver's
+ * own arrays, OpenMP-parallel.  Sums are taken per fixed chunk of
+ * TLED_CHUNK nodes and the chunk partials added in order, so the result is
+ * the same on any thread count. */
+#define TLED_CHUNK 1024
+typedef struct host_eng {
+	tled_solver_t *s;
+	const tled_ops_t *hops;
+	const double *target, *ipg_to;
+} host_eng_t;
+
+static int64_t nchunks(int64_t n)
+{
+	return (n + TLED_CHUNK - 1) / TLED_CHUNK;
+}
+
+static int he_begin(void *ctx, tled_solver_t *s, const double *target,
+		    const double *ipg_to)
+{
+	host_eng_t *e = ctx;
+	e->s = s;
+	e->target = target;
+	e->ipg_to = ipg_to;
+	free(s->part);
+	s->part = malloc((size_t)(2 * nchunks(s->m->n) + 2) * sizeof *s->part);
+	return s->part ? 0 : -1;
+}
+
+static int he_drive(void *ctx, double r, double *wext)
+{
+	host_eng_t *e = ctx;
+	tled_solver_t *s = e->s;
+	const tled_model_t *m = s->m;
+	int64_t nch = nchunks(m->n);
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t ch = 0; ch < nch; ch++) {
+		double w = 0;
+		int64_t a1 = (ch + 1) * TLED_CHUNK < m->n ? (ch + 1) * TLED_CHUNK : m->n;
+		for (int64_t a = ch * TLED_CHUNK; a < a1; a++)
+			if (m->kind[a] == TLED_DRIVEN)
+				for (int i = 0; i < 3; i++) {
+					double nu = s->ustart[3 * a + i] +
+						    r * (e->target[3 * a + i] -
+							 s->ustart[3 * a + i]);
+					/* driver work: reaction . du */
+					w += s->f[3 * a + i] * (nu - s->u[3 * a + i]);
+					s->u[3 * a + i] = nu;
+				}
+		s->part[ch] = w;
+	}
+	for (int64_t ch = 0; ch < nch; ch++)
+		*wext += s->part[ch];
+	return 0;
+}
+
+static int he_grow(void *ctx, double r)
+{
+	host_eng_t *e = ctx;
+	tled_solver_t *s = e->s;
+	tled_model_t *m = s->m;
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t p = 0; p < m->nip; p++)
+		m->ipg[p] = s->ipg0[p] + r * (e->ipg_to[p] - s->ipg0[p]);
+	return 0;
+}
+
+static int he_forces(void *ctx, tled_force_info_t *fi)
+{
+	host_eng_t *e = ctx;
+	e->hops->forces(e->hops->ctx, e->s->m, e->s->ipact, e->s->u, e->s->VP, e->s->f, fi);
+	return 0;
+}
+
+static int he_rayleigh(void *ctx, double dt, double *num, double *den)
+{
+	host_eng_t *e = ctx;
+	tled_solver_t *s = e->s;
+	const tled_model_t *m = s->m;
+	int64_t nch = nchunks(m->n);
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t ch = 0; ch < nch; ch++) {
+		double nu = 0, de = 0;
+		int64_t a1 = (ch + 1) * TLED_CHUNK < m->n ? (ch + 1) * TLED_CHUNK : m->n;
+		for (int64_t a = ch * TLED_CHUNK; a < a1; a++)
+			if (s->dkind[a] == TLED_FREE)
+				for (int i = 0; i < 3; i++) {
+					double du = dt * s->v[3 * a + i];
+					nu += du * (s->f[3 * a + i] - s->fprev[3 * a + i]);
+					de += m->mass[a] * du * du;
+				}
+		s->part[2 * ch] = nu;
+		s->part[2 * ch + 1] = de;
+	}
+	*num = *den = 0;
+	for (int64_t ch = 0; ch < nch; ch++) {
+		*num += s->part[2 * ch];
+		*den += s->part[2 * ch + 1];
+	}
+	return 0;
+}
+
+static int he_step(void *ctx, double dt, double c, tled_cd_info_t *ci)
+{
+	host_eng_t *e = ctx;
+	tled_solver_t *s = e->s;
+	e->hops->cd_step(e->hops->ctx, s->m, s->dkind, s->f, s->u, s->v, dt, c, ci);
+	return 0;
+}
+
+static int he_contact(void *ctx, double stick_dt, int64_t *count,
+		      double *vmax)
+{
+	host_eng_t *e = ctx;
+	tled_solver_t *s = e->s;
+	const tled_model_t *m = s->m;
+	*count = tled_contact(s, stick_dt);
+	if (*count > 0) {
+		double vm = 0;
+#pragma omp parallel for schedule(static) reduction(max : vm) \
+	num_threads(m->nthreads)
+		for (int64_t a = 0; a < m->n; a++)
+			if (s->dkind[a] == TLED_FREE) {
+				const double *va = s->v + 3 * a;
+				vm = fmax(vm, va[0] * va[0] + va[1] * va[1] +
+						      va[2] * va[2]);
+			}
+		*vmax = sqrt(vm);
+	}
+	return 0;
+}
+
+static int he_swap(void *ctx)
+{
+	host_eng_t *e = ctx;
+	double *t = e->s->fprev;
+	e->s->fprev = e->s->f;
+	e->s->f = t;
+	return 0;
+}
+
+static int he_end(void *ctx, tled_solver_t *s)
+{
+	return 0;
+}
+
+static int he_push(void *ctx, tled_solver_t *s)
+{
+	return 0;
+}
+
+static const char *he_strerror(void *ctx)
+{
+	return "out of memory";
+}
+
+/* the engine a relax call uses: the backend's resident one, or the host's */
+static tled_ops_t engine_of(const tled_ops_t *ops, host_eng_t *he)
+{
+	tled_ops_t e = *ops;
+	if (!e.forces)
+		e = cpu_ops;
+	if (!e.begin) {
+		he->hops = ops->forces ? ops : &cpu_ops;
+		e.ctx = he;
+		e.begin = he_begin;
+		e.drive = he_drive;
+		e.grow = he_grow;
+		e.rforces = he_forces;
+		e.rayleigh = he_rayleigh;
+		e.rstep = he_step;
+		e.rcontact = he_contact;
+		e.swap = he_swap;
+		e.end = he_end;
+		e.push = he_push;
+		e.strerror = he_strerror;
+	}
+	return e;
+}
+
+/* the error of a failed engine call, named with the relax call's tag */
+#define ENG(call)                                                              \
+	do {                                                                   \
+		if ((call) != 0) {                                             \
+			int rc_ = errf(err, errsize, "%s, iteration %d: %s backend: %s", \
+				       tag, it, E.name ? E.name : "cpu",     \
+				       E.strerror(E.ctx));                     \
+			E.end(E.ctx, s);                                       \
+			return rc_;                                            \
+		}                                                              \
+	} while (0)
+
 int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	       const double *target, const char *tag, tled_relax_stats_t *st,
 	       char *err, size_t errsize)
 {
 	tled_model_t *m = s->m;
 	const tled_ops_t *ops = o->ops ? o->ops : &cpu_ops;
+	host_eng_t he = { 0 };
+	tled_ops_t E = engine_of(ops, &he);
+	/* host-array forces of the backend (the growth's energy below) */
+	const tled_ops_t *F = E.ctx == &he ? he.hops : ops;
 	int64_t n = m->n;
 	int ebc = m->ebc;
+	int it = 0;
 	memset(st, 0, sizeof *st);
 	tled_solver_update_active(s);
 	if (ebc && s->nc < 0)
 		return errf(err, errsize, "%s: out of memory (constraints)", tag);
+	/* collocated conditions (drive=collocated, ebc) are projected on the
+	 * host: a resident backend copies u and v back and forth around the
+	 * projection and the contact (3n doubles each way per step; nodal
+	 * driving, the default, moves only scalars) */
+	int hostcon = ebc && E.ctx != &he;
 	if (ebc) {
 		/* ramp ends of the collocated conditions: from the current u^h
 		 * (update_active) to the targets of driven nodes */
@@ -859,9 +1076,9 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 				    tag);
 		memcpy(s->ipg0, m->ipg, (size_t)m->nip * sizeof *s->ipg0);
 		tled_force_info_t f0 = { 0 }, f1 = { 0 };
-		ops->forces(m, s->ipact, s->u, s->VP, s->f, &f0);
+		F->forces(F->ctx, m, s->ipact, s->u, s->VP, s->f, &f0);
 		memcpy(m->ipg, o->ipg_to, (size_t)m->nip * sizeof *m->ipg);
-		ops->forces(m, s->ipact, s->u, s->VP, s->f, &f1);
+		F->forces(F->ctx, m, s->ipact, s->u, s->VP, s->f, &f1);
 		memcpy(m->ipg, s->ipg0, (size_t)m->nip * sizeof *m->ipg);
 		if (isfinite(f1.W - f0.W))
 			Wgrow = fabs(f1.W - f0.W);
@@ -884,37 +1101,27 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	tled_force_info_t fi = { 0 };
 	tled_cd_info_t ci = { 0 };
 	double err_est = INFINITY;
-	int it;
 	s->contacts = 0;
+	if (E.begin(E.ctx, s, ebc ? NULL : target, grow ? o->ipg_to : NULL))
+		return errf(err, errsize, "%s: %s backend: %s", tag,
+			    E.name ? E.name : "cpu", E.strerror(E.ctx));
 	for (it = 1; it <= o->max_iter; it++) {
 		double r = !target && !grow ? 1 : it > ramp ? 1 : (double)it / ramp;
 		/* growth stretches (linear ramp); the strain energy they add
 		 * (estimated at the start state, Wgrow) is work supplied: it
 		 * enters the energy watchdog like the driver's work */
 		if (grow && it <= ramp + 1) {
-			for (int64_t p = 0; p < m->nip; p++)
-				m->ipg[p] = s->ipg0[p] +
-					    r * (o->ipg_to[p] - s->ipg0[p]);
+			ENG(E.grow(E.ctx, r));
 			if (it == ramp + 1 || it == 1)
 				Wext += 0.5 * Wgrow;
 		}
 		/* prescribed displacements of driven nodes (linear ramp) */
-		if (!ebc && target && it <= ramp + 1) {
-			for (int64_t a = 0; a < n; a++)
-				if (m->kind[a] == TLED_DRIVEN)
-					for (int i = 0; i < 3; i++) {
-						double nu = s->ustart[3 * a + i] +
-							    r * (target[3 * a + i] -
-								 s->ustart[3 * a + i]);
-						/* driver work: reaction . du */
-						Wext += s->f[3 * a + i] *
-							(nu - s->u[3 * a + i]);
-						s->u[3 * a + i] = nu;
-					}
-		}
-		ops->forces(m, s->ipact, s->u, s->VP, s->f, &fi);
+		if (!ebc && target && it <= ramp + 1)
+			ENG(E.drive(E.ctx, r, &Wext));
+		ENG(E.rforces(E.ctx, &fi));
 		if (fi.nbad > 0) {
 			int64_t p = fi.ip_bad;
+			E.end(E.ctx, s);
 			return errf(err, errsize, "%s, iteration %d: %s at the "
 				    "integration point (%.2f, %.2f, %.2f) mm "
 				    "(%lld such points; min det F = %.3g): the "
@@ -934,14 +1141,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		/* adaptive damping: Rayleigh quotient of the last increment */
 		if (o->damping < 0 && have_prev && it > ramp + 1) {
 			double num = 0, den = 0;
-			for (int64_t a = 0; a < n; a++)
-				if (s->dkind[a] == TLED_FREE)
-					for (int i = 0; i < 3; i++) {
-						double du = dt * s->v[3 * a + i];
-						num += du * (s->f[3 * a + i] -
-							     s->fprev[3 * a + i]);
-						den += m->mass[a] * du * du;
-					}
+			ENG(E.rayleigh(E.ctx, dt, &num, &den));
 			/* a Rayleigh quotient never falls below omega_min^2, so
 			 * the running minimum approaches it from above; as the
 			 * slowest mode comes to dominate the increments */
@@ -952,7 +1152,9 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			if (it % 10 == 0)
 				c = 2 * sqrt(lam);
 		}
-		ops->cd_step(m, s->dkind, s->f, s->u, s->v, dt, c, &ci);
+		ENG(E.rstep(E.ctx, dt, c, &ci));
+		if (hostcon && (s->nc > 0 || o->contact))
+			ENG(E.end(E.ctx, s));
 		if (ebc && s->nc > 0 && ci.node_nan < 0) {
 			/* collocated conditions at this step's ramp value, the
 			 * correction also enters the velocity (its reaction is
@@ -988,14 +1190,11 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			ci.vmax = sqrt(vm);
 			ci.node_vmax = nvm;
 		}
-		{
-			double *t = s->fprev;
-			s->fprev = s->f;
-			s->f = t;
-			have_prev = 1;
-		}
+		ENG(E.swap(E.ctx));
+		have_prev = 1;
 		if (ci.node_nan >= 0) {
 			double p[3];
+			E.end(E.ctx, s);
 			node_mm(s, ci.node_nan, p);
 			return errf(err, errsize, "%s, iteration %d: NaN/Inf "
 				    "displacement at node %lld (near %.2f, %.2f, "
@@ -1009,6 +1208,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		double umax = ci.vmax * dt; /* crude: increment size */
 		if (!isfinite(Etot) || Etot > blow * Eref || umax > L) {
 			double p[3] = { 0, 0, 0 };
+			E.end(E.ctx, s);
 			if (ci.node_vmax >= 0)
 				node_mm(s, ci.node_vmax, p);
 			return errf(err, errsize, "%s, iteration %d: energy "
@@ -1024,22 +1224,23 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			/* every iteration: projected every 10th, a node pressed
 			 * against the brain boundary drifted out and back for
 			 * ever (10 000 iterations per growth step, phantom) */
-			int64_t nc = tled_contact(s, o->contact_stick ? dt : 0);
+			int64_t nc = 0;
+			double vm = ci.vmax;
+			if (hostcon)
+				he_contact(&(host_eng_t){ .s = s }, o->contact_stick ? dt : 0,
+					   &nc, &vm);
+			else
+				ENG(E.rcontact(E.ctx, o->contact_stick ? dt : 0,
+					       &nc, &vm));
 			s->contacts += nc;
-			if (nc > 0) {
-				/* the outward velocity the last step gave a node
-				 * in contact was removed with it: measure the
-				 * distance to equilibrium on what is left */
-				double vm = 0;
-				for (int64_t a = 0; a < n; a++)
-					if (s->dkind[a] == TLED_FREE) {
-						const double *va = s->v + 3 * a;
-						vm = fmax(vm, va[0] * va[0] + va[1] * va[1] +
-								      va[2] * va[2]);
-					}
-				ci.vmax = sqrt(vm);
-			}
+			/* the outward velocity the last step gave a node in
+			 * contact was removed with it: measure the distance to
+			 * equilibrium on what is left */
+			if (nc > 0)
+				ci.vmax = vm;
 		}
+		if (hostcon && (s->nc > 0 || o->contact))
+			ENG(E.push(E.ctx, s));
 		/* The tangent stiffness grows as tissue is compressed, so the
 		 * step picked from the state at the start of this call can be
 		 * above the critical one once the driven nodes have arrived:
@@ -1049,11 +1250,13 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		 * tled_solver_pick_dt) at the end of the ramp and every 1000
 		 * iterations after it, and shorten dt to dt_safety x the new
 		 * critical step when needed (automatic dt, or dt_policy
-		 * reduce; reported in st->dt / dt_crit). */
+		 * reduce; reported in st->dt / dt_crit).  The estimate reads
+		 * the state on the host (a resident backend copies u there). */
 		if (o->dt_estimate == TLED_DTE_EIGEN &&
 		    (o->dt <= 0 || o->dt_policy == TLED_DT_REDUCE) &&
 		    ((ramp && it == ramp + 1) || (it > ramp + 1 && it % 1000 == 0))) {
 			double lmx, lmn;
+			ENG(E.end(E.ctx, s));
 			if (!tled_solver_eigs(s, o, &lmx, &lmn) && lmx > 0) {
 				double dc = 2 / sqrt(lmx);
 				double sf = o->dt_safety > 0 && o->dt_safety <= 1
@@ -1086,18 +1289,31 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			nconv = 0;
 		if (o->progress && it % 500 == 0)
 			o->progress(o->hook_ctx, it, o->max_iter, err_est);
-		if (o->cancelled && it % 100 == 0 && o->cancelled(o->hook_ctx))
+		if (o->cancelled && it % 100 == 0 && o->cancelled(o->hook_ctx)) {
+			E.end(E.ctx, s);
 			return errf(err, errsize, "%s: cancelled at iteration %d",
 				    tag, it), -2;
+		}
 		if (nconv >= 5)
 			break;
 	}
 	if (it > o->max_iter)
 		it = o->max_iter;
-	if (o->contact)
-		s->contacts += tled_contact(s, 0);
+	if (o->contact) {
+		int64_t nc = 0;
+		double vm = 0;
+		if (hostcon) {
+			ENG(E.end(E.ctx, s));
+			he_contact(&(host_eng_t){ .s = s }, 0, &nc, &vm);
+			ENG(E.push(E.ctx, s));
+		} else {
+			ENG(E.rcontact(E.ctx, 0, &nc, &vm));
+		}
+		s->contacts += nc;
+	}
 	/* final state: forces for the residual (ebc: net of the reactions) */
-	ops->forces(m, s->ipact, s->u, s->VP, s->f, &fi);
+	ENG(E.rforces(E.ctx, &fi));
+	ENG(E.end(E.ctx, s));
 	double res = 0;
 	for (int64_t a = 0; a < n; a++)
 		if (s->dkind[a] == TLED_FREE && (ebc || m->kind[a] == TLED_FREE))

@@ -1,9 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * Mesh-free Total Lagrangian Explicit Dynamics (MTLED): model setup shared by
- * every backend (tled_cpu here; a tled_cuda backend links the same sources via
- * its plugin.mk `tled_cuda_EXTRA_SRC = plugins/tled_cpu/tled_model.c ...` and
- * replaces only the hot loops of tled_step.h).
+ * every backend (lib/tled, linked by plugins/tled_cpu and plugins/tled_cuda;
+ * a backend replaces only the hot loops of tled_step.h through tled_ops_t).
  *
  * Method (Horton, Wittek, Joldes, Miller 2010, "A meshless Total Lagrangian
  * explicit dynamics algorithm for surgical simulation", IJNMBE 26:977):
@@ -233,6 +232,9 @@ typedef struct tled_model {
 	double corr_rel;    /* |integration-constraint residual| after / before */
 	int corr_iters;     /* CG iterations of the correction */
 	double dt_wave;     /* h_min / c_max, s */
+	uint64_t gen;       /* build number, unique per process: a backend
+	                       that copies the model (tled_cuda) re-uploads
+	                       when it changes */
 } tled_model_t;
 
 /*

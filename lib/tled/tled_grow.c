@@ -1,76 +1,5 @@
 /* SPDX-License-Identifier: MIT */
-/*
- * tled_cpu: grow the tumour inside the atlas with mesh-free Total Lagrangian
- * Explicit Dynamics (DESIGN.md section 6; thesis sections 3.5-3.6).  The
- * numerics live in tled_model.c (setup), tled_step.c (hot loops) and
- * tled_solve.c (time step, dynamic relaxation, contact, watchdogs); this
- * file is the port adapter and the growth replay.
- *
- * Units: ports in mm (RAS world), the model in SI (m, kg, s, Pa).
- *
- * in   nodes     pointset from the sampler: labels 0 tissue, 1 brain
- *                boundary (fixed), 2 ventricles/sulci, 3 tumour, 4 tumour
- *                boundary, 5 seed.  Labels 3 and 4 mark atlas tissue that
- *                lies where the tumour will be: it is tissue at the start and
- *                is pushed away or swept by the growth.
- *      contours  pointset from levelset: label = tumour component, attribute
- *                layer (0 = tumour boundary, increasing inward), parent (x3,
- *                mm: the point's position on the previous, outer layer),
- *                normal (x3, outward; optional: estimated when absent)
- *      labels    optional tissue label volume (atlas labels): materials per
- *                integration point; the values listed in csf_labels are
- *                ventricles/sulci, every other value brain parenchyma.
- *                Without it the material of an integration point is that of
- *                its nearest node (label 2: CSF, else parenchyma).  With it
- *                the integration points are only those inside the brain
- *                (label > 0 at the nearest voxel, tled_labels.h); without
- *                it the default domain test of tled_model.c.
- * out  nodes     the input nodes (same order, input attributes kept) with
- *                attribute u (x3, mm: the displacement, reference -> grown)
- *                and the final labels (below)
- *      tumour    the tumour nodes (those driven by the growth or swept by
- *                it) at their final, deformed positions (mm); label 3
- *                tumour, 4 tumour boundary (within half a node spacing of
- *                the final tumour surface), 5 seed; attributes u (x3, mm),
- *                ref (x3, reference position, mm), step (growth step at
- *                which the node joined the tumour), component
- *      stats     one row per growth step: step, layer, iterations,
- *                converged, dt_s, dt_crit_s, kinetic_energy_J,
- *                strain_energy_J, residual_N, err_est_mm, jmin, driven,
- *                swept, collocated, contacts, integration_points, wall_s
- *                (front = expand: growth_stretch and core_volume_fraction,
- *                the core's deformed volume / the tumour's)
- *
- * Growth replay (thesis section 3.6, in 3-D).  Layers are replayed from the
- * innermost to layer 0.  At the innermost layer of a component the tumour
- * is created: the seed nodes of the component (label 5, assigned to the
- * component of their nearest contour point) and every movable node inside
- * that layer become tumour nodes (driven, TLED_DRIVEN).  At every later
- * layer l each tumour node is displaced by the level set's layer-to-layer
- * map, evaluated at its current position: the inverse-distance weighted
- * mean of (parent - position) over the 8 nearest points of the previous
- * (inner) layer of its component.  Dynamic relaxation then brings the free
- * nodes to equilibrium with the brain boundary fixed and contact keeping
- * nodes inside the brain.  Afterwards (relabelling rule) every free node
- * whose current position lies inside layer l (signed distance to the
- * nearest layer point along its outward normal below -sweep_margin * mean
- * node spacing) is swept into the tumour: relabelled tumour, driven from
- * then on.  Integration points whose current position lies inside the
- * tumour (by more than half an integration cell) are switched off: the
- * tumour acts as a cavity with a prescribed boundary, so swept tissue
- * carries no stress; a free node left with no active integration point
- * is swept too (it would be a zero-energy mode).  Inside/outside a layer:
- * the offset along the nearest layer point's normal within 2 node
- * spacings of the layer (unless the winding number of the layer's
- * oriented points clearly disagrees: a wrong normal), the winding number
- * farther away (layer_side).
- *
- * front = expand (experimental; measured worse, bench/pipeline/results.md
- * Session 13) replaces the replay: the core inside the innermost kept layer
- * grows by a volumetric growth stretch (F = F_e g I, tled_ip_stress_c)
- * until its deformed volume is the tumour's; see the block in
- * tled_process.
- */
+/* The growth replay of the TLED stage (tled_grow.h). */
 #include <math.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -78,198 +7,9 @@
 #include <string.h>
 #include <time.h>
 
-#include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "tled_grow.h"
 #include "tled_labels.h"
-#include "tled_solve.h"
-
-typedef struct priv {
-	double e_brain, nu_brain, e_tumour, nu_tumour, e_csf, nu_csf;
-	double density;
-	int support_k;
-	int support_point;
-	double support_dilation;
-	double ip_spacing;
-	double ip_factor;
-	double dt;
-	double dt_safety;
-	int dt_policy;
-	int dt_estimate;
-	double damping;
-	int ramp_iter;
-	int max_iter;
-	double tol;
-	int contact;
-	int corr;
-	double merge_tol;
-	double sweep_margin;
-	const char *csf_labels;
-	int drive;
-	int contact_stick;
-	int front;
-	double push_mm;
-	double push_wall;
-} priv_t;
-
-static const armstg_param_t params[] = {
-	{ "e_brain", PT_DOUBLE, "3000", 1e-3, 1e9, "Pa",
-	  "Young's modulus of brain parenchyma (thesis Table 3.1: 3000 Pa)",
-	  NULL, offsetof(priv_t, e_brain), 0 },
-	{ "nu_brain", PT_DOUBLE, "0.49", 0, 0.4999, "",
-	  "Poisson's ratio of brain parenchyma (thesis Table 3.1: 0.49)", NULL,
-	  offsetof(priv_t, nu_brain), 0 },
-	{ "e_tumour", PT_DOUBLE, "3000", 1e-3, 1e9, "Pa",
-	  "Young's modulus of tumour tissue (thesis Table 3.1: 3000 Pa)", NULL,
-	  offsetof(priv_t, e_tumour), 0 },
-	{ "nu_tumour", PT_DOUBLE, "0.49", 0, 0.4999, "",
-	  "Poisson's ratio of tumour tissue (thesis Table 3.1: 0.49)", NULL,
-	  offsetof(priv_t, nu_tumour), 0 },
-	{ "e_csf", PT_DOUBLE, "10", 1e-3, 1e9, "Pa",
-	  "Young's modulus of ventricles and sulci (thesis Table 3.1: 10 Pa)",
-	  NULL, offsetof(priv_t, e_csf), 0 },
-	{ "nu_csf", PT_DOUBLE, "0.1", 0, 0.4999, "",
-	  "Poisson's ratio of ventricles and sulci (thesis Table 3.1: 0.1)",
-	  NULL, offsetof(priv_t, nu_csf), 0 },
-	{ "density", PT_DOUBLE, "1000", 1e-3, 1e6, "kg/m^3",
-	  "mass density of every tissue (only the time step and the damping "
-	  "depend on it at equilibrium)", NULL, offsetof(priv_t, density), 0 },
-	{ "support_k", PT_INT, "20", 5, 256, "nodes",
-	  "support size: with support=nodal each node's radius reaches its "
-	  "1.5 K / dilation^3-th neighbour (about 1.5 K nodes cover a point); "
-	  "with support=point the K nearest nodes of each point",
-	  NULL, offsetof(priv_t, support_k), 0 },
-	{ "support_dilation", PT_DOUBLE, "1.2", 1.01, 4, "",
-	  "MLS weight radius = this x the distance that defines the support",
-	  NULL, offsetof(priv_t, support_dilation), 0 },
-	{ "support", PT_ENUM, "nodal", 0, 0, "",
-	  "nodal: radius per node, one approximation everywhere (cavity test "
-	  "RMS 1.6%); point: K nearest per evaluation point (legacy, 3.6%; "
-	  "bench/tled/results.md)", "nodal|point",
-	  offsetof(priv_t, support_point), 0 },
-	{ "ip_spacing", PT_DOUBLE, "0", 0, 100, "mm",
-	  "background integration grid spacing (0: ip_factor x the mean "
-	  "node spacing)",
-	  NULL, offsetof(priv_t, ip_spacing), 0 },
-	{ "ip_factor", PT_DOUBLE, "1", 0.25, 2, "",
-	  "integration grid spacing / mean node spacing, used when "
-	  "ip_spacing is 0 (1: about one point per node; the graphs use 0.75, "
-	  "2.4 points per node: on phantom 1 the band error of the growth "
-	  "alone falls from 1.72 to 1.42 mm at 0.74, and of the registered "
-	  "run from 1.342 to 1.278 mm at 0.75; bench/pipeline/results.md "
-	  "Session 11)",
-	  NULL, offsetof(priv_t, ip_factor), 0 },
-	{ "dt", PT_DOUBLE, "0", 0, 10, "s",
-	  "explicit time step (0: dt_safety x the critical time step)", NULL,
-	  offsetof(priv_t, dt), 0 },
-	{ "dt_safety", PT_DOUBLE, "0.8", 0.01, 1, "",
-	  "fraction of the critical time step used (auto dt, or reduce)", NULL,
-	  offsetof(priv_t, dt_safety), 0 },
-	{ "dt_policy", PT_ENUM, "refuse", 0, 0, "",
-	  "a dt above the critical time step is refused (error) or reduced to "
-	  "dt_safety x critical", "refuse|reduce",
-	  offsetof(priv_t, dt_policy), 0 },
-	{ "dt_estimate", PT_ENUM, "eigen", 0, 0, "",
-	  "critical time step from the largest eigenvalue of M^-1 K (Lanczos) "
-	  "or from the wave speed h_min/c", "eigen|wave",
-	  offsetof(priv_t, dt_estimate), 0 },
-	{ "damping", PT_DOUBLE, "-1", -1, 1e9, "1/s",
-	  "dynamic relaxation mass damping (-1: adaptive, 2 omega_min)", NULL,
-	  offsetof(priv_t, damping), 0 },
-	{ "ramp_iter", PT_INT, "100", 1, 1000000, "iterations",
-	  "iterations over which each growth step's displacement is ramped",
-	  NULL, offsetof(priv_t, ramp_iter), 0 },
-	{ "max_iter", PT_INT, "10000", 10, 10000000, "iterations",
-	  "most dynamic-relaxation iterations per growth step", NULL,
-	  offsetof(priv_t, max_iter), 0 },
-	{ "tol", PT_DOUBLE, "0.001", 1e-9, 100, "mm",
-	  "equilibrium tolerance: estimated distance to equilibrium", NULL,
-	  offsetof(priv_t, tol), 0 },
-	{ "contact", PT_BOOL, "true", 0, 1, "",
-	  "keep nodes inside the brain boundary (projection on the boundary)",
-	  NULL, offsetof(priv_t, contact), 0 },
-	{ "contact_stick", PT_BOOL, "true", 0, 1, "",
-	  "a node that reaches the brain boundary sticks to it (its last "
-	  "step undone, its velocity zeroed: no-slip, like the fixed boundary "
-	  "nodes) instead of sliding along it; sliding contact never settled "
-	  "under front=push (a limit cycle: 10 000 iterations per step, "
-	  "bench/pipeline/results.md).  Nodal driving only",
-	  NULL, offsetof(priv_t, contact_stick), 0 },
-	{ "corr", PT_ENUM, "all", 0, 0, "",
-	  "integration-constraint correction of the shape-function "
-	  "derivatives (sum V dN = 0): all movable nodes, interior ones, none",
-	  "all|interior|none", offsetof(priv_t, corr), 0 },
-	{ "merge_tol", PT_DOUBLE, "0.001", 0, 10, "mm",
-	  "nodes closer than this are merged (highest-priority label wins)",
-	  NULL, offsetof(priv_t, merge_tol), 0 },
-	{ "sweep_margin", PT_DOUBLE, "0.25", 0, 5, "node spacings",
-	  "a free node deeper than this inside the current tumour contour is "
-	  "swept (relabelled tumour)", NULL, offsetof(priv_t, sweep_margin), 0 },
-	{ "csf_labels", PT_STRING, "1,4,5", 0, 0, "",
-	  "values of the labels volume that are ventricles or sulci "
-	  "(comma-separated)", NULL, offsetof(priv_t, csf_labels), 0 },
-	{ "drive", PT_ENUM, "nodal", 0, 0, "",
-	  "how the tumour nodes are driven: nodal (their nodal parameters "
-	  "prescribed; robust, but u^h lags: weak push) or collocated "
-	  "(u^h = the layer map at a subset of tumour nodes 0.5 h apart, "
-	  "Lagrange multipliers; experimental: bench/tled/results.md)",
-	  "nodal|collocated", offsetof(priv_t, drive), 0 },
-	{ "front", PT_ENUM, "push", 0, 0, "",
-	  "what the tumour front does to the tissue it meets: sweep (legacy, "
-	  "the default until 2026-11-22: tissue the front overtakes becomes "
-	  "tumour; with nodal driving the tissue beside the tumour moved "
-	  "13-24 % of the phantom's true mass effect) or push (default: the "
-	  "tissue at the front stays attached to it and is pushed over the "
-	  "last push_mm of growth; with nodal driving: collocated driving "
-	  "inverted under the push; bench/pipeline/results.md) or expand "
-	  "(experimental, not for use: nothing is driven; the core push_mm "
-	  "deep inside the tumour grows by an isotropic growth stretch until "
-	  "its deformed volume is the tumour's, so it pushes further where "
-	  "the tissue is soft; after registration it was worse than push on "
-	  "default phantoms 1-8, 1.294 against 1.212 mm at a fixed depth, and "
-	  "lost to the sphere grown the same way on 7 of 8; a component "
-	  "thinner than 2 push_mm is refused; bench/pipeline/results.md, "
-	  "Session 13)",
-	  "sweep|push|expand", offsetof(priv_t, front), 0 },
-	{ "push_mm", PT_DOUBLE, "6", 0, 1000, "mm",
-	  "front=push: depth of growth that pushes tissue: the tumour starts "
-	  "as the surface this deep inside the final tumour (a contour "
-	  "layer, or between two: interpolated along the layer map; the "
-	  "tissue inside it is infiltrated: tumour from the start) and "
-	  "pushes the tissue over the remaining depth (0: no mass effect; a "
-	  "value above the tumour's depth: the whole growth pushes, as from "
-	  "the seeds).  graphs/armstg.ini chooses it per case ([tune])",
-	  NULL, offsetof(priv_t, push_mm), 0 },
-	{ "push_wall", PT_DOUBLE, "1.5", 0, 3, "node spacings",
-	  "front=push: free nodes within this distance outside the front "
-	  "are attached to it (driven by the layer map, kept as tissue)",
-	  NULL, offsetof(priv_t, push_wall), 0 },
-};
-
-static const armstg_port_t inputs[] = {
-	{ "nodes", MSG_POINTSET, 0,
-	  "sampler nodes (mm): labels 0 tissue, 1 brain boundary, 2 CSF, 3 "
-	  "tumour, 4 tumour boundary, 5 seed" },
-	{ "contours", MSG_POINTSET, 0,
-	  "levelset layers (mm): label = component, attrs layer, parent(3), "
-	  "normal(3) optional" },
-	{ "labels", MSG_VOLUME, 1,
-	  "tissue labels for the materials (csf_labels are ventricles/sulci)" },
-};
-
-static const armstg_port_t outputs[] = {
-	{ "nodes", MSG_POINTSET, 0,
-	  "input nodes with attr u(3) displacement in mm (front=push or "
-	  "drive=collocated: u^h at the node, 0 on the fixed boundary; "
-	  "front=sweep with drive=nodal: the MLS nodal parameter) and final "
-	  "labels" },
-	{ "tumour", MSG_POINTSET, 0,
-	  "tumour nodes at grown positions (mm): label 3/4/5, attrs u(3), "
-	  "ref(3), step, component; front=push adds the outer contour layer's "
-	  "points (label 4, u 0), the grown tumour's outline" },
-	{ "stats", MSG_TABLE, 0,
-	  "per growth step: iterations, time step, energies, residual, wall "
-	  "time" },
-};
 
 /* ------------------------------------------------------------ helpers */
 
@@ -621,10 +361,10 @@ static void tab_relax(const armstg_host_t *H, tab_t *tab, int64_t row,
 	H->tab_set_num(tab, row, "jmin", rs->jmin);
 }
 
-static int tled_process(armstg_stage_t *st)
+int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
+		      const tled_ops_t *ops)
 {
 	const armstg_host_t *H = st->host;
-	priv_t *pv = st->priv;
 	const ps_t *pn = (const ps_t *)st->in[0];
 	const ps_t *pc = (const ps_t *)st->in[1];
 	const vol_t *lv = (const vol_t *)st->in[2];
@@ -1032,6 +772,7 @@ static int tled_process(armstg_stage_t *st)
 	so.cancelled = on_cancelled;
 	so.progress = on_progress;
 	so.hook_ctx = &hk;
+	so.ops = ops;
 	double h = m.h_mean;
 	double margin = pv->sweep_margin * h;
 	int64_t ndriven = 0;
@@ -1655,26 +1396,3 @@ out:
 	free(Xin);
 	return rc;
 }
-
-static const armstg_plugin_t desc = {
-	ARMSTG_PLUGIN_HEADER,
-	.name = "tled_cpu",
-	.description = "mesh-free TLED tumour growth in the atlas (MLS, "
-		       "background integration, neo-Hookean, dynamic "
-		       "relaxation): node displacements and grown tumour",
-	.version = "1.0.0",
-	.license = "MIT",
-	.inputs = inputs,
-	.n_inputs = ARMSTG_COUNT(inputs),
-	.outputs = outputs,
-	.n_outputs = ARMSTG_COUNT(outputs),
-	.params = params,
-	.n_params = ARMSTG_COUNT(params),
-	.priv_size = sizeof(priv_t),
-	.devices = DEV_CPU,
-	.init = NULL,
-	.process = tled_process,
-	.fini = NULL,
-};
-
-ARMSTG_PLUGIN(desc)

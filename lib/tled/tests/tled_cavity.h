@@ -15,7 +15,7 @@
 #include <stdio.h>
 #include <time.h>
 
-#include "../tled_solve.h"
+#include "tled/tled_solve.h"
 #include "tled_synth.h"
 
 typedef struct cavity_cfg {
@@ -179,6 +179,7 @@ static inline void cavity_run(const cavity_cfg_t *c, int steps,
 	tled_solver_opts_t so;
 	tled_solver_opts_default(&so);
 	so.contact = 0;
+	so.ops = TLED_TEST_OPS;
 	so.tol = c->tol * TLED_MM;
 	so.max_iter = c->max_iter;
 	so.ramp_iter = c->ramp;

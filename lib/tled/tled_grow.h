@@ -1,0 +1,123 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The TLED stage: grow the tumour inside the atlas with mesh-free Total
+ * Lagrangian Explicit Dynamics, shared by the tled_cpu and tled_cuda plugins
+ * (one model, two backends, as NiftyReg's cpu/cuda behind one contract).
+ * The plugins are thin adapters: their descriptors include the common
+ * parameter and port tables (tled_params.inc, tled_ports_in.inc,
+ * tled_ports_out.inc) and call tled_grow_process with their backend's
+ * operations table (NULL: the plain C reference of tled_step.c).
+ *
+ * DESIGN.md section 6; thesis sections 3.5-3.6.  The numerics live in
+ * tled_model.c (setup), tled_step.c (hot loops) and tled_solve.c (time
+ * step, dynamic relaxation, contact, watchdogs); tled_grow.c is the growth
+ * replay.
+ *
+ * Units: ports in mm (RAS world), the model in SI (m, kg, s, Pa).
+ *
+ * in   nodes     pointset from the sampler: labels 0 tissue, 1 brain
+ *                boundary (fixed), 2 ventricles/sulci, 3 tumour, 4 tumour
+ *                boundary, 5 seed.  Labels 3 and 4 mark atlas tissue that
+ *                lies where the tumour will be: it is tissue at the start and
+ *                is pushed away or swept by the growth.
+ *      contours  pointset from levelset: label = tumour component, attribute
+ *                layer (0 = tumour boundary, increasing inward), parent (x3,
+ *                mm: the point's position on the previous, outer layer),
+ *                normal (x3, outward; optional: estimated when absent)
+ *      labels    optional tissue label volume (atlas labels): materials per
+ *                integration point; the values listed in csf_labels are
+ *                ventricles/sulci, every other value brain parenchyma.
+ *                Without it the material of an integration point is that of
+ *                its nearest node (label 2: CSF, else parenchyma).  With it
+ *                the integration points are only those inside the brain
+ *                (label > 0 at the nearest voxel, tled_labels.h); without
+ *                it the default domain test of tled_model.c.
+ * out  nodes     the input nodes (same order, input attributes kept) with
+ *                attribute u (x3, mm: the displacement, reference -> grown)
+ *                and the final labels (below)
+ *      tumour    the tumour nodes (those driven by the growth or swept by
+ *                it) at their final, deformed positions (mm); label 3
+ *                tumour, 4 tumour boundary (within half a node spacing of
+ *                the final tumour surface), 5 seed; attributes u (x3, mm),
+ *                ref (x3, reference position, mm), step (growth step at
+ *                which the node joined the tumour), component
+ *      stats     one row per growth step: step, layer, iterations,
+ *                converged, dt_s, dt_crit_s, kinetic_energy_J,
+ *                strain_energy_J, residual_N, err_est_mm, jmin, driven,
+ *                swept, collocated, contacts, integration_points, wall_s
+ *                (front = expand: growth_stretch and core_volume_fraction,
+ *                the core's deformed volume / the tumour's)
+ *
+ * Growth replay (thesis section 3.6, in 3-D).  Layers are replayed from the
+ * innermost to layer 0.  At the innermost layer of a component the tumour
+ * is created: the seed nodes of the component (label 5, assigned to the
+ * component of their nearest contour point) and every movable node inside
+ * that layer become tumour nodes (driven, TLED_DRIVEN).  At every later
+ * layer l each tumour node is displaced by the level set's layer-to-layer
+ * map, evaluated at its current position: the inverse-distance weighted
+ * mean of (parent - position) over the 8 nearest points of the previous
+ * (inner) layer of its component.  Dynamic relaxation then brings the free
+ * nodes to equilibrium with the brain boundary fixed and contact keeping
+ * nodes inside the brain.  Afterwards (relabelling rule) every free node
+ * whose current position lies inside layer l (signed distance to the
+ * nearest layer point along its outward normal below -sweep_margin * mean
+ * node spacing) is swept into the tumour: relabelled tumour, driven from
+ * then on.  Integration points whose current position lies inside the
+ * tumour (by more than half an integration cell) are switched off: the
+ * tumour acts as a cavity with a prescribed boundary, so swept tissue
+ * carries no stress; a free node left with no active integration point
+ * is swept too (it would be a zero-energy mode).  Inside/outside a layer:
+ * the offset along the nearest layer point's normal within 2 node
+ * spacings of the layer (unless the winding number of the layer's
+ * oriented points clearly disagrees: a wrong normal), the winding number
+ * farther away (layer_side).
+ *
+ * front = expand (experimental; measured worse, bench/pipeline/results.md
+ * Session 13) replaces the replay: the core inside the innermost kept layer
+ * grows by a volumetric growth stretch (F = F_e g I, tled_ip_stress_c)
+ * until its deformed volume is the tumour's; see the block in
+ * tled_process.
+ */
+#ifndef TLED_GROW_H
+#define TLED_GROW_H
+
+#include "armstg/plugin.h"
+#include "tled_solve.h"
+
+/* the stage's parameters (tled_params.inc documents each one) */
+typedef struct tled_grow_params {
+	double e_brain, nu_brain, e_tumour, nu_tumour, e_csf, nu_csf;
+	double density;
+	int support_k;
+	int support_point;
+	double support_dilation;
+	double ip_spacing;
+	double ip_factor;
+	double dt;
+	double dt_safety;
+	int dt_policy;
+	int dt_estimate;
+	double damping;
+	int ramp_iter;
+	int max_iter;
+	double tol;
+	int contact;
+	int corr;
+	double merge_tol;
+	double sweep_margin;
+	const char *csf_labels;
+	int drive;
+	int contact_stick;
+	int front;
+	double push_mm;
+	double push_wall;
+} tled_grow_params_t;
+
+/* Run the stage: inputs st->in[0..2] (nodes, contours, labels), outputs
+ * st->out[0..2] (nodes, tumour, stats); ops: the backend (NULL = the CPU
+ * reference).  Returns 0 or the host's failure code (message set through
+ * st->host->fail). */
+int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
+		      const tled_ops_t *ops);
+
+#endif

@@ -1,0 +1,992 @@
+/* SPDX-License-Identifier: MIT */
+/* tled_cuda: the TLED step on the device (see tled_cuda.h).  SI units. */
+#include <cuda_runtime.h>
+
+#include <float.h>
+#include <limits.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "tled_cuda.h"
+
+#define TPB 256      /* threads per block */
+#define MAXBLK 1024  /* blocks of a reduction (grid-stride beyond) */
+
+/* ------------------------------------------------------------ reductions */
+
+/* One record reduces everything a step needs: two sums, an arg-max (lowest
+ * index on ties, -1 = none, as tled_step.c), a count and the lowest index
+ * flagged. */
+struct red {
+	double s0, s1;
+	double mx;
+	long long imx;
+	long long cnt;
+	long long first; /* LLONG_MAX: none */
+};
+
+__device__ __forceinline__ void red_init(red &r)
+{
+	r.s0 = r.s1 = 0;
+	r.mx = -INFINITY;
+	r.imx = -1;
+	r.cnt = 0;
+	r.first = LLONG_MAX;
+}
+
+__device__ __forceinline__ void red_max(red &r, double v, long long i)
+{
+	if (v > r.mx || (v == r.mx && i >= 0 && r.imx >= 0 && i < r.imx)) {
+		r.mx = v;
+		r.imx = i;
+	}
+}
+
+__device__ __forceinline__ void red_join(red &a, const red &b)
+{
+	a.s0 += b.s0;
+	a.s1 += b.s1;
+	red_max(a, b.mx, b.imx);
+	a.cnt += b.cnt;
+	if (b.first < a.first)
+		a.first = b.first;
+}
+
+/* block reduction into part[blockIdx.x] (fixed order: same result for the
+ * same launch geometry) */
+__device__ void red_block(red r, red *part)
+{
+	__shared__ red sh[TPB];
+	sh[threadIdx.x] = r;
+	__syncthreads();
+	for (int w = TPB / 2; w > 0; w >>= 1) {
+		if ((int)threadIdx.x < w)
+			red_join(sh[threadIdx.x], sh[threadIdx.x + w]);
+		__syncthreads();
+	}
+	if (threadIdx.x == 0)
+		part[blockIdx.x] = sh[0];
+}
+
+__global__ void k_red_final(red *part, int nb, red *out)
+{
+	__shared__ red sh[TPB];
+	red r;
+	red_init(r);
+	for (int i = threadIdx.x; i < nb; i += TPB)
+		red_join(r, part[i]);
+	sh[threadIdx.x] = r;
+	__syncthreads();
+	for (int w = TPB / 2; w > 0; w >>= 1) {
+		if ((int)threadIdx.x < w)
+			red_join(sh[threadIdx.x], sh[threadIdx.x + w]);
+		__syncthreads();
+	}
+	if (threadIdx.x == 0)
+		*out = sh[0];
+}
+
+/* ------------------------------------------------------------ device model */
+
+struct dmod {
+	int n, nip;
+	const int *ipptr, *ipnode, *nptr, *nent, *entip, *ipmat;
+	const double *dN, *ipV, *mass, *X;
+	double mu[MAT_N], kappa[MAT_N];
+	/* brain boundary: nodes, normals and their uniform grid */
+	int nb;
+	const double *bX, *bn;
+	const int *bstart, *bidx;
+	double blo[3], bcell;
+	int bnc[3];
+};
+
+/* neo-Hookean 2nd Piola-Kirchhoff stress, as tled_neohooke (tled_step.c):
+ * S = mu J^-2/3 (I - tr C / 3 C^-1) + kappa J (J - 1) C^-1, returns J */
+__device__ double d_neohooke(const double F[9], double mu, double kappa,
+			     double S[9], double *W)
+{
+	double C[9];
+	for (int i = 0; i < 3; i++)
+		for (int j = 0; j < 3; j++)
+			C[3 * i + j] = F[i] * F[j] + F[3 + i] * F[3 + j] +
+				       F[6 + i] * F[6 + j];
+	double J = F[0] * (F[4] * F[8] - F[5] * F[7]) -
+		   F[1] * (F[3] * F[8] - F[5] * F[6]) +
+		   F[2] * (F[3] * F[7] - F[4] * F[6]);
+	if (!(J > 0)) {
+		for (int i = 0; i < 9; i++)
+			S[i] = 0;
+		*W = 0;
+		return J;
+	}
+	double iJ2 = 1 / (J * J), Ci[9];
+	Ci[0] = (C[4] * C[8] - C[5] * C[7]) * iJ2;
+	Ci[1] = (C[2] * C[7] - C[1] * C[8]) * iJ2;
+	Ci[2] = (C[1] * C[5] - C[2] * C[4]) * iJ2;
+	Ci[3] = Ci[1];
+	Ci[4] = (C[0] * C[8] - C[2] * C[6]) * iJ2;
+	Ci[5] = (C[2] * C[3] - C[0] * C[5]) * iJ2;
+	Ci[6] = Ci[2];
+	Ci[7] = Ci[5];
+	Ci[8] = (C[0] * C[4] - C[1] * C[3]) * iJ2;
+	double trC = C[0] + C[4] + C[8];
+	double J23 = pow(J, -2.0 / 3.0);
+	double a = mu * J23, b = kappa * J * (J - 1) - a * trC / 3;
+	for (int i = 0; i < 9; i++)
+		S[i] = b * Ci[i];
+	S[0] += a;
+	S[4] += a;
+	S[8] += a;
+	*W = 0.5 * mu * (J23 * trC - 3) + 0.5 * kappa * (J - 1) * (J - 1);
+	return J;
+}
+
+/* stresses: VP = V F S per active ip; s0 = strain energy, max of -J (min
+ * det F) and where, count and first of inverted / non-finite points */
+__global__ void k_stress(dmod m, const unsigned char *ipact, const double *ipg,
+			 const double *u, double *VP, red *part)
+{
+	red r;
+	red_init(r);
+	for (int p = blockIdx.x * blockDim.x + threadIdx.x; p < m.nip;
+	     p += gridDim.x * blockDim.x) {
+		double *P = VP + 9 * (size_t)p;
+		if (ipact && !ipact[p]) {
+			for (int i = 0; i < 9; i++)
+				P[i] = 0;
+			continue;
+		}
+		double F[9] = { 1, 0, 0, 0, 1, 0, 0, 0, 1 };
+		for (int e = m.ipptr[p]; e < m.ipptr[p + 1]; e++) {
+			const double *ua = u + 3 * (size_t)m.ipnode[e];
+			const double *d = m.dN + 3 * (size_t)e;
+			for (int i = 0; i < 3; i++) {
+				F[3 * i] += ua[i] * d[0];
+				F[3 * i + 1] += ua[i] * d[1];
+				F[3 * i + 2] += ua[i] * d[2];
+			}
+		}
+		int mt = m.ipmat[p];
+		double S[9], W, J;
+		double g = ipg ? ipg[p] : 1, V = m.ipV[p];
+		if (g != 1) {
+			double Fe[9];
+			for (int i = 0; i < 9; i++)
+				Fe[i] = F[i] / g;
+			J = d_neohooke(Fe, m.mu[mt], m.kappa[mt], S, &W);
+			W *= g * g * g;
+			V *= g;
+		} else {
+			J = d_neohooke(F, m.mu[mt], m.kappa[mt], S, &W);
+		}
+		if (!(J > 0) || !isfinite(W)) {
+			r.cnt++;
+			if (p < r.first)
+				r.first = p;
+		}
+		if (-J > r.mx) { /* strict: the first of equal J, as the C loop */
+			r.mx = -J;
+			r.imx = p;
+		}
+		r.s0 += m.ipV[p] * W;
+		for (int i = 0; i < 3; i++)
+			for (int j = 0; j < 3; j++)
+				P[3 * i + j] = V * (F[3 * i] * S[j] +
+						    F[3 * i + 1] * S[3 + j] +
+						    F[3 * i + 2] * S[6 + j]);
+	}
+	red_block(r, part);
+}
+
+/* f_a = sum over a's support entries of VP_ip dN_a(ip): the same CSR order
+ * as tled_gather_c, no atomics */
+__global__ void k_gather(dmod m, const unsigned char *ipact, const double *VP,
+			 double *f)
+{
+	int a = blockIdx.x * blockDim.x + threadIdx.x;
+	if (a >= m.n)
+		return;
+	double s0 = 0, s1 = 0, s2 = 0;
+	for (int t = m.nptr[a]; t < m.nptr[a + 1]; t++) {
+		int e = m.nent[t], p = m.entip[e];
+		if (ipact && !ipact[p])
+			continue;
+		const double *P = VP + 9 * (size_t)p, *d = m.dN + 3 * (size_t)e;
+		s0 += P[0] * d[0] + P[1] * d[1] + P[2] * d[2];
+		s1 += P[3] * d[0] + P[4] * d[1] + P[5] * d[2];
+		s2 += P[6] * d[0] + P[7] * d[1] + P[8] * d[2];
+	}
+	f[3 * a] = s0;
+	f[3 * a + 1] = s1;
+	f[3 * a + 2] = s2;
+}
+
+/* central differences with mass damping (tled_cd_step_c): s0 = kinetic
+ * energy, max v^2 and where, first non-finite node */
+__global__ void k_cd(dmod m, const unsigned char *kind, const double *f,
+		     double *u, double *v, double a1, double a2, double dt,
+		     red *part)
+{
+	red r;
+	red_init(r);
+	r.mx = 0;
+	for (int a = blockIdx.x * blockDim.x + threadIdx.x; a < m.n;
+	     a += gridDim.x * blockDim.x) {
+		if (kind[a] != TLED_FREE)
+			continue;
+		double im = 1 / m.mass[a], v2 = 0;
+		for (int i = 0; i < 3; i++) {
+			double vi = a1 * v[3 * a + i] - a2 * f[3 * a + i] * im;
+			v[3 * a + i] = vi;
+			u[3 * a + i] += dt * vi;
+			v2 += vi * vi;
+		}
+		r.s0 += 0.5 * m.mass[a] * v2;
+		if (!isfinite(v2) || !isfinite(u[3 * a]) ||
+		    !isfinite(u[3 * a + 1]) || !isfinite(u[3 * a + 2])) {
+			if (a < r.first)
+				r.first = a;
+		} else if (v2 > r.mx) {
+			r.mx = v2;
+			r.imx = a;
+		}
+	}
+	red_block(r, part);
+}
+
+__global__ void k_rayleigh(dmod m, const unsigned char *dkind, const double *v,
+			   const double *f, const double *fprev, double dt,
+			   red *part)
+{
+	red r;
+	red_init(r);
+	for (int a = blockIdx.x * blockDim.x + threadIdx.x; a < m.n;
+	     a += gridDim.x * blockDim.x) {
+		if (dkind[a] != TLED_FREE)
+			continue;
+		for (int i = 0; i < 3; i++) {
+			double du = dt * v[3 * a + i];
+			r.s0 += du * (f[3 * a + i] - fprev[3 * a + i]);
+			r.s1 += m.mass[a] * du * du;
+		}
+	}
+	red_block(r, part);
+}
+
+__global__ void k_drive(dmod m, const unsigned char *kind, const double *ustart,
+			const double *target, const double *f, double *u,
+			double rr, red *part)
+{
+	red r;
+	red_init(r);
+	for (int a = blockIdx.x * blockDim.x + threadIdx.x; a < m.n;
+	     a += gridDim.x * blockDim.x) {
+		if (kind[a] != TLED_DRIVEN)
+			continue;
+		for (int i = 0; i < 3; i++) {
+			double nu = ustart[3 * a + i] +
+				    rr * (target[3 * a + i] - ustart[3 * a + i]);
+			r.s0 += f[3 * a + i] * (nu - u[3 * a + i]);
+			u[3 * a + i] = nu;
+		}
+	}
+	red_block(r, part);
+}
+
+__global__ void k_grow(int nip, const double *g0, const double *g1, double rr,
+		       double *ipg)
+{
+	int p = blockIdx.x * blockDim.x + threadIdx.x;
+	if (p < nip)
+		ipg[p] = g0[p] + rr * (g1[p] - g0[p]);
+}
+
+/* nearest brain-boundary node to y on its uniform grid: the traversal and
+ * tie rule of tled_grid_knn with k = 1 (lib/tled/tled_model.c) */
+__device__ int d_knn1(const dmod &m, const double y[3])
+{
+	int c0[3];
+	for (int c = 0; c < 3; c++) {
+		double f = floor((y[c] - m.blo[c]) / m.bcell);
+		if (f < 0)
+			f = 0;
+		if (f > m.bnc[c] - 1)
+			f = m.bnc[c] - 1;
+		c0[c] = (int)f;
+	}
+	int best = -1;
+	double bd = 0;
+	int rmax = max(m.bnc[0], max(m.bnc[1], m.bnc[2]));
+	for (int r = 0; r <= rmax; r++) {
+		for (int dz = -r; dz <= r; dz++) {
+			int cz = c0[2] + dz;
+			if (cz < 0 || cz >= m.bnc[2])
+				continue;
+			for (int dy = -r; dy <= r; dy++) {
+				int cy = c0[1] + dy;
+				if (cy < 0 || cy >= m.bnc[1])
+					continue;
+				int edge = (abs(dz) == r || abs(dy) == r);
+				for (int dx = -r; dx <= r; dx += edge ? 1 : 2 * r) {
+					int cx = c0[0] + dx;
+					if (cx >= 0 && cx < m.bnc[0]) {
+						long long cc = ((long long)cz * m.bnc[1] + cy) *
+							       m.bnc[0] + cx;
+						for (int e = m.bstart[cc]; e < m.bstart[cc + 1]; e++) {
+							int i = m.bidx[e];
+							const double *q = m.bX + 3 * (size_t)i;
+							double d = (q[0] - y[0]) * (q[0] - y[0]) +
+								   (q[1] - y[1]) * (q[1] - y[1]) +
+								   (q[2] - y[2]) * (q[2] - y[2]);
+							if (best < 0 || d < bd) {
+								best = i;
+								bd = d;
+							}
+						}
+					}
+					if (r == 0)
+						break;
+				}
+			}
+		}
+		if (best >= 0) {
+			double lb = DBL_MAX;
+			for (int c = 0; c < 3; c++) {
+				if (c0[c] - r > 0)
+					lb = fmin(lb, y[c] - (m.blo[c] + (c0[c] - r) * m.bcell));
+				if (c0[c] + r < m.bnc[c] - 1)
+					lb = fmin(lb, m.blo[c] + (c0[c] + r + 1) * m.bcell - y[c]);
+			}
+			if (lb == DBL_MAX || (lb > 0 && lb * lb >= bd))
+				break;
+		}
+	}
+	return best;
+}
+
+__device__ double d_side(const dmod &m, const double y[3], int *b)
+{
+	*b = d_knn1(m, y);
+	if (*b < 0)
+		return -INFINITY;
+	const double *p = m.bX + 3 * (size_t)*b, *nn = m.bn + 3 * (size_t)*b;
+	return (y[0] - p[0]) * nn[0] + (y[1] - p[1]) * nn[1] +
+	       (y[2] - p[2]) * nn[2];
+}
+
+/* contact with the brain boundary, nodal driving (tled_contact with
+ * useh = 0): cnt = nodes in contact */
+__global__ void k_contact(dmod m, const unsigned char *kind, const double *s0,
+			  double *u, double *v, double stick_dt, red *part)
+{
+	red r;
+	red_init(r);
+	for (int a = blockIdx.x * blockDim.x + threadIdx.x; a < m.n;
+	     a += gridDim.x * blockDim.x) {
+		if (kind[a] == TLED_FIXED)
+			continue;
+		double y[3];
+		for (int i = 0; i < 3; i++)
+			y[i] = m.X[3 * (size_t)a + i] + u[3 * (size_t)a + i];
+		int b;
+		double side = d_side(m, y, &b);
+		if (b < 0 || !(side > s0[a]))
+			continue;
+		if (stick_dt > 0) {
+			for (int i = 0; i < 3; i++) {
+				double du = stick_dt * v[3 * a + i];
+				y[i] -= du;
+				u[3 * a + i] -= du;
+				v[3 * a + i] = 0;
+			}
+			side = d_side(m, y, &b);
+			if (b < 0 || !(side > s0[a])) {
+				r.cnt++;
+				continue;
+			}
+		}
+		const double *nb = m.bn + 3 * (size_t)b;
+		double pen = side - s0[a], vn = 0;
+		for (int i = 0; i < 3; i++) {
+			u[3 * a + i] -= pen * nb[i];
+			vn += v[3 * a + i] * nb[i];
+		}
+		if (vn > 0)
+			for (int i = 0; i < 3; i++)
+				v[3 * a + i] -= vn * nb[i];
+		r.cnt++;
+	}
+	red_block(r, part);
+}
+
+__global__ void k_vmax(dmod m, const unsigned char *dkind, const double *v,
+		       red *part)
+{
+	red r;
+	red_init(r);
+	r.mx = 0;
+	for (int a = blockIdx.x * blockDim.x + threadIdx.x; a < m.n;
+	     a += gridDim.x * blockDim.x)
+		if (dkind[a] == TLED_FREE) {
+			const double *va = v + 3 * (size_t)a;
+			double v2 = va[0] * va[0] + va[1] * va[1] + va[2] * va[2];
+			if (v2 > r.mx)
+				r.mx = v2;
+		}
+	red_block(r, part);
+}
+
+/* ------------------------------------------------------------ host side */
+
+struct tled_cuda {
+	int dev;
+	char name[256];
+	double mem_gib;
+	char err[512];
+	/* model (uploaded when m->gen changes) */
+	uint64_t gen;
+	dmod dm;
+	void *buf_model[16];
+	int nbuf_model;
+	/* state */
+	double *u, *v, *f, *fprev, *ustart, *target, *VP, *s0, *ipg, *ipg0,
+		*ipg1, *hu, *hf;
+	unsigned char *kind, *dkind, *ipact;
+	red *part, *res;
+	red *hres; /* pinned */
+	int nbl_n, nbl_ip;
+	int have_target, growing;
+	tled_solver_t *s;
+	tled_cuda_stats_t st;
+};
+
+static double now_ms(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+static int cerr(tled_cuda_t *c, cudaError_t e, const char *what)
+{
+	if (e == cudaSuccess)
+		return 0;
+	if (e == cudaErrorMemoryAllocation) {
+		size_t fr = 0, tot = 0;
+		cudaGetLastError();
+		cudaMemGetInfo(&fr, &tot);
+		snprintf(c->err, sizeof c->err, "out of device memory (%s): "
+			 "%.0f MiB free of %.0f MiB on %s; use fewer nodes "
+			 "(larger spacing) or plugin = tled_cpu", what,
+			 fr / 1048576.0, tot / 1048576.0, c->name);
+	} else {
+		snprintf(c->err, sizeof c->err, "CUDA error in %s: %s (%s)", what,
+			 cudaGetErrorString(e), cudaGetErrorName(e));
+	}
+	cudaGetLastError(); /* clear a non-sticky error */
+	return -1;
+}
+
+#define CK(c, call, what)                                                      \
+	do {                                                                   \
+		if (cerr((c), (call), (what)))                                 \
+			return -1;                                             \
+	} while (0)
+
+static int dalloc(tled_cuda_t *c, void **p, size_t bytes, const char *what)
+{
+	*p = NULL;
+	return cerr(c, cudaMalloc(p, bytes ? bytes : 8), what);
+}
+
+static void free_state(tled_cuda_t *c)
+{
+	void *bufs[] = { c->u, c->v, c->f, c->fprev, c->ustart, c->target,
+			 c->VP, c->s0, c->ipg, c->ipg0, c->ipg1, c->hu, c->hf,
+			 c->kind, c->dkind, c->ipact, c->part, c->res };
+	for (size_t i = 0; i < sizeof bufs / sizeof *bufs; i++)
+		if (bufs[i])
+			cudaFree(bufs[i]);
+	c->u = c->v = c->f = c->fprev = c->ustart = c->target = c->VP = c->s0 =
+		c->ipg = c->ipg0 = c->ipg1 = c->hu = c->hf = NULL;
+	c->kind = c->dkind = c->ipact = NULL;
+	c->part = c->res = NULL;
+	for (int i = 0; i < c->nbuf_model; i++)
+		cudaFree(c->buf_model[i]);
+	c->nbuf_model = 0;
+	c->gen = 0;
+}
+
+/* int64 index array -> device int32 */
+static int up_idx(tled_cuda_t *c, const int *&dst, const int64_t *src,
+		  int64_t n, const char *what)
+{
+	int *h = (int *)malloc((size_t)(n ? n : 1) * sizeof *h);
+	if (!h) {
+		snprintf(c->err, sizeof c->err, "out of host memory (%s)", what);
+		return -1;
+	}
+	for (int64_t i = 0; i < n; i++)
+		h[i] = (int)src[i];
+	void *d;
+	if (dalloc(c, &d, (size_t)n * sizeof(int), what)) {
+		free(h);
+		return -1;
+	}
+	c->buf_model[c->nbuf_model++] = d;
+	cudaError_t e = cudaMemcpy(d, h, (size_t)n * sizeof(int),
+				   cudaMemcpyHostToDevice);
+	free(h);
+	dst = (const int *)d;
+	return cerr(c, e, what);
+}
+
+static int up_dbl(tled_cuda_t *c, const double *&dst, const double *src,
+		  int64_t n, const char *what)
+{
+	void *d;
+	if (dalloc(c, &d, (size_t)n * sizeof(double), what))
+		return -1;
+	c->buf_model[c->nbuf_model++] = d;
+	dst = (const double *)d;
+	return cerr(c, cudaMemcpy(d, src, (size_t)n * sizeof(double),
+				  cudaMemcpyHostToDevice), what);
+}
+
+static int ensure_model(tled_cuda_t *c, const tled_model_t *m)
+{
+	if (c->gen == m->gen && c->gen)
+		return 0;
+	double t0 = now_ms();
+	free_state(c);
+	int64_t nent = m->ipptr[m->nip];
+	if (m->n >= INT_MAX / 3 || m->nip >= INT_MAX / 9 || nent >= INT_MAX / 3) {
+		snprintf(c->err, sizeof c->err, "model too large for 32-bit "
+			 "device indices (%lld nodes, %lld integration points, "
+			 "%lld support entries)", (long long)m->n,
+			 (long long)m->nip, (long long)nent);
+		return -1;
+	}
+	dmod &d = c->dm;
+	memset(&d, 0, sizeof d);
+	d.n = (int)m->n;
+	d.nip = (int)m->nip;
+	int32_t *mat = (int32_t *)m->ipmat;
+	if (up_idx(c, d.ipptr, m->ipptr, m->nip + 1, "ipptr") ||
+	    up_idx(c, d.ipnode, m->ipnode, nent, "ipnode") ||
+	    up_idx(c, d.nptr, m->nptr, m->n + 1, "nptr") ||
+	    up_idx(c, d.nent, m->nent, m->nptr[m->n], "nent") ||
+	    up_idx(c, d.entip, m->entip, nent, "entip") ||
+	    up_dbl(c, d.dN, m->dN, 3 * nent, "dN") ||
+	    up_dbl(c, d.ipV, m->ipV, m->nip, "ipV") ||
+	    up_dbl(c, d.mass, m->mass, m->n, "mass") ||
+	    up_dbl(c, d.X, m->X, 3 * m->n, "X"))
+		return -1;
+	{
+		void *p;
+		if (dalloc(c, &p, (size_t)m->nip * sizeof(int), "ipmat"))
+			return -1;
+		c->buf_model[c->nbuf_model++] = p;
+		CK(c, cudaMemcpy(p, mat, (size_t)m->nip * sizeof(int),
+				 cudaMemcpyHostToDevice), "ipmat");
+		d.ipmat = (const int *)p;
+	}
+	for (int i = 0; i < MAT_N; i++) {
+		d.mu[i] = m->mat[i].mu;
+		d.kappa[i] = m->mat[i].kappa;
+	}
+	d.nb = (int)m->nb;
+	if (m->nb > 0) {
+		const tled_grid_t *g = &m->bgrid;
+		int64_t ncell = (int64_t)g->nc[0] * g->nc[1] * g->nc[2];
+		if (up_dbl(c, d.bX, m->bX, 3 * m->nb, "boundary") ||
+		    up_dbl(c, d.bn, m->bn, 3 * m->nb, "normals") ||
+		    up_idx(c, d.bstart, g->start, ncell + 1, "boundary grid") ||
+		    up_idx(c, d.bidx, g->idx, g->n, "boundary grid"))
+			return -1;
+		for (int i = 0; i < 3; i++) {
+			d.blo[i] = g->lo[i];
+			d.bnc[i] = g->nc[i];
+		}
+		d.bcell = g->cell;
+	}
+	size_t n3 = (size_t)(3 * m->n);
+	void **pp[] = { (void **)&c->u, (void **)&c->v, (void **)&c->f,
+			(void **)&c->fprev, (void **)&c->ustart,
+			(void **)&c->target, (void **)&c->hu, (void **)&c->hf };
+	for (size_t i = 0; i < sizeof pp / sizeof *pp; i++)
+		if (dalloc(c, pp[i], n3 * sizeof(double), "state"))
+			return -1;
+	if (dalloc(c, (void **)&c->VP, (size_t)(9 * m->nip) * sizeof(double),
+		   "stresses") ||
+	    dalloc(c, (void **)&c->s0, (size_t)m->n * sizeof(double), "state") ||
+	    dalloc(c, (void **)&c->ipg, (size_t)m->nip * sizeof(double), "growth") ||
+	    dalloc(c, (void **)&c->ipg0, (size_t)m->nip * sizeof(double), "growth") ||
+	    dalloc(c, (void **)&c->ipg1, (size_t)m->nip * sizeof(double), "growth") ||
+	    dalloc(c, (void **)&c->kind, (size_t)m->n, "kinds") ||
+	    dalloc(c, (void **)&c->dkind, (size_t)m->n, "kinds") ||
+	    dalloc(c, (void **)&c->ipact, (size_t)m->nip, "active points") ||
+	    dalloc(c, (void **)&c->part, MAXBLK * sizeof(red), "reductions") ||
+	    dalloc(c, (void **)&c->res, sizeof(red), "reductions"))
+		return -1;
+	c->nbl_n = (int)((m->n + TPB - 1) / TPB);
+	c->nbl_ip = (int)((m->nip + TPB - 1) / TPB);
+	/* bytes the step kernels move per time step: stress reads the
+	 * support entries (ipnode 4 + dN 24 B) and u per entry, writes VP
+	 * (72 B per ip); the gather reads nent + entip (8 B), dN (24 B) and
+	 * VP (72 B) per entry and writes f; the update reads f, mass, kind and
+	 * reads and writes u, v (the minimum: each array touched once) */
+	c->st.bytes_per_step = (double)nent * (4 + 24 + 24) +
+			       (double)m->nip * (72 + 4 + 8 + 8 + 1) +
+			       (double)nent * (8 + 24 + 72) +
+			       (double)m->n * (24 + 24 + 48 + 48 + 8 + 1 + 8);
+	c->gen = m->gen;
+	c->st.upload_ms += now_ms() - t0;
+	return 0;
+}
+
+static int nblk(int nb)
+{
+	return nb < MAXBLK ? (nb > 0 ? nb : 1) : MAXBLK;
+}
+
+/* finish a reduction launched on nb blocks and copy the record to c->hres */
+static int fetch(tled_cuda_t *c, int nb, const char *what)
+{
+	k_red_final<<<1, TPB>>>(c->part, nb, c->res);
+	CK(c, cudaGetLastError(), what);
+	CK(c, cudaMemcpy(c->hres, c->res, sizeof(red), cudaMemcpyDeviceToHost),
+	   what);
+	return 0;
+}
+
+static int dev_forces(tled_cuda_t *c, const double *u, double *f,
+		      const unsigned char *ipact, const double *ipg,
+		      tled_force_info_t *fi)
+{
+	int nb = nblk(c->nbl_ip);
+	k_stress<<<nb, TPB>>>(c->dm, ipact, ipg, u, c->VP, c->part);
+	CK(c, cudaGetLastError(), "stresses");
+	k_gather<<<c->nbl_n > 0 ? c->nbl_n : 1, TPB>>>(c->dm, ipact, c->VP, f);
+	CK(c, cudaGetLastError(), "force gather");
+	if (fetch(c, nb, "stresses"))
+		return -1;
+	if (fi) {
+		const red &r = *c->hres;
+		fi->W = r.s0;
+		fi->Jmin = -r.mx;
+		fi->ip_jmin = r.imx;
+		fi->nbad = r.cnt;
+		fi->ip_bad = r.first == LLONG_MAX ? -1 : r.first;
+	}
+	return 0;
+}
+
+/* ---- the tled_ops_t members ---- */
+
+extern "C" {
+
+static const char *cu_strerror(void *ctx)
+{
+	return ((tled_cuda_t *)ctx)->err;
+}
+
+/* host-array forces (Lanczos, growth energy): u up, f down */
+static void cu_forces(void *ctx, const tled_model_t *m, const uint8_t *ipact,
+		      const double *u, double *VP, double *f,
+		      tled_force_info_t *info)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	size_t n3 = (size_t)(3 * m->n) * sizeof(double);
+	int bad = ensure_model(c, m) ||
+		  cerr(c, cudaMemcpy(c->hu, u, n3, cudaMemcpyHostToDevice), "forces") ||
+		  (ipact && cerr(c, cudaMemcpy(c->ipact, ipact, (size_t)m->nip,
+					       cudaMemcpyHostToDevice), "forces")) ||
+		  (m->ipg && cerr(c, cudaMemcpy(c->ipg, m->ipg, (size_t)m->nip * sizeof(double),
+						cudaMemcpyHostToDevice), "forces")) ||
+		  dev_forces(c, c->hu, c->hf, ipact ? c->ipact : NULL,
+			     m->ipg ? c->ipg : NULL, info) ||
+		  cerr(c, cudaMemcpy(f, c->hf, n3, cudaMemcpyDeviceToHost), "forces");
+	if (bad) {
+		/* the caller's watchdog sees a non-finite stress */
+		for (int64_t i = 0; i < 3 * m->n; i++)
+			f[i] = NAN;
+		if (info) {
+			info->W = NAN;
+			info->Jmin = NAN;
+			info->nbad = 1;
+			info->ip_bad = 0;
+			info->ip_jmin = 0;
+		}
+	}
+}
+
+static void cu_cd_step(void *ctx, const tled_model_t *m, const uint8_t *kind,
+		       const double *f, double *u, double *v, double dt,
+		       double cc, tled_cd_info_t *info)
+{
+	/* host-array stepping is the reference's job (nothing calls it on
+	 * this backend: tled_relax steps through rstep) */
+	tled_cd_step_c(m, kind, f, u, v, dt, cc, info);
+}
+
+static int cu_begin(void *ctx, tled_solver_t *s, const double *target,
+		    const double *ipg_to)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	const tled_model_t *m = s->m;
+	size_t n3 = (size_t)(3 * m->n) * sizeof(double);
+	if (ensure_model(c, m))
+		return -1;
+	c->s = s;
+	CK(c, cudaMemcpy(c->u, s->u, n3, cudaMemcpyHostToDevice), "begin");
+	CK(c, cudaMemcpy(c->ustart, s->u, n3, cudaMemcpyHostToDevice), "begin");
+	CK(c, cudaMemset(c->v, 0, n3), "begin");
+	CK(c, cudaMemcpy(c->f, s->f, n3, cudaMemcpyHostToDevice), "begin");
+	CK(c, cudaMemcpy(c->fprev, s->fprev, n3, cudaMemcpyHostToDevice), "begin");
+	CK(c, cudaMemcpy(c->s0, s->s0, (size_t)m->n * sizeof(double),
+			 cudaMemcpyHostToDevice), "begin");
+	CK(c, cudaMemcpy(c->kind, m->kind, (size_t)m->n, cudaMemcpyHostToDevice),
+	   "begin");
+	CK(c, cudaMemcpy(c->dkind, s->dkind, (size_t)m->n, cudaMemcpyHostToDevice),
+	   "begin");
+	CK(c, cudaMemcpy(c->ipact, s->ipact, (size_t)m->nip,
+			 cudaMemcpyHostToDevice), "begin");
+	c->have_target = target != NULL;
+	if (target)
+		CK(c, cudaMemcpy(c->target, target, n3, cudaMemcpyHostToDevice),
+		   "begin");
+	c->growing = m->ipg != NULL;
+	if (m->ipg) {
+		size_t b = (size_t)m->nip * sizeof(double);
+		CK(c, cudaMemcpy(c->ipg, m->ipg, b, cudaMemcpyHostToDevice), "begin");
+		CK(c, cudaMemcpy(c->ipg0, m->ipg, b, cudaMemcpyHostToDevice), "begin");
+		CK(c, cudaMemcpy(c->ipg1, ipg_to ? ipg_to : m->ipg, b,
+				 cudaMemcpyHostToDevice), "begin");
+	}
+	return 0;
+}
+
+static int cu_drive(void *ctx, double r, double *wext)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	if (!c->have_target)
+		return 0;
+	int nb = nblk(c->nbl_n);
+	k_drive<<<nb, TPB>>>(c->dm, c->kind, c->ustart, c->target, c->f, c->u, r,
+			     c->part);
+	CK(c, cudaGetLastError(), "drive");
+	if (fetch(c, nb, "drive"))
+		return -1;
+	*wext += c->hres->s0;
+	return 0;
+}
+
+static int cu_grow(void *ctx, double r)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	if (!c->growing)
+		return 0;
+	k_grow<<<c->nbl_ip > 0 ? c->nbl_ip : 1, TPB>>>(c->dm.nip, c->ipg0,
+						      c->ipg1, r, c->ipg);
+	CK(c, cudaGetLastError(), "growth");
+	return 0;
+}
+
+static int cu_rforces(void *ctx, tled_force_info_t *fi)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	double t0 = now_ms();
+	int rc = dev_forces(c, c->u, c->f, c->ipact, c->growing ? c->ipg : NULL,
+			    fi);
+	c->st.step_ms += now_ms() - t0;
+	return rc;
+}
+
+static int cu_rayleigh(void *ctx, double dt, double *num, double *den)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	double t0 = now_ms();
+	int nb = nblk(c->nbl_n);
+	k_rayleigh<<<nb, TPB>>>(c->dm, c->dkind, c->v, c->f, c->fprev, dt,
+				c->part);
+	CK(c, cudaGetLastError(), "damping");
+	if (fetch(c, nb, "damping"))
+		return -1;
+	*num = c->hres->s0;
+	*den = c->hres->s1;
+	c->st.step_ms += now_ms() - t0;
+	return 0;
+}
+
+static int cu_rstep(void *ctx, double dt, double cdamp, tled_cd_info_t *ci)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	double t0 = now_ms();
+	double a1 = (2 - cdamp * dt) / (2 + cdamp * dt), a2 = 2 * dt / (2 + cdamp * dt);
+	int nb = nblk(c->nbl_n);
+	k_cd<<<nb, TPB>>>(c->dm, c->dkind, c->f, c->u, c->v, a1, a2, dt, c->part);
+	CK(c, cudaGetLastError(), "update");
+	if (fetch(c, nb, "update"))
+		return -1;
+	const red &r = *c->hres;
+	ci->ke = r.s0;
+	ci->vmax = sqrt(r.mx > 0 ? r.mx : 0);
+	ci->node_vmax = r.imx;
+	ci->node_nan = r.first == LLONG_MAX ? -1 : r.first;
+	c->st.steps++;
+	c->st.step_ms += now_ms() - t0;
+	return 0;
+}
+
+static int cu_rcontact(void *ctx, double stick_dt, int64_t *count, double *vmax)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	*count = 0;
+	if (c->dm.nb == 0)
+		return 0;
+	double t0 = now_ms();
+	int nb = nblk(c->nbl_n);
+	k_contact<<<nb, TPB>>>(c->dm, c->dkind, c->s0, c->u, c->v, stick_dt,
+			       c->part);
+	CK(c, cudaGetLastError(), "contact");
+	if (fetch(c, nb, "contact"))
+		return -1;
+	*count = c->hres->cnt;
+	if (*count > 0) {
+		k_vmax<<<nb, TPB>>>(c->dm, c->dkind, c->v, c->part);
+		CK(c, cudaGetLastError(), "contact");
+		if (fetch(c, nb, "contact"))
+			return -1;
+		*vmax = sqrt(c->hres->mx > 0 ? c->hres->mx : 0);
+	}
+	c->st.step_ms += now_ms() - t0;
+	return 0;
+}
+
+static int cu_swap(void *ctx)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	double *t = c->f;
+	c->f = c->fprev;
+	c->fprev = t;
+	return 0;
+}
+
+static int cu_end(void *ctx, tled_solver_t *s)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	const tled_model_t *m = s->m;
+	size_t n3 = (size_t)(3 * m->n) * sizeof(double);
+	if (!c->u || c->s != s)
+		return 0;
+	CK(c, cudaMemcpy(s->u, c->u, n3, cudaMemcpyDeviceToHost), "end");
+	CK(c, cudaMemcpy(s->v, c->v, n3, cudaMemcpyDeviceToHost), "end");
+	CK(c, cudaMemcpy(s->f, c->f, n3, cudaMemcpyDeviceToHost), "end");
+	if (c->growing && m->ipg)
+		CK(c, cudaMemcpy(m->ipg, c->ipg, (size_t)m->nip * sizeof(double),
+				 cudaMemcpyDeviceToHost), "end");
+	return 0;
+}
+
+static int cu_push(void *ctx, tled_solver_t *s)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	size_t n3 = (size_t)(3 * s->m->n) * sizeof(double);
+	CK(c, cudaMemcpy(c->u, s->u, n3, cudaMemcpyHostToDevice), "push");
+	CK(c, cudaMemcpy(c->v, s->v, n3, cudaMemcpyHostToDevice), "push");
+	return 0;
+}
+
+tled_cuda_t *tled_cuda_open(int device, char *err, size_t errsize)
+{
+	int nd = 0;
+	cudaError_t e = cudaGetDeviceCount(&nd);
+	if (e != cudaSuccess || nd <= 0) {
+		snprintf(err, errsize, "no CUDA device (%s): run the stage with "
+			 "plugin = tled_cpu", e != cudaSuccess
+				 ? cudaGetErrorString(e) : "0 devices");
+		cudaGetLastError();
+		return NULL;
+	}
+	if (device < 0 || device >= nd) {
+		snprintf(err, errsize, "device %d does not exist (%d CUDA "
+			 "device%s: 0..%d)", device, nd, nd > 1 ? "s" : "", nd - 1);
+		return NULL;
+	}
+	tled_cuda_t *c = (tled_cuda_t *)calloc(1, sizeof *c);
+	if (!c) {
+		snprintf(err, errsize, "out of memory");
+		return NULL;
+	}
+	c->dev = device;
+	cudaDeviceProp pr;
+	if ((e = cudaSetDevice(device)) != cudaSuccess ||
+	    (e = cudaGetDeviceProperties(&pr, device)) != cudaSuccess ||
+	    (e = cudaMallocHost((void **)&c->hres, sizeof(red))) != cudaSuccess) {
+		snprintf(err, errsize, "CUDA device %d: %s", device,
+			 cudaGetErrorString(e));
+		cudaGetLastError();
+		free(c);
+		return NULL;
+	}
+	snprintf(c->name, sizeof c->name, "%s", pr.name);
+	c->mem_gib = pr.totalGlobalMem / 1073741824.0;
+	return c;
+}
+
+void tled_cuda_close(tled_cuda_t **pc)
+{
+	if (!pc || !*pc)
+		return;
+	tled_cuda_t *c = *pc;
+	cudaSetDevice(c->dev);
+	free_state(c);
+	if (c->hres)
+		cudaFreeHost(c->hres);
+	free(c);
+	*pc = NULL;
+}
+
+const char *tled_cuda_name(const tled_cuda_t *c)
+{
+	return c->name;
+}
+
+double tled_cuda_mem_gib(const tled_cuda_t *c)
+{
+	return c->mem_gib;
+}
+
+void tled_cuda_get_stats(const tled_cuda_t *c, tled_cuda_stats_t *st)
+{
+	*st = c->st;
+}
+
+void tled_cuda_ops(tled_cuda_t *c, tled_ops_t *ops)
+{
+	memset(ops, 0, sizeof *ops);
+	ops->name = "cuda";
+	ops->ctx = c;
+	ops->forces = cu_forces;
+	ops->cd_step = cu_cd_step;
+	ops->begin = cu_begin;
+	ops->drive = cu_drive;
+	ops->grow = cu_grow;
+	ops->rforces = cu_rforces;
+	ops->rayleigh = cu_rayleigh;
+	ops->rstep = cu_rstep;
+	ops->rcontact = cu_rcontact;
+	ops->swap = cu_swap;
+	ops->end = cu_end;
+	ops->push = cu_push;
+	ops->strerror = cu_strerror;
+}
+
+} /* extern "C" */
