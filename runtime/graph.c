@@ -6,6 +6,9 @@
 #include <math.h>
 #include <pthread.h>
 #include <stdarg.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -1547,12 +1550,15 @@ static int run_pass(graph_t *g, const run_opts_t *o, char *err,
 		    size_t errsize)
 {
 	runner_t r = { .g = g, .o = o };
+	/* the threads the stages share: OMP_NUM_THREADS when set, else the
+	 * cores (omp_get_max_threads); split over --jobs.  (Counting the
+	 * cores alone ignored OMP_NUM_THREADS: tled_cpu ran 16 threads when
+	 * told 1, 2026-11-25.) */
 	int nthreads_total = 1;
 #ifdef _OPENMP
-	{
-		long nc = sysconf(_SC_NPROCESSORS_ONLN);
-		nthreads_total = nc > 0 ? (int)nc : 1;
-	}
+	nthreads_total = omp_get_max_threads();
+	if (nthreads_total < 1)
+		nthreads_total = 1;
 #endif
 	int per = nthreads_total / o->jobs;
 	for (int i = 0; i < g->nstages; i++) {

@@ -11,7 +11,8 @@ BUILD=${1:-build}
 OUT=${GPU_TEST_OUT:-out/gpu-test}
 export ARMSTG_PLUGIN_PATH="$BUILD/plugins" ARMSTG_REQUIRE_GPU=1
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-$(nproc)}
-commit=$(git rev-parse --short HEAD 2>/dev/null || cat .commit 2>/dev/null || echo unknown)
+commit=$(cat .commit 2>/dev/null || git rev-parse --short HEAD 2>/dev/null || echo unknown)
+mkdir -p "$OUT"
 gpu=$(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1)
 echo "gpu-test: $(date -u '+%Y-%m-%d %H:%M UTC'), commit $commit, ${gpu:-no nvidia-smi}, $(nproc) cores"
 rc=0

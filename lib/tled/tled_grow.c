@@ -551,9 +551,12 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 		}
 	}
 	H->log(st, LOG_INFO, "model: %lld nodes (%lld merged), %lld "
-	       "integration points, mean spacing %.2f mm, min %.3f mm",
+	       "integration points, %lld support entries, mean spacing %.2f "
+	       "mm, min %.3f mm, built in %.2f s (%s backend)",
 	       (long long)m.n, (long long)m.n_merged, (long long)m.nip,
-	       m.h_mean / TLED_MM, m.h_min / TLED_MM);
+	       (long long)m.ipptr[m.nip], m.h_mean / TLED_MM,
+	       m.h_min / TLED_MM, now_s() - t0,
+	       ops && ops->name ? ops->name : "cpu");
 	/* seed clusters much denser than the other nodes give one-sided,
 	 * extrapolating MLS supports around them: the first growth steps
 	 * then invert integration points (phantom seeds 2 and 5 with seeds

@@ -176,6 +176,8 @@ struct tled_solver {
 	int64_t nfree;
 	int64_t contacts;   /* projections in the last relax */
 	double *part;       /* chunked-reduction partials (tled_solve.c) */
+	int64_t *ctb;       /* contact: cached nearest boundary node per node */
+	double *ctq, *ctgap;/* its query point (3n, m) and distance gap (m) */
 };
 
 typedef struct tled_relax_stats {

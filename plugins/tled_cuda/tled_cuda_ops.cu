@@ -148,30 +148,46 @@ __device__ double d_neohooke(const double F[9], double mu, double kappa,
 }
 
 /* stresses: VP = V F S per active ip; s0 = strain energy, max of -J (min
- * det F) and where, count and first of inverted / non-finite points */
+ * det F) and where, count and first of inverted / non-finite points.
+ * One warp per integration point: the lanes share its support entries
+ * (F = I + sum_a u_a (x) dN_a, reduced across the warp), lane 0 evaluates
+ * the material.  (One thread per point left the H100 latency-bound: 12.6k
+ * nodes ran at 134 GB/s.) */
 __global__ void k_stress(dmod m, const unsigned char *ipact, const double *ipg,
 			 const double *u, double *VP, red *part)
 {
 	red r;
 	red_init(r);
-	for (int p = blockIdx.x * blockDim.x + threadIdx.x; p < m.nip;
-	     p += gridDim.x * blockDim.x) {
+	int lane = threadIdx.x & 31;
+	int warps = gridDim.x * (blockDim.x >> 5);
+	for (int p = (blockIdx.x * blockDim.x + threadIdx.x) >> 5; p < m.nip;
+	     p += warps) {
 		double *P = VP + 9 * (size_t)p;
 		if (ipact && !ipact[p]) {
-			for (int i = 0; i < 9; i++)
-				P[i] = 0;
+			if (lane < 9)
+				P[lane] = 0;
 			continue;
 		}
-		double F[9] = { 1, 0, 0, 0, 1, 0, 0, 0, 1 };
-		for (int e = m.ipptr[p]; e < m.ipptr[p + 1]; e++) {
+		double H[9] = { 0, 0, 0, 0, 0, 0, 0, 0, 0 };
+		for (int e = m.ipptr[p] + lane; e < m.ipptr[p + 1]; e += 32) {
 			const double *ua = u + 3 * (size_t)m.ipnode[e];
 			const double *d = m.dN + 3 * (size_t)e;
+			double d0 = d[0], d1 = d[1], d2 = d[2];
 			for (int i = 0; i < 3; i++) {
-				F[3 * i] += ua[i] * d[0];
-				F[3 * i + 1] += ua[i] * d[1];
-				F[3 * i + 2] += ua[i] * d[2];
+				double ui = ua[i];
+				H[3 * i] += ui * d0;
+				H[3 * i + 1] += ui * d1;
+				H[3 * i + 2] += ui * d2;
 			}
 		}
+		for (int k = 0; k < 9; k++)
+			for (int o = 16; o > 0; o >>= 1)
+				H[k] += __shfl_xor_sync(0xffffffffu, H[k], o);
+		if (lane)
+			continue;
+		double F[9];
+		for (int k = 0; k < 9; k++)
+			F[k] = H[k] + (k % 4 == 0 ? 1 : 0);
 		int mt = m.ipmat[p];
 		double S[9], W, J;
 		double g = ipg ? ipg[p] : 1, V = m.ipV[p];
@@ -204,27 +220,38 @@ __global__ void k_stress(dmod m, const unsigned char *ipact, const double *ipg,
 	red_block(r, part);
 }
 
-/* f_a = sum over a's support entries of VP_ip dN_a(ip): the same CSR order
- * as tled_gather_c, no atomics */
+/* f_a = sum over a's support entries of VP_ip dN_a(ip): the node->entry
+ * CSR of tled_gather_c, no atomics; one warp per node, lanes over its
+ * entries, reduced across the warp (a deterministic order) */
 __global__ void k_gather(dmod m, const unsigned char *ipact, const double *VP,
 			 double *f)
 {
-	int a = blockIdx.x * blockDim.x + threadIdx.x;
-	if (a >= m.n)
-		return;
-	double s0 = 0, s1 = 0, s2 = 0;
-	for (int t = m.nptr[a]; t < m.nptr[a + 1]; t++) {
-		int e = m.nent[t], p = m.entip[e];
-		if (ipact && !ipact[p])
-			continue;
-		const double *P = VP + 9 * (size_t)p, *d = m.dN + 3 * (size_t)e;
-		s0 += P[0] * d[0] + P[1] * d[1] + P[2] * d[2];
-		s1 += P[3] * d[0] + P[4] * d[1] + P[5] * d[2];
-		s2 += P[6] * d[0] + P[7] * d[1] + P[8] * d[2];
+	int lane = threadIdx.x & 31;
+	int warps = gridDim.x * (blockDim.x >> 5);
+	for (int a = (blockIdx.x * blockDim.x + threadIdx.x) >> 5; a < m.n;
+	     a += warps) {
+		double s0 = 0, s1 = 0, s2 = 0;
+		for (int t = m.nptr[a] + lane; t < m.nptr[a + 1]; t += 32) {
+			int e = m.nent[t], p = m.entip[e];
+			if (ipact && !ipact[p])
+				continue;
+			const double *P = VP + 9 * (size_t)p, *d = m.dN + 3 * (size_t)e;
+			double d0 = d[0], d1 = d[1], d2 = d[2];
+			s0 += P[0] * d0 + P[1] * d1 + P[2] * d2;
+			s1 += P[3] * d0 + P[4] * d1 + P[5] * d2;
+			s2 += P[6] * d0 + P[7] * d1 + P[8] * d2;
+		}
+		for (int o = 16; o > 0; o >>= 1) {
+			s0 += __shfl_xor_sync(0xffffffffu, s0, o);
+			s1 += __shfl_xor_sync(0xffffffffu, s1, o);
+			s2 += __shfl_xor_sync(0xffffffffu, s2, o);
+		}
+		if (lane == 0) {
+			f[3 * a] = s0;
+			f[3 * a + 1] = s1;
+			f[3 * a + 2] = s2;
+		}
 	}
-	f[3 * a] = s0;
-	f[3 * a + 1] = s1;
-	f[3 * a + 2] = s2;
 }
 
 /* central differences with mass damping (tled_cd_step_c): s0 = kinetic
@@ -307,9 +334,10 @@ __global__ void k_grow(int nip, const double *g0, const double *g1, double rr,
 		ipg[p] = g0[p] + rr * (g1[p] - g0[p]);
 }
 
-/* nearest brain-boundary node to y on its uniform grid: the traversal and
- * tie rule of tled_grid_knn with k = 1 (lib/tled/tled_model.c) */
-__device__ int d_knn1(const dmod &m, const double y[3])
+/* the two nearest brain-boundary nodes to y on its uniform grid: the
+ * traversal, stopping rule and tie rule of tled_grid_knn with k = 2
+ * (lib/tled/tled_model.c); *gap = second - first distance (INF with one) */
+__device__ int d_knn2(const dmod &m, const double y[3], double *gap)
 {
 	int c0[3];
 	for (int c = 0; c < 3; c++) {
@@ -320,8 +348,8 @@ __device__ int d_knn1(const dmod &m, const double y[3])
 			f = m.bnc[c] - 1;
 		c0[c] = (int)f;
 	}
-	int best = -1;
-	double bd = 0;
+	int best = -1, cnt = 0;
+	double bd = 0, bd2 = 0;
 	int rmax = max(m.bnc[0], max(m.bnc[1], m.bnc[2]));
 	for (int r = 0; r <= rmax; r++) {
 		for (int dz = -r; dz <= r; dz++) {
@@ -344,9 +372,14 @@ __device__ int d_knn1(const dmod &m, const double y[3])
 							double d = (q[0] - y[0]) * (q[0] - y[0]) +
 								   (q[1] - y[1]) * (q[1] - y[1]) +
 								   (q[2] - y[2]) * (q[2] - y[2]);
-							if (best < 0 || d < bd) {
+							if (cnt == 0 || d < bd) {
+								bd2 = bd;
 								best = i;
 								bd = d;
+								cnt = cnt < 2 ? cnt + 1 : 2;
+							} else if (cnt == 1 || d < bd2) {
+								bd2 = d;
+								cnt = 2;
 							}
 						}
 					}
@@ -355,7 +388,7 @@ __device__ int d_knn1(const dmod &m, const double y[3])
 				}
 			}
 		}
-		if (best >= 0) {
+		if (cnt == 2) {
 			double lb = DBL_MAX;
 			for (int c = 0; c < 3; c++) {
 				if (c0[c] - r > 0)
@@ -363,16 +396,32 @@ __device__ int d_knn1(const dmod &m, const double y[3])
 				if (c0[c] + r < m.bnc[c] - 1)
 					lb = fmin(lb, m.blo[c] + (c0[c] + r + 1) * m.bcell - y[c]);
 			}
-			if (lb == DBL_MAX || (lb > 0 && lb * lb >= bd))
+			if (lb == DBL_MAX || (lb > 0 && lb * lb >= bd2))
 				break;
 		}
 	}
+	*gap = cnt == 2 ? sqrt(bd2) - sqrt(bd) : INFINITY;
 	return best;
 }
 
-__device__ double d_side(const dmod &m, const double y[3], int *b)
+/* side of y beyond the brain boundary for node a, with the per-node cache
+ * of lib/tled/tled_solve.c (side_cached): exact, a grid search only when
+ * the node has moved by half the gap since its last one */
+__device__ double d_side(const dmod &m, int a, const double y[3], int *b,
+			 int *ctb, double *ctq, double *ctgap)
 {
-	*b = d_knn1(m, y);
+	double *q = ctq + 3 * (size_t)a;
+	double dd = (y[0] - q[0]) * (y[0] - q[0]) + (y[1] - q[1]) * (y[1] - q[1]) +
+		    (y[2] - q[2]) * (y[2] - q[2]);
+	*b = ctb[a];
+	if (!(*b >= 0 && 4 * dd < ctgap[a] * ctgap[a])) {
+		double gap;
+		*b = d_knn2(m, y, &gap);
+		ctb[a] = *b;
+		ctgap[a] = gap;
+		for (int i = 0; i < 3; i++)
+			q[i] = y[i];
+	}
 	if (*b < 0)
 		return -INFINITY;
 	const double *p = m.bX + 3 * (size_t)*b, *nn = m.bn + 3 * (size_t)*b;
@@ -383,7 +432,8 @@ __device__ double d_side(const dmod &m, const double y[3], int *b)
 /* contact with the brain boundary, nodal driving (tled_contact with
  * useh = 0): cnt = nodes in contact */
 __global__ void k_contact(dmod m, const unsigned char *kind, const double *s0,
-			  double *u, double *v, double stick_dt, red *part)
+			  double *u, double *v, double stick_dt, int *ctb,
+			  double *ctq, double *ctgap, red *part)
 {
 	red r;
 	red_init(r);
@@ -395,7 +445,7 @@ __global__ void k_contact(dmod m, const unsigned char *kind, const double *s0,
 		for (int i = 0; i < 3; i++)
 			y[i] = m.X[3 * (size_t)a + i] + u[3 * (size_t)a + i];
 		int b;
-		double side = d_side(m, y, &b);
+		double side = d_side(m, a, y, &b, ctb, ctq, ctgap);
 		if (b < 0 || !(side > s0[a]))
 			continue;
 		if (stick_dt > 0) {
@@ -405,7 +455,7 @@ __global__ void k_contact(dmod m, const unsigned char *kind, const double *s0,
 				u[3 * a + i] -= du;
 				v[3 * a + i] = 0;
 			}
-			side = d_side(m, y, &b);
+			side = d_side(m, a, y, &b, ctb, ctq, ctgap);
 			if (b < 0 || !(side > s0[a])) {
 				r.cnt++;
 				continue;
@@ -458,6 +508,8 @@ struct tled_cuda {
 	double *u, *v, *f, *fprev, *ustart, *target, *VP, *s0, *ipg, *ipg0,
 		*ipg1, *hu, *hf;
 	unsigned char *kind, *dkind, *ipact;
+	int *ctb;            /* contact cache (d_side) */
+	double *ctq, *ctgap;
 	red *part, *res;
 	red *hres; /* pinned */
 	int nbl_n, nbl_ip;
@@ -509,7 +561,8 @@ static void free_state(tled_cuda_t *c)
 {
 	void *bufs[] = { c->u, c->v, c->f, c->fprev, c->ustart, c->target,
 			 c->VP, c->s0, c->ipg, c->ipg0, c->ipg1, c->hu, c->hf,
-			 c->kind, c->dkind, c->ipact, c->part, c->res };
+			 c->kind, c->dkind, c->ipact, c->part, c->res, c->ctb,
+			 c->ctq, c->ctgap };
 	for (size_t i = 0; i < sizeof bufs / sizeof *bufs; i++)
 		if (bufs[i])
 			cudaFree(bufs[i]);
@@ -517,6 +570,8 @@ static void free_state(tled_cuda_t *c)
 		c->ipg = c->ipg0 = c->ipg1 = c->hu = c->hf = NULL;
 	c->kind = c->dkind = c->ipact = NULL;
 	c->part = c->res = NULL;
+	c->ctb = NULL;
+	c->ctq = c->ctgap = NULL;
 	for (int i = 0; i < c->nbuf_model; i++)
 		cudaFree(c->buf_model[i]);
 	c->nbuf_model = 0;
@@ -633,8 +688,13 @@ static int ensure_model(tled_cuda_t *c, const tled_model_t *m)
 	    dalloc(c, (void **)&c->dkind, (size_t)m->n, "kinds") ||
 	    dalloc(c, (void **)&c->ipact, (size_t)m->nip, "active points") ||
 	    dalloc(c, (void **)&c->part, MAXBLK * sizeof(red), "reductions") ||
-	    dalloc(c, (void **)&c->res, sizeof(red), "reductions"))
+	    dalloc(c, (void **)&c->res, sizeof(red), "reductions") ||
+	    dalloc(c, (void **)&c->ctb, (size_t)m->n * sizeof(int), "contact") ||
+	    dalloc(c, (void **)&c->ctq, n3 * sizeof(double), "contact") ||
+	    dalloc(c, (void **)&c->ctgap, (size_t)m->n * sizeof(double), "contact"))
 		return -1;
+	CK(c, cudaMemset(c->ctb, 0xff, (size_t)m->n * sizeof(int)), "contact");
+	CK(c, cudaMemset(c->ctq, 0, n3 * sizeof(double)), "contact");
 	c->nbl_n = (int)((m->n + TPB - 1) / TPB);
 	c->nbl_ip = (int)((m->nip + TPB - 1) / TPB);
 	/* bytes the step kernels move per time step: stress reads the
@@ -670,10 +730,12 @@ static int dev_forces(tled_cuda_t *c, const double *u, double *f,
 		      const unsigned char *ipact, const double *ipg,
 		      tled_force_info_t *fi)
 {
-	int nb = nblk(c->nbl_ip);
+	/* one warp per point / node: TPB / 32 of them per block */
+	int nb = nblk((int)((c->dm.nip + TPB / 32 - 1) / (TPB / 32)));
 	k_stress<<<nb, TPB>>>(c->dm, ipact, ipg, u, c->VP, c->part);
 	CK(c, cudaGetLastError(), "stresses");
-	k_gather<<<c->nbl_n > 0 ? c->nbl_n : 1, TPB>>>(c->dm, ipact, c->VP, f);
+	int ng = (int)((c->dm.n + TPB / 32 - 1) / (TPB / 32));
+	k_gather<<<ng > 0 ? ng : 1, TPB>>>(c->dm, ipact, c->VP, f);
 	CK(c, cudaGetLastError(), "force gather");
 	if (fetch(c, nb, "stresses"))
 		return -1;
@@ -854,7 +916,7 @@ static int cu_rcontact(void *ctx, double stick_dt, int64_t *count, double *vmax)
 	double t0 = now_ms();
 	int nb = nblk(c->nbl_n);
 	k_contact<<<nb, TPB>>>(c->dm, c->dkind, c->s0, c->u, c->v, stick_dt,
-			       c->part);
+			       c->ctb, c->ctq, c->ctgap, c->part);
 	CK(c, cudaGetLastError(), "contact");
 	if (fetch(c, nb, "contact"))
 		return -1;

@@ -3,7 +3,8 @@
  * CPU/CUDA parity of the TLED solver: the same model relaxed from the same
  * state by the C reference (ops NULL) and by the CUDA backend.  The cavity
  * of lib/tled/tests/tled_cavity.h (a sphere with a driven inner surface
- * inside a fixed outer one), large strain (u(a) = 2 mm on a = 10 mm), with
+ * inside a fixed outer one), large strain (u(a) = 1 mm nodal, 2 mm
+ * collocated, on a = 10 mm), with
  * contact on, nodal driving and collocated driving.  Asserted: both converge
  * in iteration counts within 2 % of each other, and node displacements agree
  * to 1e-4 mm (max over nodes); the figures are printed for bench/tled.
@@ -21,7 +22,7 @@ static void relax_both(int ebc, int contact)
 	cavity_cfg_default(&c);
 	c.ebc = ebc;
 	c.h = 2.0;
-	c.ua = 2.0;
+	c.ua = ebc ? 2.0 : 1.0; /* nodal driving inverts near 2 mm here */
 	c.tol = 1e-4;
 	tled_model_t m;
 	char err[512];
