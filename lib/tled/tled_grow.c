@@ -324,6 +324,55 @@ static int cmp_layer(const void *a, const void *b)
  * mapping: cancelled, a time step above the critical one (bad parameter)
  * or a numerical failure (NaN, inversion, energy blow-up); a step that
  * did not converge is logged.  0, or the rc of H->fail. */
+/* Adaptive sub-steps: a growth step whose relaxation inverts an
+ * integration point (det F <= 0) is undone and replayed as two half steps
+ * (the driven nodes first to the midpoint of their move, then to the
+ * target), each half split again when it inverts, down to
+ * 1/2^TLED_SUBSTEP_DEPTH of the step.  An explicit step that carries the
+ * front too far in one ramp compresses the soft tissue ahead of it faster
+ * than dynamic relaxation spreads the load; smaller moves let it settle
+ * between them.  Nodal driving only (collocated conditions keep their own
+ * ramp). */
+#define TLED_SUBSTEP_DEPTH 4
+
+static int relax_sub(tled_solver_t *s, const tled_solver_opts_t *so,
+		     const double *tgt, const char *tag, tled_relax_stats_t *rs,
+		     char *err, size_t errsize, int depth, int *nsub)
+{
+	int r = tled_relax(s, so, tgt, tag, rs, err, errsize);
+	if (r != -1 || !tgt || s->m->ebc || depth >= TLED_SUBSTEP_DEPTH ||
+	    (!strstr(err, "inverted material") && !strstr(err, "non-finite")))
+		return r;
+	tled_model_t *m = s->m;
+	size_t n3 = (size_t)(3 * m->n);
+	double *u0 = malloc(n3 * sizeof *u0), *mid = malloc(n3 * sizeof *mid);
+	if (!u0 || !mid) {
+		free(u0);
+		free(mid);
+		return r;
+	}
+	/* tled_relax started from s->ustart: back there */
+	memcpy(u0, s->ustart, n3 * sizeof *u0);
+	memcpy(s->u, u0, n3 * sizeof *u0);
+	for (size_t i = 0; i < n3; i++)
+		mid[i] = u0[i] + 0.5 * (tgt[i] - u0[i]);
+	char tag2[96];
+	snprintf(tag2, sizeof tag2, "%s, half %d/2 (depth %d)", tag, 1, depth + 1);
+	tled_relax_stats_t r1;
+	(*nsub)++;
+	r = relax_sub(s, so, mid, tag2, &r1, err, errsize, depth + 1, nsub);
+	if (!r) {
+		snprintf(tag2, sizeof tag2, "%s, half %d/2 (depth %d)", tag, 2,
+			 depth + 1);
+		r = relax_sub(s, so, tgt, tag2, rs, err, errsize, depth + 1, nsub);
+		rs->iters += r1.iters;
+		rs->jmin = fmin(rs->jmin, r1.jmin);
+	}
+	free(u0);
+	free(mid);
+	return r;
+}
+
 static int relax_step(armstg_stage_t *st, tled_solver_t *s,
 		      const tled_solver_opts_t *so, const double *tgt,
 		      const char *tag, tled_relax_stats_t *rs, char *err,
@@ -331,14 +380,21 @@ static int relax_step(armstg_stage_t *st, tled_solver_t *s,
 {
 	const armstg_host_t *H = st->host;
 	memset(rs, 0, sizeof *rs);
-	int r = tled_relax(s, so, tgt, tag, rs, err, errsize);
+	int nsub = 0;
+	int r = relax_sub(s, so, tgt, tag, rs, err, errsize, 0, &nsub);
+	if (nsub > 0 && !r)
+		H->log(st, LOG_INFO, "%s: an integration point inverted; "
+		       "replayed in %d sub-steps (min det F %.3f)", tag,
+		       nsub + 1, rs->jmin);
 	if (r == -2)
 		return H->fail(st, ARMSTG_ECANCELLED, "%s", err);
 	if (r)
 		return H->fail(st, strstr(err, "above the critical")
 					   ? ARMSTG_EINVAL
 					   : ARMSTG_ENUMERIC,
-			       "%s", err);
+			       "%s%s", err, nsub ? " (also in adaptive "
+						   "sub-steps down to 1/16 of "
+						   "the growth step)" : "");
 	if (!rs->converged)
 		H->log(st, LOG_WARN, "%s: not converged after %d iterations "
 		       "(estimated error %.3g mm)", tag, rs->iters,
