@@ -212,4 +212,37 @@ typedef struct ph_elastic {
  * no convergence (u holds the last iterate). */
 int ph_elastic_solve(ph_elastic_t *E, double *u);
 
+/* ---- a real atlas as the anatomy (ph_real.c) ---- */
+#include <stddef.h>
+#include "armstg/msg.h"
+
+typedef struct ph_real_in {
+	const vol_t *t1;          /* atlas T1 */
+	const vol_t *tissues;     /* tissue labels */
+	const vol_t *structures;  /* structure labels, or NULL */
+	int csf, gm, wm;          /* their codes in tissues */
+	const char *ventricles;   /* lateral ventricle codes in structures */
+	const char *third;        /* third ventricle codes */
+} ph_real_in_t;
+
+/* canonical RAS grid of an axis-aligned isotropic volume; -1 with err */
+int ph_real_grid(const vol_t *v, ph_grid_t *G, char *err, size_t errsize);
+/* labels (PH_BG..PH_V3) and clean images on G (T1 from the atlas scaled
+ * to white matter 900, T1c from it, T2 and FLAIR from the labels); the
+ * ventricles' bounding box (world mm); 0, -1 (err) or -2 (memory) */
+int ph_real_atlas(const ph_real_in_t *in, const ph_grid_t *G, uint8_t *alab,
+		  float *clean[PH_NMOD], double vlo[3], double vhi[3],
+		  char *err, size_t errsize);
+/* tumour labels (ph_tumour_label) on G from a mask in world space (BraTS
+ * codes, or any positive value = core); *radius: the core's
+ * equal-volume radius (mm); 0 or -1 (err) */
+int ph_real_tumour(const vol_t *tum, const ph_grid_t *G, uint8_t *tmask,
+		   double *radius, char *err, size_t errsize);
+/* ph_tumour_sample for such a mask (nearest voxel of G) */
+void ph_real_tsample(const uint8_t *tmask, const ph_grid_t *G,
+		     const double x[3], ph_tsample_t *s);
+/* "a-b,c" code ranges */
+int ph_in_ranges(const char *s, long x);
+int ph_ranges_valid(const char *s);
+
 #endif

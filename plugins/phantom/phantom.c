@@ -64,6 +64,10 @@ typedef struct phantom_priv {
 	double bias;
 	int skull_stripped;
 	double solve_spacing;
+	/* a real atlas (inputs connected) */
+	int csf_label, gm_label, wm_label;
+	const char *ventricle_labels;
+	const char *third_ventricle_labels;
 } phantom_priv_t;
 
 #define OFF(f) offsetof(phantom_priv_t, f)
@@ -136,6 +140,41 @@ static const armstg_param_t params[] = {
 	{ "solve_spacing", PT_DOUBLE, "4", 1, 8, "mm",
 	  "node spacing of the deformation grid (elastic solve, velocities)",
 	  NULL, OFF(solve_spacing), 0 },
+	{ "csf_label", PT_INT, "1", 0, 65535, "",
+	  "real atlas: CSF code in atlas_tissues (SRI24 tissues: 1)", NULL,
+	  OFF(csf_label), 0 },
+	{ "gm_label", PT_INT, "2", 0, 65535, "",
+	  "real atlas: grey matter code in atlas_tissues (SRI24: 2)", NULL,
+	  OFF(gm_label), 0 },
+	{ "wm_label", PT_INT, "3", 0, 65535, "",
+	  "real atlas: white matter code in atlas_tissues (SRI24: 3)", NULL,
+	  OFF(wm_label), 0 },
+	{ "ventricle_labels", PT_STRING, "201-414", 0, 0, "",
+	  "real atlas: lateral ventricle codes in atlas_structures (SRI24 "
+	  "tzo116plus: 201-414)", NULL, OFF(ventricle_labels), 0 },
+	{ "third_ventricle_labels", PT_STRING, "491-556", 0, 0, "",
+	  "real atlas: third ventricle codes in atlas_structures (SRI24 "
+	  "tzo116plus: 491-556)", NULL, OFF(third_ventricle_labels), 0 },
+};
+
+/* A real atlas instead of the analytic one: connect atlas_t1 and
+ * atlas_tissues (and atlas_structures for the ventricles); a real tumour
+ * mask replaces the analytic tumour (tumour_radius, location, side,
+ * shift_*, lobulation, two_components are then unused). */
+enum { I_ATLAS_T1, I_TISSUES, I_STRUCTURES, I_TUMOUR, I_N };
+static const armstg_port_t inputs[] = {
+	{ "atlas_t1", MSG_VOLUME, 1,
+	  "real atlas T1 (with atlas_tissues: replaces the analytic atlas)" },
+	{ "atlas_tissues", MSG_VOLUME, 1,
+	  "real atlas tissue labels (csf_label, gm_label, wm_label; 0 "
+	  "outside), axis-aligned isotropic voxels: the phantom's grid" },
+	{ "atlas_structures", MSG_VOLUME, 1,
+	  "real atlas structure labels: the ventricles (ventricle_labels, "
+	  "third_ventricle_labels)" },
+	{ "tumour", MSG_VOLUME, 1,
+	  "real tumour in the patient, world space (BraTS codes 1, 3, 4 core, "
+	  "2 edema; other positive values core): replaces the analytic "
+	  "tumour; the mass effect grows it (needs atlas_tissues)" },
 };
 
 enum {
@@ -237,6 +276,11 @@ typedef struct gen {
 	float *bias;          /* coarse grid, PH_NMOD planes */
 	uint8_t *plab;        /* patient labels, canonical */
 	uint8_t *ptum;        /* tumour labels, canonical */
+	/* a real atlas (ph_real.c) */
+	int real;
+	uint8_t *tmask;       /* real tumour labels, canonical (NULL: none) */
+	double t_radius;      /* its core's equal-volume radius, mm */
+	double vlo[3], vhi[3];/* ventricles' bounding box, world mm */
 	/* figures */
 	int cg_iters, nsearch;
 	double cg_relres, vent_shift;
@@ -264,6 +308,23 @@ static inline int atlas_nn(const gen_t *g, const double a[3])
 			return 0;
 	}
 	return g->alab[(id[2] * g->G.n[1] + id[1]) * g->G.n[0] + id[0]];
+}
+
+/* structure label of the atlas at world a: analytic, or the real atlas's
+ * nearest voxel */
+static inline int label_at(const gen_t *g, const double a[3])
+{
+	return g->real ? atlas_nn(g, a) : ph_anat_label(&g->A, a);
+}
+
+/* the tumour at patient point x: analytic, or the real mask */
+static inline void tumour_at(const gen_t *g, const double x[3],
+			     ph_tsample_t *ts)
+{
+	if (g->real && g->tmask)
+		ph_real_tsample(g->tmask, &g->G, x, ts);
+	else
+		ph_tumour_sample(&g->T, x, ts);
 }
 
 /* mass, random and total displacement at world x (float-rounded, as
@@ -315,6 +376,22 @@ static void make_atlas(gen_t *g, vol_t *t1, vol_t *t2, vol_t *lab,
 	const int nx = G->n[0], ny = G->n[1], nz = G->n[2];
 	int flip[3];
 	orient_flips(g->P->atlas_orientation, flip);
+	float *T1 = t1->data, *T2 = t2->data;
+	uint8_t *L = lab->data, *M = mask->data;
+	if (g->real) {
+		/* labels and clean images came from the inputs (ph_real.c) */
+		for (int k = 0; k < nz; k++)
+			for (int j = 0; j < ny; j++)
+				for (int i = 0; i < nx; i++) {
+					int64_t e = ((int64_t)k * ny + j) * nx + i;
+					int64_t o = oidx(G, flip, i, j, k);
+					T1[o] = g->clean[PH_T1][e];
+					T2[o] = g->clean[PH_T2][e];
+					L[o] = g->alab[e];
+					M[o] = g->alab[e] != PH_BG;
+				}
+		return;
+	}
 #pragma omp parallel for schedule(dynamic, 1) num_threads(g->nt)
 	for (int k = 0; k < nz; k++)
 		for (int j = 0; j < ny; j++)
@@ -324,8 +401,6 @@ static void make_atlas(gen_t *g, vol_t *t1, vol_t *t2, vol_t *lab,
 				g->alab[((int64_t)k * ny + j) * nx + i] =
 					(uint8_t)ph_anat_label(&g->A, p);
 			}
-	float *T1 = t1->data, *T2 = t2->data;
-	uint8_t *L = lab->data, *M = mask->data;
 #pragma omp parallel for schedule(dynamic, 1) num_threads(g->nt)
 	for (int k = 0; k < nz; k++)
 		for (int j = 0; j < ny; j++)
@@ -462,7 +537,8 @@ static int make_random(gen_t *g)
 				ph_modes_eval3(&m, p, w);
 				for (int c = 0; c < 3; c++)
 					v[c * nv + e] = w[c];
-				if (ph_anat_depth(&g->A, p) > -10) {
+				if (g->real ? atlas_nn(g, p) != PH_BG
+					    : ph_anat_depth(&g->A, p) > -10) {
 					double s = sqrt(w[0] * w[0] +
 							w[1] * w[1] +
 							w[2] * w[2]);
@@ -520,8 +596,12 @@ static void init_blob(ph_blob_t *b, ph_rng_t *r, const double c[3],
 static void make_tumour(gen_t *g)
 {
 	const phantom_priv_t *P = g->P;
-	g->has_tumour = P->tumour_radius > 0;
 	memset(&g->T, 0, sizeof g->T);
+	if (g->real) {
+		g->has_tumour = g->tmask != NULL;
+		return;
+	}
+	g->has_tumour = P->tumour_radius > 0;
 	if (!g->has_tumour)
 		return;
 	const ph_anat_t *A = &g->A;
@@ -633,7 +713,7 @@ static int solve_mass(gen_t *g)
 				double x[3], a[3];
 				gworld(C, i, j, k, x);
 				healthy_to_atlas(g, x, a);
-				int l = ph_anat_label(&g->A, a);
+				int l = label_at(g, a);
 				fr[e] = l != PH_BG;
 				int soft = l == PH_CSF || l == PH_LV ||
 					   l == PH_V3;
@@ -655,11 +735,12 @@ static int solve_mass(gen_t *g)
 						x[c] = x0[c] + C->h *
 							(0.5 + sub8[s][c]);
 					ph_tsample_t ts;
-					ph_tumour_sample(&g->T, x, &ts);
+					tumour_at(g, x, &ts);
 					if (ts.t >= 1.0)
 						continue;
 					healthy_to_atlas(g, x, a);
-					in += ph_anat_inside(&g->A, a);
+					in += g->real ? atlas_nn(g, a) != PH_BG
+						      : ph_anat_inside(&g->A, a);
 				}
 				pc[((int64_t)k * (ny - 1) + j) * (nx - 1) +
 				   i] = (float)(-3.0 * Kt * in / 8.0);
@@ -735,8 +816,10 @@ static int search_scale(gen_t *g)
 	double margin = P->deform_mm * 1.5 + 2 * P->mass_effect + 3 * G->h;
 	int lo[3], hi[3];
 	for (int c = 0; c < 3; c++) {
-		double a = g->A.centre[c] + g->A.deep_lo[c] - margin;
-		double b = g->A.centre[c] + g->A.deep_hi[c] + margin;
+		double a = (g->real ? g->vlo[c] : g->A.centre[c] + g->A.deep_lo[c]) -
+			   margin;
+		double b = (g->real ? g->vhi[c] : g->A.centre[c] + g->A.deep_hi[c]) +
+			   margin;
 		lo[c] = (int)floor((a - G->o[c]) / G->h);
 		hi[c] = (int)ceil((b - G->o[c]) / G->h);
 		if (lo[c] < 0) lo[c] = 0;
@@ -757,7 +840,7 @@ static int search_scale(gen_t *g)
 				double x[3];
 				ph_tsample_t ts;
 				gworld(G, i, j, k, x);
-				ph_tumour_sample(&g->T, x, &ts);
+				tumour_at(g, x, &ts);
 				if (ts.t < 1.0)
 					continue;
 				cd.e[cd.n++] = ((int64_t)k * G->n[1] + j) *
@@ -777,7 +860,7 @@ static int search_scale(gen_t *g)
 	}
 	/* the tumour boundary may not be pulled back by more than 85% of
 	 * its radius (the tumour grew from a seed, not from nothing) */
-	double s_max = 0.85 * P->tumour_radius / vmax;
+	double s_max = 0.85 * (g->real ? g->t_radius : P->tumour_radius) / vmax;
 	double want = P->mass_effect;
 	double s_lo = 0, s_hi = want / vmax, m_hi = 0, m_lo = 0;
 	for (;;) {
@@ -867,7 +950,7 @@ static int make_patient(gen_t *g, vol_t **o)
 				int tl = PH_T_NONE;
 				if (g->has_tumour && l != PH_BG) {
 					ph_tsample_t ts;
-					ph_tumour_sample(&g->T, x, &ts);
+					tumour_at(g, x, &ts);
 					if (ts.t < 1.0) {
 						tl = ts.sub;
 						l = PH_TUMOUR;
@@ -936,7 +1019,7 @@ static int make_patient(gen_t *g, vol_t **o)
 				if (g->has_tumour && (l == PH_TUMOUR ||
 						      tl == PH_T_EDEMA)) {
 					ph_tsample_t ts;
-					ph_tumour_sample(&g->T, x, &ts);
+					tumour_at(g, x, &ts);
 					double tex = 1.0 + 0.08 * ts.tex;
 					if (tl == PH_T_EDEMA) {
 						double w = 0.85 * ts.edema;
@@ -1073,6 +1156,53 @@ static int phantom_process(armstg_stage_t *st)
 		g->G.o[c] = centre[c] - 0.5 * (n[c] - 1) * h;
 	}
 	g->G.h = h;
+	/* a real atlas: its grid is the phantom's */
+	const vol_t *vt1 = (const vol_t *)st->in[I_ATLAS_T1],
+		    *vti = (const vol_t *)st->in[I_TISSUES],
+		    *vst = (const vol_t *)st->in[I_STRUCTURES],
+		    *vtu = (const vol_t *)st->in[I_TUMOUR];
+	if (vt1 || vti || vst || vtu) {
+		char err[512];
+		if (!vt1 || !vti) {
+			rc = H->fail(st, ARMSTG_EINVAL, "a real atlas needs both "
+				     "atlas_t1 and atlas_tissues (and "
+				     "atlas_structures for the ventricles); %s "
+				     "is not connected", vt1 ? "atlas_tissues"
+				     : "atlas_t1");
+			goto out;
+		}
+		if (!ph_ranges_valid(P->ventricle_labels) ||
+		    !ph_ranges_valid(P->third_ventricle_labels)) {
+			rc = H->fail(st, ARMSTG_EINVAL, "ventricle_labels '%s' or "
+				     "third_ventricle_labels '%s' is not a list "
+				     "of codes and ranges (e.g. 201-414)",
+				     P->ventricle_labels ? P->ventricle_labels : "",
+				     P->third_ventricle_labels
+					     ? P->third_ventricle_labels : "");
+			goto out;
+		}
+		if (vti->nc != 1 || vt1->nc != 1 || (vst && vst->nc != 1) ||
+		    (vtu && vtu->nc != 1)) {
+			rc = H->fail(st, ARMSTG_EINVAL, "the atlas and tumour "
+				     "inputs must be scalar volumes");
+			goto out;
+		}
+		if (ph_real_grid(vti, &g->G, err, sizeof err)) {
+			rc = H->fail(st, ARMSTG_EINVAL, "%s", err);
+			goto out;
+		}
+		g->real = 1;
+		for (int c = 0; c < 3; c++)
+			n[c] = g->G.n[c];
+		h = g->G.h;
+		if ((double)n[0] * n[1] * n[2] > 64e6 || n[0] < 4 || n[1] < 4 ||
+		    n[2] < 4) {
+			rc = H->fail(st, ARMSTG_EINVAL, "atlas_tissues grid "
+				     "%dx%dx%d: at least 4 and at most 64 million "
+				     "voxels", n[0], n[1], n[2]);
+			goto out;
+		}
+	}
 	double hc = P->solve_spacing;
 	for (int c = 0; c < 3; c++) {
 		double ext = (n[c] - 1) * h;
@@ -1093,6 +1223,29 @@ static int phantom_process(armstg_stage_t *st)
 	for (int m = 0; m < PH_NMOD; m++)
 		if (!(g->clean[m] = malloc(nv * sizeof *g->clean[m])))
 			goto nomem;
+	if (g->real) {
+		char err[512];
+		ph_real_in_t ri = { vt1, vti, vst, P->csf_label, P->gm_label,
+				    P->wm_label, P->ventricle_labels,
+				    P->third_ventricle_labels };
+		int r = ph_real_atlas(&ri, &g->G, g->alab, g->clean, g->vlo,
+				      g->vhi, err, sizeof err);
+		if (r == -2)
+			goto nomem;
+		if (r) {
+			rc = H->fail(st, ARMSTG_EINVAL, "%s", err);
+			goto out;
+		}
+		if (vtu) {
+			if (!(g->tmask = malloc(nv)))
+				goto nomem;
+			if (ph_real_tumour(vtu, &g->G, g->tmask, &g->t_radius, err,
+					   sizeof err)) {
+				rc = H->fail(st, ARMSTG_EINVAL, "%s", err);
+				goto out;
+			}
+		}
+	}
 	double Aa[16], Ap[16];
 	orient_affine(&g->G, P->atlas_orientation, Aa);
 	orient_affine(&g->G, P->orientation, Ap);
@@ -1137,7 +1290,9 @@ static int phantom_process(armstg_stage_t *st)
 		if (!g->has_tumour) {
 			rc = H->fail(st, ARMSTG_EINVAL,
 				     "mass_effect %.3g mm needs a tumour "
-				     "(tumour_radius is 0)", P->mass_effect);
+				     "(%s)", P->mass_effect, g->real ?
+				     "connect the tumour input" :
+				     "tumour_radius is 0");
 			goto out;
 		}
 		t = now_s();
@@ -1259,6 +1414,7 @@ out:
 	free(g->alab);
 	free(g->plab);
 	free(g->ptum);
+	free(g->tmask);
 	free(g->bias);
 	for (int m = 0; m < PH_NMOD; m++)
 		free(g->clean[m]);
@@ -1275,6 +1431,7 @@ static const armstg_plugin_t phantom_desc = {
 		       "linear-elastic tumour mass effect",
 	.version = "1.0.0",
 	.license = "MIT",
+	ARMSTG_INPUTS(inputs),
 	ARMSTG_OUTPUTS(outputs),
 	ARMSTG_PARAMS(params),
 	.priv_size = sizeof(phantom_priv_t),

@@ -107,8 +107,9 @@ int main(int argc, char **argv)
 							 ? "brats1mm" : p->def);
 	}
 	msg_t *out[32] = { 0 };
+	const msg_t *in[8] = { 0 }; /* the optional real-atlas inputs: none */
 	armstg_stage_t st = { .host = &H, .plugin = d, .name = "phantom",
-			      .priv = priv, .out = out };
+			      .priv = priv, .in = in, .out = out };
 	struct timespec a, b;
 	clock_gettime(CLOCK_MONOTONIC, &a);
 	int rc = d->process(&st);

@@ -33,12 +33,15 @@ static const vol_t *V(const ph_t *p, int port)
 	return (const vol_t *)p->m[port];
 }
 
-/* run the plugin with `threads` worker threads; 0 or the stage's code */
-static int gen_threads(ph_t *p, int threads, const char *const *params,
-		       char *err, size_t errsize)
+/* run the plugin with `threads` worker threads and inputs `in` (NULL:
+ * none, the analytic atlas); 0 or the stage's code */
+static int gen_in(ph_t *p, int threads, const char *const *params,
+		  const msg_t *const *in, char *err, size_t errsize)
 {
 	const armstg_plugin_t *d = TU_PLUGIN();
-	const msg_t *none[1] = { NULL };
+	const msg_t *none[8] = { NULL }; /* no real-atlas inputs */
+	if (in)
+		memcpy(none, in, sizeof(msg_t *) * (size_t)d->n_inputs);
 	char e[1024] = "";
 	memset(p, 0, sizeof *p);
 	/* the descriptor's port order is what this file assumes */
@@ -76,6 +79,12 @@ out:
 	if (err)
 		snprintf(err, errsize, "%s", e);
 	return rc;
+}
+
+static int gen_threads(ph_t *p, int threads, const char *const *params,
+		       char *err, size_t errsize)
+{
+	return gen_in(p, threads, params, NULL, err, errsize);
 }
 
 static void gen(ph_t *p, const char *const *params)
@@ -648,6 +657,179 @@ static void test_errors(void **state)
 	drop(&p);
 }
 
+/* ---- a real atlas and a real tumour (issue 25 point 5) ---- */
+
+static vol_t *read_data(const char *rel)
+{
+	vol_t *v = NULL;
+	char e[512];
+	const char *p = tu_data(rel);
+	if (!p || vol_read_nifti(p, &v, e, sizeof e)) {
+		print_message("skip: cannot read %s (%s)\n", rel, p ? e : "no data");
+		skip();
+	}
+	return v;
+}
+
+/* trilinear sample of scalar v at world point w (0 outside), as the
+ * phantom samples its clean atlas */
+static double tri(const vol_t *v, const double W[16], const double w[3])
+{
+	double c[3];
+	const int n[3] = { v->nx, v->ny, v->nz };
+	int i0[3];
+	double f[3];
+	for (int a = 0; a < 3; a++) {
+		c[a] = W[4 * a] * w[0] + W[4 * a + 1] * w[1] + W[4 * a + 2] * w[2] +
+		       W[4 * a + 3];
+		double fl = floor(c[a]);
+		i0[a] = (int)fl;
+		f[a] = c[a] - fl;
+	}
+	double s = 0;
+	for (int q = 0; q < 8; q++) {
+		int id[3];
+		double wt = 1;
+		for (int a = 0; a < 3; a++) {
+			int hi = (q >> a) & 1;
+			id[a] = i0[a] + hi;
+			wt *= hi ? f[a] : 1 - f[a];
+		}
+		if (wt == 0 || id[0] < 0 || id[1] < 0 || id[2] < 0 ||
+		    id[0] >= n[0] || id[1] >= n[1] || id[2] >= n[2])
+			continue;
+		s += wt * vol_get(v, ((int64_t)id[2] * n[1] + id[1]) * n[0] + id[0]);
+	}
+	return s;
+}
+
+/*
+ * SRI24 (T1, tissues, tzo116plus ventricles) as the atlas and BraTS 2013
+ * pat0001's manual tumour as the patient's tumour: its own elastic mass
+ * effect pushes the ventricles by exactly mass_effect (within 1 %), the
+ * fields stay invertible, the patient's tumour is the given one, and the
+ * patient T1 is the atlas T1 at x + u(x) (noise and bias off): the true
+ * field is the field of the images, on real anatomy.
+ */
+static void test_real_atlas(void **state)
+{
+	(void)state;
+	TU_NEED_DATA();
+	vol_t *t1 = read_data("sri24/spgr.nii.gz");
+	vol_t *ti = read_data("sri24/tissues.nii.gz");
+	vol_t *sl = read_data("sri24/tzo116plus.nii.gz");
+	vol_t *tu = read_data("brats2013/brats_2013_pat0001_1/OTMultiClass.nii.gz");
+	const msg_t *in[4] = { &t1->base, &ti->base, &sl->base, &tu->base };
+	const char *a[] = { "seed=1", "noise=0", "bias=0", "mass_effect=5",
+			    NULL };
+	ph_t p;
+	char err[1024];
+	int rc = gen_in(&p, 2, a, in, err, sizeof err);
+	if (rc)
+		print_message("phantom: %s\n", err);
+	assert_int_equal(rc, 0);
+	const vol_t *pt1 = V(&p, P_T1), *at1 = V(&p, P_ATLAS_T1),
+		    *u = V(&p, P_FIELD), *ptu = V(&p, P_TUMOUR),
+		    *pm = V(&p, P_MASK), *al = V(&p, P_ATLAS_LABELS);
+	assert_int_equal(pt1->nx, 240);
+	assert_int_equal(pt1->nz, 155);
+	double shift = info(&p, "ventricle_shift_mm");
+	double maxm = info(&p, "max_mass_mm");
+	double dj = info(&p, "min_detj_total");
+	print_message("SRI24 + pat0001 tumour: core %.1f ml, edema %.1f ml, "
+		      "ventricle shift %.3f mm, largest mass-effect push %.2f mm, "
+		      "min det J %.4f, %g CG iterations\n",
+		      info(&p, "necrosis_ml") + info(&p, "nonenhancing_ml") +
+			      info(&p, "enhancing_ml"),
+		      info(&p, "edema_ml"), shift, maxm, dj,
+		      info(&p, "cg_iterations"));
+	assert_true(shift >= 5 && shift <= 5.05);
+	assert_true(maxm > 5);
+	assert_true(dj > 0);
+	/* atlas labels: the SRI24 ventricles are there */
+	int64_t nlv = 0;
+	for (int64_t e = 0; e < vol_nvox(al); e++)
+		nlv += vol_get(al, e) == 4;
+	assert_true(nlv * 1e-3 > 5); /* ml: SRI24's lateral ventricles */
+	/* the patient's tumour is the given one (same world grid: BraTS and
+	 * the default patient orientation are both LPS) */
+	assert_true(vol_same_grid(ptu, tu, 1e-6));
+	int64_t core_in = 0, core_out = 0, miss = 0;
+	for (int64_t e = 0; e < vol_nvox(tu); e++) {
+		int c = (int)vol_get(tu, e), o = (int)vol_get(ptu, e);
+		int core = c == 1 || c == 3 || c == 4;
+		if (!core)
+			continue;
+		if (vol_get(pm, e) > 0) {
+			core_in++;
+			miss += o != c;
+		} else {
+			core_out++;
+		}
+	}
+	print_message("tumour core voxels %lld in the patient brain (%lld "
+		      "outside it), %lld relabelled\n", (long long)core_in,
+		      (long long)core_out, (long long)miss);
+	assert_true(core_in > 50000);
+	assert_int_equal(miss, 0);
+	/* patient T1 = atlas T1 at x + u(x), outside the tumour and edema */
+	double W[16];
+	{
+		const double *A = at1->affine;
+		/* the atlas affine is diagonal here (LAS): invert it */
+		memset(W, 0, sizeof W);
+		for (int c = 0; c < 3; c++) {
+			W[5 * c] = 1.0 / A[5 * c];
+			W[4 * c + 3] = -A[4 * c + 3] / A[5 * c];
+		}
+		W[15] = 1;
+	}
+	const int64_t nv = vol_nvox(pt1);
+	double dmax = 0, s2 = 0, r2 = 0;
+	int64_t cnt = 0;
+	for (int64_t e = 0; e < nv; e += 3) {
+		if (!(vol_get(pm, e) > 0) || vol_get(ptu, e) > 0)
+			continue;
+		int i = (int)(e % pt1->nx), j = (int)(e / pt1->nx % pt1->ny),
+		    k = (int)(e / ((int64_t)pt1->nx * pt1->ny));
+		double x[3], y[3];
+		vol_to_world(pt1, i, j, k, x);
+		for (int c = 0; c < 3; c++)
+			y[c] = x[c] + vol_get(u, e + c * nv);
+		double want = tri(at1, W, y), got = vol_get(pt1, e);
+		dmax = fmax(dmax, fabs(want - got));
+		s2 += (want - got) * (want - got);
+		r2 += got * got;
+		cnt++;
+	}
+	print_message("patient T1 vs atlas T1 at x + u(x) over %lld brain "
+		      "voxels: max |difference| %.3g (white matter 900)\n",
+		      (long long)cnt, dmax);
+	assert_true(cnt > 100000);
+	assert_true(dmax < 0.05);
+	drop(&p);
+	/* refused with a reason */
+	const msg_t *only_t1[4] = { &t1->base, NULL, NULL, NULL };
+	assert_int_equal(gen_in(&p, 1, a, only_t1, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "atlas_tissues"));
+	const msg_t *no_vent[4] = { &t1->base, &ti->base, NULL, &tu->base };
+	assert_int_equal(gen_in(&p, 1, a, no_vent, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "ventricle"));
+	vol_t *rot = vol_clone(ti);
+	rot->affine[1] = 0.3; /* a rotated grid */
+	const msg_t *rotated[4] = { &t1->base, &rot->base, &sl->base, NULL };
+	assert_int_equal(gen_in(&p, 1, a, rotated, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "world axes"));
+	msg_unref(&rot->base);
+	msg_unref(&t1->base);
+	msg_unref(&ti->base);
+	msg_unref(&sl->base);
+	msg_unref(&tu->base);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -660,6 +842,7 @@ int main(void)
 		cmocka_unit_test(test_noise_bias),
 		cmocka_unit_test(test_orientation),
 		cmocka_unit_test(test_errors),
+		cmocka_unit_test(test_real_atlas),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
