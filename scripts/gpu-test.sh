@@ -2,8 +2,18 @@
 # make gpu-test (or, on a GPU host with a carried build: sh scripts/gpu-test.sh
 # BUILD): the CUDA backend's tests with a GPU required (a skip is a failure),
 # then the demo phantom grown with tled_cpu and with tled_cuda (one push depth,
-# 6 mm) and compared: node displacements (target: max difference 1e-4 mm)
-# and the band error after registration (target: 1e-3 mm).  Prints the
+# 6 mm) and compared: the band error after registration as shipped (target:
+# 1e-3 mm), and the node displacements of the growth converged to
+# grow.tol = 1e-5 mm (target: max difference 1e-4 mm).  At the shipped
+# tol (1e-3 mm, an estimate of the distance to equilibrium) the two stop at
+# different iterations (their sums are reduced in another order) and the
+# sticky contact makes the end state depend on the path: 0.004-0.015 mm
+# apart (bench/tled/results.md); converged, they agree to round-off.
+# Both runs use --jobs 1 (every stage with all the cores): the model the
+# growth receives depends on the thread count of the stages before it (4 mm:
+# 1 293 453 / 458 / 467 support entries with 16 / 2 / 1 threads), and with
+# --jobs 2 the demo's band error moved between runs (1.27247-1.27256 mm);
+# bench/tled/results.md.  Prints the
 # machine, date and commit first; exits non-zero when a test fails or a
 # target is missed.
 set -u
@@ -26,7 +36,7 @@ for p in tled_cpu tled_cuda; do
     rm -rf "$OUT/$p"
     t0=$(date +%s.%N)
     if ! TLED=$p "$BUILD/armstg" run graphs/demo.ini --set tune.values=6 \
-            --out "$OUT/$p" --jobs 2 -q >"$OUT.$p.log" 2>&1; then
+            --out "$OUT/$p" --jobs 1 -q >"$OUT.$p.log" 2>&1; then
         echo "gpu-test: the demo with $p failed:"; tail -5 "$OUT.$p.log"
         exit 1
     fi
@@ -36,12 +46,19 @@ for p in tled_cpu tled_cuda; do
     echo "demo with $p: band error $(band "$OUT/$p/metrics.tsv") mm, growth ${g:-?} s, whole run $(echo "$t1 - $t0" | bc 2>/dev/null || echo '?') s"
 done
 d=$("$BUILD/tests/tools/ps_diff" "$OUT/tled_cpu/nodes.h5" "$OUT/tled_cuda/nodes.h5") || rc=1
-echo "nodes (cpu vs cuda): $d"
+echo "nodes at the shipped tol (cpu vs cuda): $d"
+for p in tled_cpu tled_cuda; do
+    TLED=$p "$BUILD/armstg" run graphs/demo.ini --target save_nodes \
+        --set tune.values=6 --set grow.tol=0.00001 --out "$OUT/tol5_$p" --jobs 1 -q \
+        >"$OUT.tol5_$p.log" 2>&1 || { echo "gpu-test: tol 1e-5 run with $p failed"; rc=1; }
+done
+d=$("$BUILD/tests/tools/ps_diff" "$OUT/tol5_tled_cpu/nodes.h5" "$OUT/tol5_tled_cuda/nodes.h5") || rc=1
+echo "nodes converged to 1e-5 mm (cpu vs cuda): $d"
 du=$(echo "$d" | sed -n 's/.*max_du=\([^ ]*\).*/\1/p')
 b0=$(band "$OUT/tled_cpu/metrics.tsv"); b1=$(band "$OUT/tled_cuda/metrics.tsv")
 ok=$(awk -v du="$du" -v b0="$b0" -v b1="$b1" 'BEGIN{d=b0-b1; if(d<0)d=-d;
     print (du != "" && du + 0 <= 1e-4 && d <= 1e-3) ? "yes" : "no"}')
-echo "parity on the demo phantom: max |du| = $du mm (target 1e-4), band error difference |$b0 - $b1| mm (target 1e-3): $ok"
+echo "parity on the demo phantom: max |du| = $du mm converged (target 1e-4), band error difference |$b0 - $b1| mm (target 1e-3): $ok"
 [ "$ok" = yes ] || rc=1
 [ $rc -eq 0 ] && echo "gpu-test: PASSED" || echo "gpu-test: FAILED"
 exit $rc
