@@ -586,6 +586,31 @@ static double tri_eig(const double *a, const double *b, int k, int which)
 	return 0.5 * (lo + hi);
 }
 
+/* Deterministic parallel dot product over 3n: partial sums per fixed chunk
+ * of 3 * 1024 entries, added in order (the same result on any thread
+ * count). */
+#define DOT_CHUNK 3072
+static double pdot(const tled_model_t *m, const double *a, const double *b,
+		   int64_t n3)
+{
+	int64_t nch = (n3 + DOT_CHUNK - 1) / DOT_CHUNK;
+	double part[256], sum = 0;
+	for (int64_t c0 = 0; c0 < nch; c0 += 256) {
+		int64_t c1 = c0 + 256 < nch ? c0 + 256 : nch;
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+		for (int64_t ch = c0; ch < c1; ch++) {
+			int64_t i1 = (ch + 1) * DOT_CHUNK < n3 ? (ch + 1) * DOT_CHUNK : n3;
+			double t = 0;
+			for (int64_t i = ch * DOT_CHUNK; i < i1; i++)
+				t += a[i] * b[i];
+			part[ch - c0] = t;
+		}
+		for (int64_t ch = c0; ch < c1; ch++)
+			sum += part[ch - c0];
+	}
+	return sum;
+}
+
 /* y = M^-1/2 K M^-1/2 x on free dofs (K by central differences of f) */
 static void op_apply(tled_solver_t *s, const tled_ops_t *ops, const double *x,
 		     double *y)
@@ -594,6 +619,8 @@ static void op_apply(tled_solver_t *s, const tled_ops_t *ops, const double *x,
 	int64_t n = m->n;
 	double *up = s->tmp2, *fp = s->fprev;
 	double xmax = 0;
+#pragma omp parallel for schedule(static) reduction(max : xmax) \
+	num_threads(m->nthreads)
 	for (int64_t a = 0; a < n; a++)
 		if (s->dkind[a] == TLED_FREE)
 			for (int i = 0; i < 3; i++)
@@ -605,6 +632,7 @@ static void op_apply(tled_solver_t *s, const tled_ops_t *ops, const double *x,
 	}
 	double eps = 1e-6 * m->h_mean / xmax;
 	for (int sgn = 0; sgn < 2; sgn++) {
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
 		for (int64_t a = 0; a < n; a++) {
 			double im = s->dkind[a] == TLED_FREE ? 1 / sqrt(m->mass[a]) : 0;
 			for (int i = 0; i < 3; i++)
@@ -613,6 +641,7 @@ static void op_apply(tled_solver_t *s, const tled_ops_t *ops, const double *x,
 		}
 		ops->forces(ops->ctx, m, s->ipact, up, s->VP, sgn ? fp : y, NULL);
 	}
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
 	for (int64_t a = 0; a < n; a++) {
 		double im = s->dkind[a] == TLED_FREE ? 1 / sqrt(m->mass[a]) : 0;
 		for (int i = 0; i < 3; i++)
@@ -684,16 +713,13 @@ int tled_solver_eigs(tled_solver_t *s, const tled_solver_opts_t *o,
 		op_apply(s, ops, v1, w);
 		if (m->ebc && s->nc > 0)
 			ebc_project_scaled(s, w);
-		double a = 0;
-		for (int64_t i = 0; i < n3; i++)
-			a += w[i] * v1[i];
+		double a = pdot(m, w, v1, n3);
 		al[k] = a;
-		double b = 0;
-		for (int64_t i = 0; i < n3; i++) {
-			w[i] -= a * v1[i] + be[k] * v0[i];
-			b += w[i] * w[i];
-		}
-		b = sqrt(b);
+		double bk = be[k];
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+		for (int64_t i = 0; i < n3; i++)
+			w[i] -= a * v1[i] + bk * v0[i];
+		double b = sqrt(pdot(m, w, w, n3));
 		top = tri_eig(al, be, k + 1, 1);
 		bot = tri_eig(al, be, k + 1, 0);
 		if (k >= 15 && fabs(top - prev) <= 1e-7 * fabs(top))
@@ -702,6 +728,7 @@ int tled_solver_eigs(tled_solver_t *s, const tled_solver_opts_t *o,
 		if (!(b > 1e-14 * fabs(top)))
 			break;
 		be[k + 1] = b;
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
 		for (int64_t i = 0; i < n3; i++) {
 			v0[i] = v1[i];
 			v1[i] = w[i] / b;
