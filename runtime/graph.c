@@ -107,6 +107,10 @@ struct graph {
 	g_node_t nodes[16];
 	int nnodes;
 	g_tune_t tune;
+	/* variables that win over the environment ("NAME=value"; a batch
+	 * case's row) */
+	const char *const *vars;
+	int nvars;
 	/* parse state */
 	int cur_kind;               /* 0 none, 1 graph, 2 stage, 3 node,
 				       4 tune */
@@ -165,6 +169,16 @@ static int is_name(const char *s)
 	return 1;
 }
 
+/* a variable: the graph's own (graph_load_vars), else the environment */
+static const char *lookup_var(const graph_t *g, const char *name)
+{
+	size_t n = strlen(name);
+	for (int i = 0; i < g->nvars; i++)
+		if (!strncmp(g->vars[i], name, n) && g->vars[i][n] == '=')
+			return g->vars[i] + n + 1;
+	return getenv(name);
+}
+
 /* Expand ${VAR} / ${VAR:-default} / $$.  0, or -1 with an error logged. */
 static int expand(graph_t *g, int line, const char *stage, const char *key,
 		  const char *in, char *out, size_t outsize)
@@ -220,7 +234,7 @@ static int expand(graph_t *g, int line, const char *stage, const char *key,
 					     "bad variable name '%s'", var);
 					return -1;
 				}
-			const char *val = getenv(var);
+			const char *val = lookup_var(g, var);
 			if (val && *val) {
 				add = val;
 			} else if (has_def) {
@@ -1141,11 +1155,20 @@ static void validate_tune(graph_t *g)
 graph_t *graph_load(const char *path, const char *const *sets, int nsets,
 		    char *err, size_t errsize)
 {
+	return graph_load_vars(path, sets, nsets, NULL, 0, err, errsize);
+}
+
+graph_t *graph_load_vars(const char *path, const char *const *sets, int nsets,
+			 const char *const *vars, int nvars, char *err,
+			 size_t errsize)
+{
 	graph_t *g = graph_alloc(path, err, errsize);
 	if (!g) {
 		snprintf(err, errsize, "%s: out of memory", path);
 		return NULL;
 	}
+	g->vars = vars;
+	g->nvars = nvars;
 	g->fp = fopen(path, "r");
 	if (!g->fp) {
 		gerr(g, 0, NULL, NULL, "cannot open: %s", strerror(errno));
@@ -1203,6 +1226,8 @@ graph_t *graph_load(const char *path, const char *const *sets, int nsets,
 		return NULL;
 	}
 	g->err = NULL;
+	g->vars = NULL; /* the caller's: used only while loading */
+	g->nvars = 0;
 	return g;
 }
 

@@ -55,6 +55,12 @@ struct remote_ctx;
  * NULL and err holds every error found, one per line. */
 graph_t *graph_load(const char *path, const char *const *sets, int nsets,
 		    char *err, size_t errsize);
+/* The same with variables that win over the environment in ${VAR}:
+ * "NAME=value" strings (a batch case's row), kept by the caller until
+ * graph_load_vars returns. */
+graph_t *graph_load_vars(const char *path, const char *const *sets, int nsets,
+			 const char *const *vars, int nvars, char *err,
+			 size_t errsize);
 /* Syntax-level parse of text only (no plugin loading): for fuzzing. */
 int graph_parse_string(const char *text, const char *fname, char *err,
 		       size_t errsize);

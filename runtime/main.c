@@ -7,6 +7,7 @@
  *   armstg check GRAPH [--set ...]...
  *   armstg worker [--bind EP] [--plugins DIR] [--keys DIR] ...  (worker.c)
  *   armstg keygen DIR NAME
+ *   armstg batch GRAPH --cases FILE --workers EP,... --out DIR  (batch.c)
  *   armstg plugins
  *   armstg describe PLUGIN
  *   armstg --help | --version
@@ -50,6 +51,9 @@ static void usage(FILE *f)
 "                          host this build's plugins for remote stages\n"
 "                          ([node] sections); 'armstg worker --help'\n"
 "  keygen DIR NAME         a CURVE key pair for workers and coordinators\n"
+"  batch GRAPH --cases FILE --workers EP,... --out DIR\n"
+"                          one graph over many cases, spread over workers;\n"
+"                          'armstg batch --help'\n"
 "  --help, --version\n"
 "\n"
 "exit codes: 0 ok, 1 a stage failed, 2 usage or invalid graph,\n"
@@ -312,6 +316,8 @@ int main(int argc, char **argv)
 		return worker_main(argc, argv);
 	if (!strcmp(cmd, "keygen"))
 		return keygen_main(argc, argv);
+	if (!strcmp(cmd, "batch"))
+		return batch_main(argc, argv);
 	if (!strcmp(cmd, "describe")) {
 		if (argc != 3) {
 			fprintf(stderr, "usage: armstg describe PLUGIN\n");
