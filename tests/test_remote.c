@@ -17,6 +17,12 @@
  *     worker, and is not retried on the fallback
  *   - a graph whose node is down fails after its time-out (1 s), naming the
  *     node and the endpoint
+ *   - CURVE: keys from `armstg keygen`; a worker started with --keys runs
+ *     the stage of a coordinator whose certificate is in its clients/
+ *     folder (the sum checked), and refuses, with a logged reason, a
+ *     coordinator without keys and one with an unknown key (each run fails
+ *     after its 1 s time-out); a worker will not bind off loopback without
+ *     --keys; the secret files are mode 0600
  *   - hand-made frames: not the protocol, a corrupt header, a path as
  *     plugin name, a truncated input, an absolute path parameter, an input
  *     over --max-message, a frame over ZeroMQ's hard cap: each refused (the
@@ -208,6 +214,10 @@ static void test_worker_killed_mid_stage(void **state)
 	const char *vv[] = { "-v", "-v", NULL };
 	assert_int_equal(dt_worker_start(&k1, "k1", vv), 0);
 	assert_int_equal(dt_worker_start(&k2, "k2", NULL), 0);
+	/* their ports may be ones that earlier tests' workers had, which
+	 * this process found dead: forget that */
+	remote_endpoint_set_dead(k1.ep, 0);
+	remote_endpoint_set_dead(k2.ep, 0);
 	setenv("ARMSTG_GPU_WORKER", k1.ep, 1);
 	setenv("ARMSTG_GPU_FALLBACK", k2.ep, 1);
 	setenv("ARMSTG_CPU_WORKER", k2.ep, 1);
@@ -566,11 +576,141 @@ static void test_bad_frames(void **state)
 	assert_int_equal(dt_log_count(w.log, "stopping:"), 1);
 }
 
+/* ------------------------------------------------------------------ */
+/* CURVE                                                                */
+
+static int run_cmd(const char *const *argv, const char *log)
+{
+	fflush(NULL);
+	pid_t pid = fork();
+	if (pid == 0) {
+		int fd = open(log, O_WRONLY | O_CREAT | O_APPEND, 0644);
+		if (fd >= 0) {
+			dup2(fd, 1);
+			dup2(fd, 2);
+		}
+		execv(argv[0], (char *const *)argv);
+		_exit(127);
+	}
+	int st = 0;
+	waitpid(pid, &st, 0);
+	return WIFEXITED(st) ? WEXITSTATUS(st) : 128;
+}
+
+static void keygen(const char *dir, const char *name, const char *log)
+{
+	char exe[512];
+	snprintf(exe, sizeof exe, "%s/armstg", tu_build_dir());
+	const char *argv[] = { exe, "keygen", dir, name, NULL };
+	assert_int_equal(run_cmd(argv, log), 0);
+	char sec[700];
+	struct stat st;
+	snprintf(sec, sizeof sec, "%s/%s.key_secret", dir, name);
+	assert_int_equal(stat(sec, &st), 0);
+	assert_int_equal(st.st_mode & 0777, 0600);
+	/* a second keygen never overwrites */
+	assert_int_equal(run_cmd(argv, log), 2);
+}
+
+static void copy_file(const char *from, const char *to)
+{
+	FILE *a = fopen(from, "rb"), *b = fopen(to, "wb");
+	assert_non_null(a);
+	assert_non_null(b);
+	int c;
+	while ((c = fgetc(a)) != EOF)
+		fputc(c, b);
+	fclose(a);
+	assert_int_equal(fclose(b), 0);
+}
+
+/* tp_gen (value 2.5) -> tp_add on node s (CURVE keys as given) -> file */
+static int curve_run(const char *ep, const char *skey, const char *ckey,
+		     const char *tag, char *err, size_t errsize)
+{
+	char g[600], text[4096], out[600];
+	snprintf(g, sizeof g, "%s/curve-%s.ini", tu_tmpdir(), tag);
+	int n = snprintf(text, sizeof text,
+			 "[stage gen]\nplugin = tp_gen\nvalue = 2.5\n"
+			 "[stage add]\nplugin = tp_add\na = gen.volume\n"
+			 "b = gen.volume\nnode = s\n"
+			 "[stage out]\nplugin = tp_sink\npath = sum.txt\n"
+			 "volume = add.sum\n"
+			 "[node s]\nendpoint = %s\ntimeout = 1\n", ep);
+	if (skey)
+		snprintf(text + n, sizeof text - (size_t)n,
+			 "server_key = %s\nclient_key = %s\n", skey, ckey);
+	write_text(g, text);
+	snprintf(out, sizeof out, "%s/curve-%s", tu_tmpdir(), tag);
+	return run_graph(g, NULL, 0, out, err, errsize);
+}
+
+static void test_curve(void **state)
+{
+	(void)state;
+	char wk[600], ck[600], xk[600], clients[700], log[600];
+	snprintf(wk, sizeof wk, "%s/wkeys", tu_tmpdir());
+	snprintf(ck, sizeof ck, "%s/ckeys", tu_tmpdir());
+	snprintf(xk, sizeof xk, "%s/intruder", tu_tmpdir());
+	snprintf(log, sizeof log, "%s/keygen.log", tu_tmpdir());
+	keygen(wk, "worker", log);
+	keygen(ck, "coordinator", log);
+	keygen(xk, "mallory", log);
+	snprintf(clients, sizeof clients, "%s/clients", wk);
+	assert_int_equal(mkdir(clients, 0700), 0);
+	char from[800], to[800];
+	snprintf(from, sizeof from, "%s/coordinator.key", ck);
+	snprintf(to, sizeof to, "%s/coordinator.key", clients);
+	copy_file(from, to);
+	/* off loopback without keys: refused */
+	char exe[512];
+	snprintf(exe, sizeof exe, "%s/armstg", tu_build_dir());
+	const char *argv[] = { exe, "worker", "--bind", "tcp://0.0.0.0:*", NULL };
+	assert_int_equal(run_cmd(argv, log), 2);
+	assert_int_equal(dt_log_count(log, "is off loopback: give --keys DIR"),
+			 1);
+
+	dt_worker_t w;
+	const char *extra[] = { "--keys", wk, NULL };
+	assert_int_equal(dt_worker_start(&w, "curve", extra), 0);
+	char skey[700], ckey[700], xkey[700], err[4096];
+	snprintf(skey, sizeof skey, "%s/worker.key", wk);
+	snprintf(ckey, sizeof ckey, "%s/coordinator.key", ck);
+	snprintf(xkey, sizeof xkey, "%s/mallory.key", xk);
+	/* the coordinator whose key the worker knows */
+	int rc = curve_run(w.ep, skey, ckey, "ok", err, sizeof err);
+	if (rc)
+		print_message("%s\n", err);
+	assert_int_equal(rc, 0);
+	char sum[700];
+	snprintf(sum, sizeof sum, "%s/curve-ok/sum.txt", tu_tmpdir());
+	assert_true(tu_read_num(sum) == 5.0); /* 2.5 + 2.5 */
+	assert_int_equal(dt_log_count(w.log, "stage 'add' (tp_add"), 1);
+	/* no keys at all */
+	double t0 = dt_now();
+	rc = curve_run(w.ep, NULL, NULL, "none", err, sizeof err);
+	print_message("without keys (%.1f s): %s\n", dt_now() - t0, err);
+	assert_int_equal(rc, ARMSTG_EIO);
+	assert_non_null(strstr(err, "no answer within 1 s"));
+	assert_true(dt_wait_log(w.log, "handshake failed", 5));
+	/* a key the worker does not know */
+	rc = curve_run(w.ep, skey, xkey, "intruder", err, sizeof err);
+	print_message("unknown key: %s\n", err);
+	assert_int_equal(rc, ARMSTG_EIO);
+	assert_non_null(strstr(err, "with our key in its clients folder"));
+	assert_true(dt_wait_log(w.log, "its CURVE key is not in", 5));
+	/* neither ran anything */
+	assert_int_equal(dt_log_count(w.log, "stage 'add' (tp_add"), 1);
+	assert_true(dt_worker_alive(&w));
+	assert_int_equal(dt_worker_stop(&w), 0);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_node_down),
 		cmocka_unit_test(test_bad_frames),
+		cmocka_unit_test(test_curve),
 		cmocka_unit_test(test_remote_sink_file),
 		cmocka_unit_test(test_remote_stage_error),
 		cmocka_unit_test(test_distributed_equals_local),
