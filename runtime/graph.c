@@ -23,6 +23,9 @@
 #define G_MAX_STAGES 256
 #define G_MAX_PORTS 32
 #define G_NAME 64
+/* longest line of a graph file, '\n' included (libinih's buffer, see
+ * ini_setup); values after ${VAR} expansion have the same limit */
+#define G_MAX_LINE 16384
 
 typedef struct g_kv {
 	char key[G_NAME];
@@ -111,13 +114,15 @@ struct graph {
 	 * case's row) */
 	const char *const *vars;
 	int nvars;
+	int plugin_failed;          /* a plugin could not be loaded */
+	int refused;                /* the last run stopped before any stage */
 	/* parse state */
 	int cur_kind;               /* 0 none, 1 graph, 2 stage, 3 node,
 				       4 tune */
 	int cur_index;
 	int lineno;
 	int cont;                   /* current raw line is a continuation */
-	int toolong;
+	int stop;                   /* a line was refused: no more keys */
 	FILE *fp;
 	const char *text;           /* string parsing */
 	size_t textpos;
@@ -133,27 +138,30 @@ static void gerr(graph_t *g, int line, const char *stage, const char *key,
 static void gerr(graph_t *g, int line, const char *stage, const char *key,
 		 const char *fmt, ...)
 {
-	char msg[1536], pre[512];
+	char msg[1536], pre[PATH_MAX + 256], all[sizeof pre + sizeof msg];
 	va_list ap;
 	va_start(ap, fmt);
 	vsnprintf(msg, sizeof msg, fmt, ap);
 	va_end(ap);
-	int n = line > 0 ? snprintf(pre, sizeof pre, "%s:%d: ", g->file, line)
-			 : snprintf(pre, sizeof pre, "%s: --set: ", g->file);
+	size_t n = 0;
+	if (line > 0)
+		n = str_addf(pre, sizeof pre, n, "%s:%d: ", g->file, line);
+	else
+		n = str_addf(pre, sizeof pre, n, "%s: --set: ", g->file);
 	if (stage)
-		n += snprintf(pre + n, sizeof pre - (size_t)n, "stage '%s': ",
-			      stage);
+		n = str_addf(pre, sizeof pre, n, "stage '%s': ", stage);
 	if (key)
-		snprintf(pre + n, sizeof pre - (size_t)n, "key '%s': ", key);
+		str_addf(pre, sizeof pre, n, "key '%s': ", key);
 	g->nerr++;
 	if (!g->err || g->errlen + 1 >= g->errsize)
 		return;
-	int w = snprintf(g->err + g->errlen, g->errsize - g->errlen, "%s%s%s",
-			 g->errlen ? "\n" : "", pre, msg);
-	if (w > 0)
-		g->errlen += (size_t)w;
-	if (g->errlen >= g->errsize)
-		g->errlen = g->errsize - 1;
+	/* the text may come from a garbage file: control bytes are shown
+	 * as \xNN, never sent raw to the terminal */
+	snprintf(all, sizeof all, "%s%s", pre, msg);
+	if (g->errlen)
+		g->err[g->errlen++] = '\n';
+	rt_escape_ctl(all, g->err + g->errlen, g->errsize - g->errlen);
+	g->errlen += strlen(g->err + g->errlen);
 }
 
 static int is_name(const char *s)
@@ -179,44 +187,61 @@ static const char *lookup_var(const graph_t *g, const char *name)
 	return getenv(name);
 }
 
-/* Expand ${VAR} / ${VAR:-default} / $$.  0, or -1 with an error logged. */
-static int expand(graph_t *g, int line, const char *stage, const char *key,
-		  const char *in, char *out, size_t outsize)
+/* The '}' that closes the '${' whose name starts at p (nested '${' count),
+ * or NULL when it is not closed. */
+static const char *var_end(const char *p)
 {
-	size_t o = 0;
-	for (const char *p = in; *p;) {
+	int depth = 1;
+	for (; *p; p++) {
+		if (p[0] == '$' && p[1] == '$') {
+			p++;
+		} else if (p[0] == '$' && p[1] == '{') {
+			depth++;
+			p++;
+		} else if (*p == '}' && --depth == 0) {
+			return p;
+		}
+	}
+	return NULL;
+}
+
+#define G_EXPAND_DEPTH 8
+
+/* Expand in[0..n) into out at *o: ${VAR}, ${VAR:-default} (the default is
+ * itself expanded, so defaults nest: ${A:-${B:-x}}, as in sh), $$.  0, or
+ * -1 with an error reported. */
+static int expand_n(graph_t *g, int line, const char *stage, const char *key,
+		    const char *in, size_t n, char *out, size_t *o,
+		    size_t outsize, int depth)
+{
+	const char *end_in = in + n;
+	if (depth > G_EXPAND_DEPTH) {
+		gerr(g, line, stage, key, "variables nested more than %d deep",
+		     G_EXPAND_DEPTH);
+		return -1;
+	}
+	for (const char *p = in; p < end_in;) {
 		const char *add = p;
 		size_t addn = 1;
-		char var[128], def[1024];
-		if (p[0] == '$' && p[1] == '$') {
+		if (p[0] == '$' && p + 1 < end_in && p[1] == '$') {
 			add = "$";
 			p += 2;
-		} else if (p[0] == '$' && p[1] == '{') {
-			const char *end = strchr(p + 2, '}');
-			if (!end) {
+		} else if (p[0] == '$' && p + 1 < end_in && p[1] == '{') {
+			const char *end = var_end(p + 2);
+			if (!end || end >= end_in) {
 				gerr(g, line, stage, key,
 				     "unterminated '${' in value");
 				return -1;
 			}
-			size_t n = (size_t)(end - (p + 2));
-			const char *colon = memchr(p + 2, ':', n);
-			size_t vn = colon ? (size_t)(colon - (p + 2)) : n;
-			int has_def = 0;
-			if (colon) {
-				if (colon[1] != '-') {
-					gerr(g, line, stage, key,
-					     "bad variable syntax '%.*s' (use "
-					     "${VAR} or ${VAR:-default})",
-					     (int)(end - p + 1), p);
-					return -1;
-				}
-				size_t dn = (size_t)(end - (colon + 2));
-				if (dn >= sizeof def)
-					dn = sizeof def - 1;
-				memcpy(def, colon + 2, dn);
-				def[dn] = 0;
-				has_def = 1;
+			size_t vn = strcspn(p + 2, ":}");
+			const char *colon = p + 2 + vn < end ? p + 2 + vn : NULL;
+			if (colon && colon[1] != '-') {
+				gerr(g, line, stage, key,
+				     "bad variable syntax '%.*s' (use ${VAR} or "
+				     "${VAR:-default})", (int)(end - p + 1), p);
+				return -1;
 			}
+			char var[128];
 			if (vn == 0 || vn >= sizeof var) {
 				gerr(g, line, stage, key,
 				     "bad variable name in '%.*s'",
@@ -235,37 +260,45 @@ static int expand(graph_t *g, int line, const char *stage, const char *key,
 					return -1;
 				}
 			const char *val = lookup_var(g, var);
+			p = end + 1;
 			if (val && *val) {
 				add = val;
-			} else if (has_def) {
-				add = def;
+				addn = strlen(val);
+			} else if (colon) {
+				/* only the default used is expanded (sh) */
+				if (expand_n(g, line, stage, key, colon + 2,
+					     (size_t)(end - colon - 2), out, o,
+					     outsize, depth + 1))
+					return -1;
+				continue;
 			} else {
 				gerr(g, line, stage, key,
 				     "variable '%s' is not set (give a default"
 				     " with ${%s:-value})", var, var);
 				return -1;
 			}
-			addn = strlen(add);
-			p = end + 1;
-			if (o + addn >= outsize)
-				goto toolong;
-			memcpy(out + o, add, addn);
-			o += addn;
-			continue;
 		} else {
 			p++;
 		}
-		if (o + addn >= outsize)
-			goto toolong;
-		memcpy(out + o, add, addn);
-		o += addn;
+		if (*o + addn >= outsize) {
+			gerr(g, line, stage, key, "value longer than %zu "
+			     "characters after expansion", outsize - 1);
+			return -1;
+		}
+		memcpy(out + *o, add, addn);
+		*o += addn;
 	}
-	out[o] = 0;
+	out[*o] = 0;
 	return 0;
-toolong:
-	gerr(g, line, stage, key, "value longer than %zu characters after "
-	     "expansion", outsize - 1);
-	return -1;
+}
+
+static int expand(graph_t *g, int line, const char *stage, const char *key,
+		  const char *in, char *out, size_t outsize)
+{
+	size_t o = 0;
+	out[0] = 0;
+	return expand_n(g, line, stage, key, in, strlen(in), out, &o, outsize,
+			0);
 }
 
 static g_stage_t *find_stage(graph_t *g, const char *name)
@@ -467,20 +500,39 @@ static void track_line(graph_t *g, const char *line)
 	if (*p == '[')
 		on_section(g, p);
 	size_t n = strlen(line);
-	if (n && line[n - 1] != '\n' && n >= INI_MAX_LINE - 1 && !g->toolong) {
-		g->toolong = 1;
+	if (n && line[n - 1] != '\n' && n >= G_MAX_LINE - 1 && !g->stop) {
+		g->stop = 1;
 		gerr(g, g->lineno, NULL, NULL,
-		     "line longer than %d characters", INI_MAX_LINE - 2);
+		     "line longer than %d characters (the limit of a graph "
+		     "line)", G_MAX_LINE - 3);
 	}
 }
 
+/* fgets that also sees NUL bytes: a graph file is text, and a NUL would
+ * silently cut a value short */
 static char *file_reader(char *str, int num, void *stream)
 {
 	graph_t *g = stream;
-	char *r = fgets(str, num, g->fp);
-	if (r)
-		track_line(g, r);
-	return r;
+	int i = 0, c = EOF, nul = 0;
+	while (i < num - 1 && (c = getc(g->fp)) != EOF) {
+		if (c == 0) {
+			nul = 1;
+			c = ' ';
+		}
+		str[i++] = (char)c;
+		if (c == '\n')
+			break;
+	}
+	if (!i)
+		return NULL;
+	str[i] = 0;
+	track_line(g, str);
+	if (nul && !g->stop) {
+		g->stop = 1; /* stop here: the rest of the line is suspect */
+		gerr(g, g->lineno, NULL, NULL, "NUL byte in the line: a graph "
+		     "file is text (is this the right file?)");
+	}
+	return str;
 }
 
 static char *string_reader(char *str, int num, void *stream)
@@ -506,9 +558,9 @@ static int handler(void *user, const char *section, const char *key,
 {
 	graph_t *g = user;
 	(void)section;
-	if (g->toolong)
+	if (g->stop)
 		return 1;
-	char val[4096];
+	char val[G_MAX_LINE];
 	const char *sname = g->cur_kind == 2 ? g->stages[g->cur_index].name
 					     : NULL;
 	if (g->cur_kind == 0) {
@@ -562,8 +614,22 @@ static int handler(void *user, const char *section, const char *key,
 	return 1;
 }
 
+/* libinih (Debian's build) reads lines into a fixed buffer of 200 bytes
+ * unless told otherwise through its run-time settings: a heap buffer of
+ * G_MAX_LINE bytes (a realistic path of 250 characters must fit). */
+static pthread_once_t ini_once = PTHREAD_ONCE_INIT;
+
+static void ini_setup(void)
+{
+	ini_use_stack = 0;
+	ini_allow_realloc = 0;
+	ini_initial_alloc = G_MAX_LINE;
+	ini_max_line = G_MAX_LINE;
+}
+
 static graph_t *graph_alloc(const char *fname, char *err, size_t errsize)
 {
+	pthread_once(&ini_once, ini_setup);
 	graph_t *g = calloc(1, sizeof *g);
 	if (!g)
 		return NULL;
@@ -582,7 +648,7 @@ static graph_t *graph_alloc(const char *fname, char *err, size_t errsize)
 
 static void parse_result(graph_t *g, int rc)
 {
-	if (rc > 0 && !g->toolong)
+	if (rc > 0 && !g->stop)
 		gerr(g, rc, NULL, NULL,
 		     "syntax error (expected '[section]', 'key = value' or "
 		     "a ';' comment)");
@@ -647,9 +713,11 @@ static void validate_stage(graph_t *g, g_stage_t *s)
 	char e[1024];
 	if (plugin_load(pk->val, &s->plug, e, sizeof e)) {
 		gerr(g, pk->line, s->name, "plugin", "%s", e);
+		g->plugin_failed = 1;
 		return;
 	}
 	s->loaded = 1;
+	int nerr0 = g->nerr;
 	const armstg_plugin_t *d = s->plug.desc;
 	s->st = stage_new(d, s->name);
 	if (!s->st) {
@@ -710,7 +778,9 @@ static void validate_stage(graph_t *g, g_stage_t *s)
 			}
 		}
 	}
-	if (stage_finish_params(s->st, e, sizeof e))
+	/* a required parameter whose value was just refused is not also
+	 * "not set" */
+	if (stage_finish_params(s->st, e, sizeof e) && g->nerr == nerr0)
 		gerr(g, s->line, s->name, NULL, "%s", e);
 	/* a remote stage's files come back under --out: no absolute path */
 	for (int i = 0; s->node >= 0 && i < s->nkv; i++) {
@@ -826,7 +896,7 @@ static void apply_sets(graph_t *g, const char *const *sets, int nsets)
 			     "'%s' must look like stage.key=value", a);
 			continue;
 		}
-		char sn[G_NAME], key[G_NAME], val[4096];
+		char sn[G_NAME], key[G_NAME], val[G_MAX_LINE];
 		size_t sl = (size_t)(dot - a), kl = (size_t)(eq - dot - 1);
 		if (sl >= G_NAME || kl >= G_NAME) {
 			gerr(g, 0, NULL, NULL, "'%s': name too long", a);
@@ -1152,16 +1222,154 @@ static void validate_tune(graph_t *g)
 	}
 }
 
+/* ---- the files a graph writes ---- */
+
+/* One output path a stage declares (PARAM_OUT_FILE / PARAM_OUT_DIR). */
+typedef struct g_out {
+	int stage, line;
+	const char *key, *value;
+	int dir;                    /* a folder (PARAM_OUT_DIR) */
+	char norm[PATH_MAX];        /* normalised (see collect_outputs) */
+} g_out_t;
+
+/* the runtime's own names in the output folder */
+static const char *const run_names[] = { "run.tsv", "tune.tsv",
+					 "run.failed.tsv", "tune.failed.tsv" };
+
+/* Every declared output path of the loaded stages (value given in the
+ * graph or the parameter's default).  outdir NULL: relative paths are
+ * normalised lexically (kept relative), absolute ones too; else both are
+ * resolved against the disk with relative ones under outdir.  Returns the
+ * count (*outs malloc'ed) or -1. */
+static int collect_outputs(graph_t *g, const char *outdir, g_out_t **outs)
+{
+	int n = 0, cap = 0;
+	g_out_t *o = NULL;
+	for (int i = 0; i < g->nstages; i++) {
+		g_stage_t *s = &g->stages[i];
+		if (!s->loaded)
+			continue;
+		const armstg_plugin_t *d = s->plug.desc;
+		for (int k = 0; k < d->n_params; k++) {
+			const armstg_param_t *p = &d->params[k];
+			if (p->type != PT_STRING ||
+			    !(p->flags & (PARAM_OUT_FILE | PARAM_OUT_DIR)))
+				continue;
+			g_kv_t *kv = find_kv(s, p->name);
+			const char *v = kv ? kv->val : p->def;
+			if (!v || !*v)
+				continue;
+			if (n == cap) {
+				g_out_t *no = realloc(o, (size_t)(cap = cap * 2 +
+							 16) * sizeof *no);
+				if (!no) {
+					free(o);
+					return -1;
+				}
+				o = no;
+			}
+			g_out_t *e = &o[n];
+			e->stage = i;
+			e->line = kv ? kv->line : s->line;
+			e->key = p->name;
+			e->value = v;
+			e->dir = !(p->flags & PARAM_OUT_FILE);
+			int bad = outdir ? path_resolve(v[0] == '/' ? NULL
+								    : outdir,
+							v, e->norm,
+							sizeof e->norm)
+					 : path_norm(v, e->norm, sizeof e->norm);
+			if (bad)
+				snprintf(e->norm, sizeof e->norm, "%s", v);
+			n++;
+		}
+	}
+	*outs = o;
+	return n;
+}
+
+/* a is b, or a folder above b */
+static int path_above(const char *a, const char *b)
+{
+	size_t n = strlen(a);
+	return !strncmp(a, b, n) && (b[n] == '/' || (n && a[n - 1] == '/'));
+}
+
+/* Two outputs that are one file (or a file where another needs a folder),
+ * and outputs named like the run table.  outdir: see collect_outputs; its
+ * errors are reported with gerr (line 0 of a --set reads "--set"). */
+static void check_outputs(graph_t *g, const char *outdir)
+{
+	g_out_t *o = NULL;
+	int n = collect_outputs(g, outdir, &o);
+	char own[ARMSTG_COUNT(run_names)][PATH_MAX];
+	for (int r = 0; r < ARMSTG_COUNT(run_names); r++)
+		if (!outdir || path_resolve(outdir, run_names[r], own[r],
+					    sizeof own[r]))
+			snprintf(own[r], sizeof own[r], "%s", run_names[r]);
+	for (int i = 0; i < n; i++) {
+		g_out_t *a = &o[i];
+		const char *sa = g->stages[a->stage].name;
+		int rel = a->value[0] != '/';
+		for (int r = 0; r < ARMSTG_COUNT(run_names); r++)
+			if ((outdir || rel) && !strcmp(a->norm, own[r]))
+				gerr(g, a->line, sa, a->key, "'%s' is the name "
+				     "of the run table in the output folder: "
+				     "choose another", a->value);
+		for (int j = 0; j < i; j++) {
+			g_out_t *b = &o[j];
+			/* without an output folder, a relative and an
+			 * absolute path cannot be compared */
+			if (!outdir && rel != (b->value[0] != '/'))
+				continue;
+			const char *sb = g->stages[b->stage].name;
+			if (!strcmp(a->norm, b->norm))
+				gerr(g, a->line, sa, a->key, "'%s' is also "
+				     "written by stage '%s' (key '%s'%s%.0d): "
+				     "two outputs cannot be one %s", a->value,
+				     sb, b->key, b->line ? ", line " : "",
+				     b->line, a->dir && b->dir ? "folder"
+							   : "file");
+			else if ((!b->dir && path_above(b->norm, a->norm)) ||
+				 (!a->dir && path_above(a->norm, b->norm)))
+				gerr(g, a->line, sa, a->key, "'%s' and the "
+				     "output '%s' of stage '%s' (key '%s') "
+				     "cannot both exist: one is a file, the "
+				     "other needs a folder of that name",
+				     a->value, b->value, sb, b->key);
+		}
+	}
+	free(o);
+}
+
 graph_t *graph_load(const char *path, const char *const *sets, int nsets,
 		    char *err, size_t errsize)
 {
-	return graph_load_vars(path, sets, nsets, NULL, 0, err, errsize);
+	return graph_load_full(path, sets, nsets, NULL, 0, NULL, err,
+			       errsize);
 }
 
 graph_t *graph_load_vars(const char *path, const char *const *sets, int nsets,
 			 const char *const *vars, int nvars, char *err,
 			 size_t errsize)
 {
+	return graph_load_full(path, sets, nsets, vars, nvars, NULL, err,
+			       errsize);
+}
+
+graph_t *graph_load_ex(const char *path, const char *const *sets, int nsets,
+		       int *plugin_failed, char *err, size_t errsize)
+{
+	return graph_load_full(path, sets, nsets, NULL, 0, plugin_failed, err,
+			       errsize);
+}
+
+graph_t *graph_load_full(const char *path, const char *const *sets,
+			 int nsets, const char *const *vars, int nvars,
+			 int *plugin_failed, char *err, size_t errsize)
+{
+	if (plugin_failed)
+		*plugin_failed = 0;
 	graph_t *g = graph_alloc(path, err, errsize);
 	if (!g) {
 		snprintf(err, errsize, "%s: out of memory", path);
@@ -1169,12 +1377,20 @@ graph_t *graph_load_vars(const char *path, const char *const *sets, int nsets,
 	}
 	g->vars = vars;
 	g->nvars = nvars;
+	struct stat sb;
 	g->fp = fopen(path, "r");
-	if (!g->fp) {
-		gerr(g, 0, NULL, NULL, "cannot open: %s", strerror(errno));
-		/* the --set prefix makes no sense here */
-		snprintf(err, errsize, "%s: cannot open: %s", path,
-			 strerror(errno));
+	if (!g->fp || (!fstat(fileno(g->fp), &sb) && S_ISDIR(sb.st_mode))) {
+		/* the --set prefix of gerr makes no sense here */
+		if (g->fp)
+			snprintf(err, errsize, "%s: is a folder, not a graph "
+				 "file", path);
+		else
+			snprintf(err, errsize, "%s: cannot open: %s", path,
+				 strerror(errno));
+		if (g->fp)
+			fclose(g->fp);
+		g->fp = NULL;
+		g->err = NULL;
 		graph_free(g);
 		return NULL;
 	}
@@ -1198,6 +1414,7 @@ graph_t *graph_load_vars(const char *path, const char *const *sets, int nsets,
 		if (g->stages[i].loaded)
 			resolve_conns(g, &g->stages[i]);
 	validate_tune(g);
+	check_outputs(g, NULL);
 	for (int i = 0; i < g->nnodes; i++) {
 		char e[2048];
 		if (remote_node_check(&g->nodes[i].rn, e, sizeof e))
@@ -1222,6 +1439,8 @@ graph_t *graph_load_vars(const char *path, const char *const *sets, int nsets,
 				     "unknown stage '%s'", t);
 	}
 	if (g->nerr) {
+		if (plugin_failed)
+			*plugin_failed = g->plugin_failed;
 		graph_free(g);
 		return NULL;
 	}
@@ -1451,23 +1670,17 @@ static const char *state_name(const g_stage_t *s)
 	}
 }
 
-/* run.tsv: the final run, one row per stage it needed (plus the stages a
- * tuning run needed only for its score, "tune-only"), a row "tune" with
- * the candidates' total wall time when a search ran, and the total. */
-static void write_run_table(graph_t *g, const run_opts_t *o, double total)
+/* The run table: the final run, one row per stage it needed (plus the
+ * stages a tuning run needed only for its score, "tune-only"), a row
+ * "tune" with the candidates' total wall time when a search ran, and the
+ * total.  Written to path (a temporary name); logged unless quiet. */
+static int write_run_table(graph_t *g, const run_opts_t *o, double total,
+			   const char *path)
 {
-	char path[PATH_MAX], tmp[PATH_MAX];
-	const char *dir = o->outdir && *o->outdir ? o->outdir : ".";
 	const g_tune_t *t = &g->tune;
-	snprintf(path, sizeof path, "%s/run.tsv", dir);
-	snprintf(tmp, sizeof tmp, "%s/.armstg-tmp-%ld-run.tsv", dir,
-		 (long)getpid());
-	FILE *f = fopen(tmp, "w");
-	if (!f) {
-		rt_log(NULL, LOG_WARN, "cannot write %s: %s", path,
-		       strerror(errno));
-		return;
-	}
+	FILE *f = fopen(path, "w");
+	if (!f)
+		return -1;
 	fprintf(f, "stage\tplugin\tstatus\twall_s\tpeak_rss_mib\t"
 		   "output_mib\n");
 	if (!o->quiet)
@@ -1499,22 +1712,19 @@ static void write_run_table(graph_t *g, const run_opts_t *o, double total)
 			       tw);
 	}
 	fprintf(f, "total\t-\t-\t%.3f\t%.1f\t-\n", total, peak_rss_mb());
-	if (fclose(f) || rename(tmp, path)) {
-		unlink(tmp);
-		rt_log(NULL, LOG_WARN, "cannot write %s", path);
+	if (fclose(f)) {
+		unlink(path);
+		return -1;
 	}
+	return 0;
 }
 
 /* tune.tsv: one row per candidate tried (value, score, wall_s, status,
- * chosen, error), written like run.tsv: a temporary name, then renamed. */
-static void write_tune_table(graph_t *g, const run_opts_t *o)
+ * chosen, error), written to path (a temporary name). */
+static int write_tune_table(graph_t *g, const char *path)
 {
 	const g_tune_t *t = &g->tune;
-	char path[PATH_MAX], tmp[PATH_MAX], e[1024];
-	const char *dir = o->outdir && *o->outdir ? o->outdir : ".";
-	snprintf(path, sizeof path, "%s/tune.tsv", dir);
-	snprintf(tmp, sizeof tmp, "%s/.armstg-tmp-%ld-tune.tsv", dir,
-		 (long)getpid());
+	char e[1024];
 	tab_t *tab = tab_new();
 	int bad = !tab || !tab_add_col(tab, "value", TAB_STR) ||
 		  !tab_add_col(tab, "score", TAB_NUM) ||
@@ -1533,38 +1743,13 @@ static void write_tune_table(graph_t *g, const run_opts_t *o)
 		      tab_set_num(tab, row, "chosen", k == t->best) ||
 		      (!r->ok && tab_set_str(tab, row, "error", r->err));
 	}
-	if (bad) {
-		rt_log(NULL, LOG_WARN, "cannot write %s: out of memory", path);
-	} else if (tab_write_file(tmp, tab, e, sizeof e)) {
+	if (!bad && tab_write_file(path, tab, e, sizeof e)) {
 		rt_log(NULL, LOG_WARN, "cannot write %s: %s", path, e);
-	} else if (rename(tmp, path)) {
-		rt_log(NULL, LOG_WARN, "cannot write %s: %s", path,
-		       strerror(errno));
-		unlink(tmp);
+		bad = 1;
 	}
 	if (tab)
 		msg_unref(&tab->base);
-}
-
-/* mkdir -p */
-static int mkdir_p(const char *dir)
-{
-	char buf[PATH_MAX];
-	if (snprintf(buf, sizeof buf, "%s", dir) >= (int)sizeof buf) {
-		errno = ENAMETOOLONG;
-		return -1;
-	}
-	for (char *p = buf + 1; *p; p++) {
-		if (*p != '/')
-			continue;
-		*p = 0;
-		if (mkdir(buf, 0777) && errno != EEXIST)
-			return -1;
-		*p = '/';
-	}
-	if (mkdir(buf, 0777) && errno != EEXIST)
-		return -1;
-	return 0;
+	return bad ? -1 : 0;
 }
 
 /* One pass of the scheduler over the stages marked needed.  A stage that
@@ -1905,19 +2090,166 @@ out:
 	return rc;
 }
 
+/* Everything checked before a stage runs: the targets, the output
+ * folder, the declared outputs (not twice the same file once relative and
+ * absolute paths are resolved; no folder in the way).  0, or -1 with err. */
+static int run_check(graph_t *g, const run_opts_t *o, char *err,
+		     size_t errsize)
+{
+	for (int k = 0; k < o->ntargets; k++)
+		if (!find_stage(g, o->targets[k])) {
+			snprintf(err, errsize, "unknown target stage '%s'",
+				 o->targets[k]);
+			return -1;
+		}
+	struct stat sb;
+	if (!*o->outdir) {
+		snprintf(err, errsize, "the output folder name is empty (give "
+			 "--out DIR; '.' for the current folder)");
+		return -1;
+	}
+	if (!stat(o->outdir, &sb) && !S_ISDIR(sb.st_mode)) {
+		snprintf(err, errsize, "output folder '%s' is a file, not a "
+			 "folder", o->outdir);
+		return -1;
+	}
+	g->err = err;
+	g->errsize = errsize;
+	g->errlen = 0;
+	err[0] = 0;
+	int nerr0 = g->nerr;
+	check_outputs(g, o->outdir);
+	g_out_t *outs = NULL;
+	int n = collect_outputs(g, o->outdir, &outs);
+	for (int i = 0; i < n; i++) {
+		g_stage_t *s = &g->stages[outs[i].stage];
+		if (s->needed && !outs[i].dir && !stat(outs[i].norm, &sb) &&
+		    S_ISDIR(sb.st_mode))
+			gerr(g, outs[i].line, s->name, outs[i].key,
+			     "'%s' is a folder on disk (%s): the output file "
+			     "cannot replace it", outs[i].value,
+			     outs[i].norm);
+	}
+	free(outs);
+	int bad = g->nerr != nerr0;
+	g->nerr = nerr0;
+	g->err = NULL;
+	return bad ? -1 : 0;
+}
+
+static int stop_requested(void *user)
+{
+	(void)user;
+	return rt_interrupted != 0;
+}
+
+/* The run's files and its tables, all or nothing (outdir_commit). */
+static int commit_run(graph_t *g, const run_opts_t *o, outdir_t *od,
+		      double total, char *err, size_t errsize)
+{
+	int n = 0, cap = 2, rc = 0;
+	for (int i = 0; i < g->nstages; i++)
+		if (g->stages[i].needed)
+			cap += stage_nfiles(g->stages[i].st);
+	const char **tmps = calloc((size_t)cap, sizeof *tmps);
+	const char **finals = calloc((size_t)cap, sizeof *finals);
+	char rt_tmp[PATH_MAX], rt_final[PATH_MAX];
+	char tt_tmp[PATH_MAX], tt_final[PATH_MAX];
+	if (!tmps || !finals) {
+		snprintf(err, errsize, "out of memory");
+		rc = ARMSTG_ENOMEM;
+		goto out;
+	}
+	for (int i = 0; i < g->nstages; i++) {
+		g_stage_t *s = &g->stages[i];
+		/* a stage run only for the tuning writes nothing */
+		for (int k = 0; s->needed && k < stage_nfiles(s->st); k++) {
+			tmps[n] = stage_file_tmp(s->st, k);
+			finals[n++] = stage_file_final(s->st, k);
+		}
+	}
+	snprintf(rt_tmp, sizeof rt_tmp, "%s/run.tsv", outdir_staging(od));
+	snprintf(rt_final, sizeof rt_final, "%s/run.tsv", o->outdir);
+	if (write_run_table(g, o, total, rt_tmp)) {
+		snprintf(err, errsize, "cannot write the run table '%s': %s",
+			 rt_tmp, strerror(errno));
+		rc = ARMSTG_EIO;
+		goto out;
+	}
+	tmps[n] = rt_tmp;
+	finals[n++] = rt_final;
+	if (g->tune.nrows) {
+		snprintf(tt_tmp, sizeof tt_tmp, "%s/tune.tsv",
+			 outdir_staging(od));
+		snprintf(tt_final, sizeof tt_final, "%s/tune.tsv", o->outdir);
+		if (write_tune_table(g, tt_tmp)) {
+			snprintf(err, errsize, "cannot write '%s'", tt_tmp);
+			rc = ARMSTG_EIO;
+			goto out;
+		}
+		tmps[n] = tt_tmp;
+		finals[n++] = tt_final;
+	}
+	char e[2048];
+	rc = outdir_commit(od, tmps, finals, n, stop_requested, NULL, e,
+			   sizeof e);
+	if (rc == ARMSTG_ECANCELLED) {
+		snprintf(err, errsize, "interrupted");
+	} else if (rc) {
+		snprintf(err, errsize, "cannot commit the outputs (none was "
+			 "written): %s", e);
+	} else {
+		for (int i = 0; i < n; i++)
+			rt_log(NULL, LOG_INFO, "wrote %s", finals[i]);
+		/* the tables of an earlier failed run are out of date */
+		char old[PATH_MAX];
+		snprintf(old, sizeof old, "%s/run.failed.tsv", o->outdir);
+		unlink(old);
+		snprintf(old, sizeof old, "%s/tune.failed.tsv", o->outdir);
+		unlink(old);
+	}
+out:
+	for (int i = 0; i < g->nstages; i++)
+		stage_forget_files(g->stages[i].st);
+	free(tmps);
+	free(finals);
+	return rc;
+}
+
+/* A failed run's tables, under names that say so: run.failed.tsv,
+ * tune.failed.tsv (written to a temporary name, then renamed). */
+static void write_failed_tables(graph_t *g, const run_opts_t *o,
+				outdir_t *od, double total)
+{
+	char tmp[PATH_MAX], path[PATH_MAX];
+	snprintf(tmp, sizeof tmp, "%s/run.failed.tsv", outdir_staging(od));
+	snprintf(path, sizeof path, "%s/run.failed.tsv", o->outdir);
+	if (write_run_table(g, o, total, tmp) || rename(tmp, path))
+		rt_log(NULL, LOG_WARN, "cannot write %s: %s", path,
+		       strerror(errno));
+	if (!g->tune.nrows)
+		return;
+	snprintf(tmp, sizeof tmp, "%s/tune.failed.tsv", outdir_staging(od));
+	snprintf(path, sizeof path, "%s/tune.failed.tsv", o->outdir);
+	if (write_tune_table(g, tmp) || rename(tmp, path))
+		rt_log(NULL, LOG_WARN, "cannot write %s", path);
+}
+
+int graph_run_refused(const graph_t *g)
+{
+	return g->refused;
+}
+
 int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize)
 {
 	run_opts_t opts = *o;
 	g_tune_t *t = &g->tune;
-	if (!opts.outdir || !*opts.outdir)
+	outdir_t *od = NULL;
+	g->refused = 1;
+	if (!opts.outdir)
 		opts.outdir = ".";
 	if (opts.jobs < 1)
 		opts.jobs = 1;
-	if (mkdir_p(opts.outdir)) {
-		snprintf(err, errsize, "cannot create output folder '%s': %s",
-			 opts.outdir, strerror(errno));
-		return ARMSTG_EIO;
-	}
 	/* which stages: explicit targets, [graph] targets, or all */
 	for (int i = 0; i < g->nstages; i++) {
 		g_stage_t *s = &g->stages[i];
@@ -1932,12 +2264,8 @@ int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize)
 	if (opts.ntargets > 0) {
 		for (int k = 0; k < opts.ntargets; k++) {
 			g_stage_t *s = find_stage(g, opts.targets[k]);
-			if (!s) {
-				snprintf(err, errsize, "unknown target stage "
-					 "'%s'", opts.targets[k]);
-				return ARMSTG_EINVAL;
-			}
-			mark_needed(g, (int)(s - g->stages));
+			if (s)
+				mark_needed(g, (int)(s - g->stages));
 		}
 	} else if (g->targets[0]) {
 		char buf[1024];
@@ -1949,6 +2277,16 @@ int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize)
 		for (int i = 0; i < g->nstages; i++)
 			mark_needed(g, i);
 	}
+	if (run_check(g, &opts, err, errsize))
+		return ARMSTG_EINVAL;
+	int rc = outdir_open(opts.outdir, g->file, &od, err, errsize);
+	if (rc)
+		return rc;
+	g->refused = 0;
+	for (int i = 0; i < g->nstages; i++) {
+		stage_set_outdir(g->stages[i].st, opts.outdir);
+		stage_set_staging(g->stages[i].st, outdir_staging(od));
+	}
 	int nrun = 0;
 	for (int i = 0; i < g->nstages; i++)
 		nrun += g->stages[i].needed;
@@ -1958,38 +2296,26 @@ int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize)
 	if (t->present && !t->search)
 		rt_log(NULL, LOG_INFO, "tune: %s", t->why);
 	double t0 = now_s();
-	int rc = t->search ? tune_run(g, &opts, err, errsize) : 0;
+	rc = t->search ? tune_run(g, &opts, err, errsize) : 0;
 	if (!rc)
 		rc = run_pass(g, &opts, err, errsize);
-	double total = now_s() - t0;
-	if (rc) {
-		for (int i = 0; i < g->nstages; i++)
-			stage_discard_files(g->stages[i].st);
-	} else {
-		char e[1024] = "";
-		for (int i = 0; i < g->nstages; i++) {
-			g_stage_t *s = &g->stages[i];
-			const char **paths;
-			int n = s->needed ? stage_pending_files(s->st, &paths)
-					  : 0;
-			for (int k = 0; k < n; k++)
-				rt_log(s->name, LOG_INFO, "wrote %s", paths[k]);
-			/* a stage run only for the tuning writes nothing */
-			if (!rc && s->needed &&
-			    stage_commit_files(s->st, e, sizeof e)) {
-				rc = ARMSTG_EIO;
-				snprintf(err, errsize, "%s", e);
-			}
-			stage_discard_files(s->st);
-		}
+	if (!rc && rt_interrupted) {
+		snprintf(err, errsize, "interrupted");
+		rc = ARMSTG_ECANCELLED;
 	}
 	for (int i = 0; i < g->nstages; i++) {
 		stage_fini(g->stages[i].st);
 		for (int o2 = 0; o2 < g->stages[i].plug.desc->n_outputs; o2++)
 			msg_unref(stage_take_output(g->stages[i].st, o2));
 	}
-	write_run_table(g, &opts, total);
-	if (t->nrows)
-		write_tune_table(g, &opts);
+	double total = now_s() - t0;
+	if (!rc)
+		rc = commit_run(g, &opts, od, total, err, errsize);
+	if (rc) {
+		for (int i = 0; i < g->nstages; i++)
+			stage_discard_files(g->stages[i].st);
+		write_failed_tables(g, &opts, od, total);
+	}
+	outdir_close(&od, rc != 0);
 	return rc;
 }

@@ -61,13 +61,22 @@ graph_t *graph_load(const char *path, const char *const *sets, int nsets,
 graph_t *graph_load_vars(const char *path, const char *const *sets, int nsets,
 			 const char *const *vars, int nvars, char *err,
 			 size_t errsize);
+/* graph_load, and *plugin_failed = 1 when a plugin named by the graph
+ * could not be loaded (unknown, not a shared object, refused descriptor):
+ * armstg exits 3 then, 2 for other errors. */
+graph_t *graph_load_ex(const char *path, const char *const *sets, int nsets,
+		       int *plugin_failed, char *err, size_t errsize);
+/* both: variables and the plugin flag */
+graph_t *graph_load_full(const char *path, const char *const *sets,
+			 int nsets, const char *const *vars, int nvars,
+			 int *plugin_failed, char *err, size_t errsize);
 /* Syntax-level parse of text only (no plugin loading): for fuzzing. */
 int graph_parse_string(const char *text, const char *fname, char *err,
 		       size_t errsize);
 void graph_free(graph_t *g);
 
 typedef struct run_opts {
-	const char *outdir;          /* NULL: "." */
+	const char *outdir;          /* NULL: "."; "" is refused */
 	int jobs;                    /* stages run concurrently (>= 1) */
 	const char *const *targets;  /* stages wanted (NULL: [graph] targets,
 					else all) */
@@ -79,12 +88,22 @@ typedef struct run_opts {
 	struct remote_ctx *remote;
 } run_opts_t;
 
-/* Run the stages the targets need (after the [tune] search, if any).  0 on
- * success; a negative code when a stage failed (its message is logged and
- * copied to err), every [tune] candidate failed, or rt_interrupted was set
- * (ARMSTG_ECANCELLED).  On failure no output file is left: only run.tsv
- * (and tune.tsv once a candidate has finished). */
+/* Run the stages the targets need (after the [tune] search, if any), in
+ * the output folder's lock (outdir.c), then commit every file they wrote
+ * and run.tsv (tune.tsv) all or nothing.  0 on success: every output is
+ * under its final name.  A negative code, with err, when something was
+ * refused before any stage ran (graph_run_refused() says so: an unknown
+ * target, an output folder that is a file, cannot be created or is in use
+ * by another run, two outputs that are one file, a folder where an output
+ * file goes), a stage failed (its message is logged and copied to err),
+ * every [tune] candidate failed, the commit failed, or rt_interrupted was
+ * set before the commit point (ARMSTG_ECANCELLED).  After any failure no
+ * output of the run is there and files that were there before are as they
+ * were; a run that ran stages leaves its tables as run.failed.tsv (and
+ * tune.failed.tsv). */
 int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize);
+/* 1 when the last graph_run stopped before any stage ran */
+int graph_run_refused(const graph_t *g);
 
 const char *graph_name(const graph_t *g);
 int graph_nstages(const graph_t *g);

@@ -137,6 +137,10 @@ int plugin_check_desc(const armstg_plugin_t *d, char *err, size_t errsize)
 		}
 		if (p->type == PT_ENUM && (!p->choices || !*p->choices))
 			BAD("parameter '%s': enum without choices", p->name);
+		if ((p->flags & (PARAM_OUT_FILE | PARAM_OUT_DIR)) &&
+		    p->type != PT_STRING)
+			BAD("parameter '%s': an output path must be a string",
+			    p->name);
 		size_t need = p->type == PT_DOUBLE ? sizeof(double)
 			      : p->type == PT_STRING ? sizeof(char *)
 						     : sizeof(int);
@@ -221,6 +225,9 @@ int plugin_load_file(const char *path, rt_plugin_t *out, char *err,
 {
 	memset(out, 0, sizeof *out);
 	snprintf(out->path, sizeof out->path, "%s", path);
+	int erc = plugin_check_elf(path, err, errsize);
+	if (erc)
+		return erc;
 	void *dl = dlopen(path, RTLD_NOW | RTLD_LOCAL);
 	if (!dl) {
 		snprintf(err, errsize, "%s: cannot load: %s", path, dlerror());
@@ -276,6 +283,16 @@ int plugin_load_file(const char *path, rt_plugin_t *out, char *err,
 int plugin_load(const char *name, rt_plugin_t *out, char *err,
 		size_t errsize)
 {
+	/* by name from the plugin path only: "../x" or "/tmp/x" would load
+	 * any shared object on disk */
+	if (!is_ident(name, 64)) {
+		char shown[256];
+		rt_escape_ctl(name, shown, sizeof shown);
+		snprintf(err, errsize, "'%s' is not a plugin name (plugins are "
+			 "loaded by name, [a-z][a-z0-9_]*, from the plugin "
+			 "path; 'armstg plugins' lists them)", shown);
+		return ARMSTG_EINVAL;
+	}
 	char sp[4 * PATH_MAX];
 	snprintf(sp, sizeof sp, "%s", plugin_search_path());
 	for (char *save = NULL, *dir = strtok_r(sp, ":", &save); dir;

@@ -33,35 +33,96 @@ static int parse_level(const char *s, size_t n)
 	return -1;
 }
 
+int rt_log_configure(const char *spec, char *err, size_t errsize)
+{
+	int bad = 0;
+	if (err && errsize)
+		err[0] = 0;
+	for (const char *e = spec ? spec : ""; *e;) {
+		const char *end = strchr(e, ',');
+		size_t n = end ? (size_t)(end - e) : strlen(e);
+		const char *eq = memchr(e, '=', n);
+		int lv = eq ? parse_level(eq + 1, n - (size_t)(eq - e) - 1)
+			    : parse_level(e, n);
+		size_t sl = eq ? (size_t)(eq - e) : 0;
+		if (lv < 0 || (eq && (sl == 0 || sl >= 64))) {
+			if (!bad && err && errsize) {
+				char item[128];
+				snprintf(item, sizeof item, "%.*s",
+					 (int)(n < 100 ? n : 100), e);
+				char shown[512];
+				rt_escape_ctl(item, shown, sizeof shown);
+				snprintf(err, errsize, "'%s' is not LEVEL or "
+					 "STAGE=LEVEL (levels: error, warn, "
+					 "info, debug, trace)", shown);
+			}
+			bad = 1;
+		} else if (eq) {
+			if (n_overrides < 32) {
+				memcpy(overrides[n_overrides].stage, e, sl);
+				overrides[n_overrides].stage[sl] = 0;
+				overrides[n_overrides++].level = lv;
+			}
+		} else {
+			default_level = lv;
+		}
+		e += n;
+		if (*e == ',')
+			e++;
+	}
+	return bad ? ARMSTG_EINVAL : 0;
+}
+
 static void parse_env(void)
 {
 	if (env_parsed)
 		return;
 	env_parsed = 1;
 	const char *e = getenv("ARMSTG_LOG");
-	if (!e)
+	char err[600];
+	if (e && rt_log_configure(e, err, sizeof err))
+		rt_log(NULL, LOG_WARN, "ARMSTG_LOG: %s; that part is ignored",
+		       err);
+}
+
+void rt_escape_ctl(const char *in, char *out, size_t outsize)
+{
+	static const char hex[] = "0123456789abcdef";
+	size_t o = 0;
+	if (!outsize)
 		return;
-	while (*e) {
-		const char *end = strchr(e, ',');
-		size_t n = end ? (size_t)(end - e) : strlen(e);
-		const char *eq = memchr(e, '=', n);
-		if (eq && n_overrides < 32) {
-			size_t sl = (size_t)(eq - e);
-			int lv = parse_level(eq + 1, n - sl - 1);
-			if (lv >= 0 && sl < 64) {
-				memcpy(overrides[n_overrides].stage, e, sl);
-				overrides[n_overrides].stage[sl] = 0;
-				overrides[n_overrides++].level = lv;
-			}
-		} else if (!eq) {
-			int lv = parse_level(e, n);
-			if (lv >= 0)
-				default_level = lv;
+	for (const unsigned char *p = (const unsigned char *)in; p && *p;
+	     p++) {
+		if ((*p < 0x20 && *p != '\t') || *p == 0x7f) {
+			if (o + 4 >= outsize)
+				break;
+			out[o++] = '\\';
+			out[o++] = 'x';
+			out[o++] = hex[*p >> 4];
+			out[o++] = hex[*p & 15];
+		} else {
+			if (o + 1 >= outsize)
+				break;
+			out[o++] = (char)*p;
 		}
-		e += n;
-		if (*e == ',')
-			e++;
 	}
+	out[o] = 0;
+}
+
+size_t str_addf(char *buf, size_t size, size_t off, const char *fmt, ...)
+{
+	if (!size)
+		return 0;
+	if (off >= size)
+		return size - 1;
+	va_list ap;
+	va_start(ap, fmt);
+	int n = vsnprintf(buf + off, size - off, fmt, ap);
+	va_end(ap);
+	if (n < 0)
+		return off;
+	off += (size_t)n;
+	return off < size ? off : size - 1;
 }
 
 void rt_log_set_level(int level)
@@ -117,8 +178,10 @@ void rt_vlog_at(const char *stage, const char *node, int level,
 	size_t len = strlen(line);
 	while (len && line[len - 1] == '\n')
 		line[--len] = 0;
+	char shown[sizeof line];
+	rt_escape_ctl(line, shown, sizeof shown);
 	pthread_mutex_lock(&log_lock);
-	fprintf(stderr, "%s\n", line);
+	fprintf(stderr, "%s\n", shown);
 	fflush(stderr);
 	pthread_mutex_unlock(&log_lock);
 }

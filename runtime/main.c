@@ -12,14 +12,20 @@
  *   armstg describe PLUGIN
  *   armstg --help | --version
  *
- * Exit codes: 0 success; 1 a stage failed while running; 2 usage error or
- * invalid graph (nothing ran); 3 a plugin could not be loaded (plugins,
- * describe); 130 interrupted (SIGINT/SIGTERM; temporary files removed).
+ * Exit codes: 0 success (every output written); 1 the run failed after
+ * stages ran (a stage failed, every [tune] value failed, or the outputs
+ * could not be committed: none was written); 2 refused before any stage
+ * ran (usage error, invalid graph, unknown target, an output folder that is
+ * a file, cannot be created or is in use by another run, two outputs that
+ * are one file); 3 a plugin could not be loaded (run, check, plugins,
+ * describe); 130 interrupted by SIGINT, SIGTERM, SIGHUP or SIGPIPE before
+ * the outputs were committed (none was written).
  */
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "graph.h"
@@ -56,8 +62,10 @@ static void usage(FILE *f)
 "                          'armstg batch --help'\n"
 "  --help, --version\n"
 "\n"
-"exit codes: 0 ok, 1 a stage failed, 2 usage or invalid graph,\n"
-"            3 plugin load error, 130 interrupted\n");
+"exit codes: 0 ok (every output written), 1 the run failed (no output\n"
+"            written), 2 refused before any stage ran (usage, invalid graph,\n"
+"            bad or busy --out), 3 a plugin could not be loaded,\n"
+"            130 interrupted (no output written)\n");
 }
 
 static void on_signal(int sig)
@@ -95,6 +103,11 @@ static int parse_cli(int argc, char **argv, int i, cli_t *c)
 		} else if (!strcmp(a, "--out") || !strcmp(a, "-o")) {
 			if (!next)
 				goto missing;
+			if (!*next) {
+				fprintf(stderr, "armstg: --out needs a folder "
+					"name ('.' for the current folder)\n");
+				return -1;
+			}
 			c->out = next;
 			i++;
 		} else if (!strcmp(a, "--jobs") || !strcmp(a, "-j")) {
@@ -150,38 +163,62 @@ static int cmd_run(int argc, char **argv, int check_only)
 	char *err = malloc(65536);
 	if (!err)
 		return EXIT_USAGE;
-	graph_t *g = graph_load(c.graph, c.sets, c.nsets, err, 65536);
+	int plugin_failed = 0;
+	graph_t *g = graph_load_ex(c.graph, c.sets, c.nsets, &plugin_failed,
+				   err, 65536);
 	if (!g) {
 		fprintf(stderr, "%s\n", err);
 		free(err);
-		return EXIT_USAGE;
+		return plugin_failed ? EXIT_PLUGIN : EXIT_USAGE;
 	}
 	if (check_only) {
-		printf("%s: ok (%d stages)\n", c.graph, graph_nstages(g));
+		struct stat sb;
+		int code = 0;
+		if (c.out && !stat(c.out, &sb) && !S_ISDIR(sb.st_mode)) {
+			fprintf(stderr, "armstg: output folder '%s' is a file, "
+				"not a folder\n", c.out);
+			code = EXIT_USAGE;
+		} else {
+			printf("%s: ok (%d stages)\n", c.graph,
+			       graph_nstages(g));
+		}
 		graph_free(g);
 		free(err);
-		return 0;
+		return code;
 	}
+	/* a dropped ssh session (SIGHUP) or a closed pipe (SIGPIPE, e.g.
+	 * `armstg run ... 2>&1 | head`) stops the run like Ctrl-C: the
+	 * stages stop, nothing is committed, the temporaries go */
 	struct sigaction sa;
 	memset(&sa, 0, sizeof sa);
 	sa.sa_handler = on_signal;
 	sigaction(SIGINT, &sa, NULL);
 	sigaction(SIGTERM, &sa, NULL);
+	sigaction(SIGHUP, &sa, NULL);
+	sigaction(SIGPIPE, &sa, NULL);
 	run_opts_t o = { .outdir = c.out ? c.out : ".", .jobs = c.jobs,
 			 .targets = c.targets, .ntargets = c.ntargets,
 			 .quiet = c.quiet };
 	int rc = graph_run(g, &o, err, 65536);
 	int code = 0;
-	if (rt_interrupted) {
-		fprintf(stderr, "armstg: interrupted; no output file was "
-			"left behind\n");
-		code = EXIT_INTR;
-	} else if (rc) {
-		fprintf(stderr, "armstg: %s\n", err);
-		code = EXIT_STAGE;
-	} else {
+	char shown[4096];
+	rt_escape_ctl(err, shown, sizeof shown);
+	if (!rc) {
 		fprintf(stderr, "armstg: graph '%s' done; outputs and run.tsv "
-			"in %s\n", graph_name(g), o.outdir);
+			"in %s%s\n", graph_name(g), o.outdir,
+			rt_interrupted ? " (the interrupt came after every "
+					 "output was written)" : "");
+	} else if (graph_run_refused(g)) {
+		fprintf(stderr, "armstg: %s\n", shown);
+		code = EXIT_USAGE;
+	} else if (rc == ARMSTG_ECANCELLED) {
+		fprintf(stderr, "armstg: interrupted; no output was written "
+			"(the run table is %s/run.failed.tsv)\n", o.outdir);
+		code = EXIT_INTR;
+	} else {
+		fprintf(stderr, "armstg: %s\nno output was written (the run "
+			"table is %s/run.failed.tsv)\n", shown, o.outdir);
+		code = EXIT_STAGE;
 	}
 	graph_free(g);
 	free(err);
@@ -291,6 +328,8 @@ int main(int argc, char **argv)
 		execv("/proc/self/exe", argv);
 		/* if exec fails, carry on with the default policy */
 	}
+	/* reads ARMSTG_LOG now: a bad value is reported whatever runs */
+	rt_log_level_for(NULL);
 	if (argc < 2) {
 		usage(stderr);
 		return EXIT_USAGE;

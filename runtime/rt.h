@@ -81,6 +81,10 @@ int plugin_load_file(const char *path, rt_plugin_t *out, char *err,
 		     size_t errsize);
 int plugin_load(const char *name, rt_plugin_t *out, char *err,
 		size_t errsize);
+/* elfcheck.c: refuse (with a message naming the file) a file that is not a
+ * shared object of this machine or whose headers point beyond its end; a
+ * truncated .so would otherwise crash dlopen with SIGBUS */
+int plugin_check_elf(const char *path, char *err, size_t errsize);
 void plugin_unload(rt_plugin_t *p);
 /* folders searched, ':'-separated; static storage */
 const char *plugin_search_path(void);
@@ -111,10 +115,57 @@ msg_t *stage_take_output(rt_stage_t *s, int port);
 const char *stage_error(rt_stage_t *s);  /* last message, "" if none */
 void stage_set_outdir(rt_stage_t *s, const char *dir);
 void stage_set_threads(rt_stage_t *s, int n);
+/* Write every file of the stage into this folder (a run's staging folder)
+ * under a temporary name, whatever its final folder; NULL: beside the final
+ * file (a stage run on its own).  The run commits them (outdir_commit). */
+void stage_set_staging(rt_stage_t *s, const char *dir);
 /* commit (rename) or discard the stage's pending temporary files */
 int stage_commit_files(rt_stage_t *s, char *err, size_t errsize);
 void stage_discard_files(rt_stage_t *s);
+/* the final names of the pending files (at most 64; thread-local
+ * storage) */
 int stage_pending_files(rt_stage_t *s, const char ***paths);
+/* number of pending files; file i's temporary and final names */
+int stage_nfiles(const rt_stage_t *s);
+const char *stage_file_tmp(const rt_stage_t *s, int i);
+const char *stage_file_final(const rt_stage_t *s, int i);
+/* forget the pending files (committed by the run: not removed) */
+void stage_forget_files(rt_stage_t *s);
+
+/* ---- path.c ---- */
+/* lexical normalisation: "a//b/./c/../d" -> "a/b/d", "" -> "."; leading
+ * ".." of a relative path kept.  0, or -1 when out is too small. */
+int path_norm(const char *in, char *out, size_t outsize);
+/* absolute, normalised path of p (relative to base, NULL: the current
+ * folder) with the links of its longest existing prefix resolved: two
+ * names of one file give the same string.  0 or -1. */
+int path_resolve(const char *base, const char *p, char *out, size_t outsize);
+/* mkdir -p; made(dir) for each folder it created.  0, or -1 with errno
+ * (ENOTDIR when a file is in the way). */
+int path_mkdirs(const char *dir, void (*made)(const char *dir, void *user),
+		void *user);
+
+/* ---- outdir.c: the output folder of a run (lock, staging, commit) ---- */
+typedef struct outdir outdir_t;
+/* Refuse "" and a non-folder; create DIR (mkdir -p); take DIR/.armstg.lock
+ * or refuse naming the run that holds it (ARMSTG_EINVAL); roll back and
+ * remove what dead runs left; make the staging folder.  graph: named in the
+ * lock file. */
+int outdir_open(const char *dir, const char *graph, outdir_t **od,
+		char *err, size_t errsize);
+const char *outdir_path(const outdir_t *od);
+/* DIR/.armstg-tmp-<pid>: where every file of the run is written first */
+const char *outdir_staging(const outdir_t *od);
+/* Rename every tmps[i] to finals[i], all or nothing: on a failure, or when
+ * stop(user) says so between two files (NULL: never), every final name is
+ * as it was before (ARMSTG_ECANCELLED for a stop) and the temporaries are
+ * removed.  See outdir.c for the journal that covers a killed run. */
+int outdir_commit(outdir_t *od, const char *const *tmps,
+		  const char *const *finals, int n, int (*stop)(void *),
+		  void *user, char *err, size_t errsize);
+/* Remove the staging folder and the lock; remove_made: also the folders
+ * outdir_open created, when they are empty. */
+void outdir_close(outdir_t **od, int remove_made);
 
 /* ---- log.c ---- */
 void rt_log_set_level(int level);     /* default LOG_INFO; env ARMSTG_LOG */
@@ -131,7 +182,20 @@ void rt_vlog_at(const char *stage, const char *node, int level,
  * name in `armstg worker`) */
 void rt_log_set_node(const char *name);
 const char *rt_log_node(void);
-/* set by SIGINT/SIGTERM handler */
+/* Parse a level spec ("info", "warn,demons=debug") and use it: 0, or
+ * ARMSTG_EINVAL with err naming what is wrong (the valid parts are kept).
+ * The ARMSTG_LOG variable goes through it on first use; a bad value is
+ * reported once as a warning. */
+int rt_log_configure(const char *spec, char *err, size_t errsize);
+/* Copy in to out, control bytes (< 0x20 but tab, and 0x7f) written as
+ * \xNN: text from files never reaches the terminal raw.  Always
+ * terminated; truncated to outsize. */
+void rt_escape_ctl(const char *in, char *out, size_t outsize);
+/* snprintf at buf + off, returning the new length clamped to size - 1
+ * (so calls can be chained without overflow) */
+size_t str_addf(char *buf, size_t size, size_t off, const char *fmt, ...)
+	ARMSTG_PRINTF(4, 5);
+/* set by the handler of SIGINT, SIGTERM, SIGHUP and SIGPIPE */
 extern volatile int rt_interrupted;
 
 #endif

@@ -4,6 +4,7 @@
  * output files; and the host API table plugins call.
  */
 #include <errno.h>
+#include <float.h>
 #include <limits.h>
 #include <math.h>
 #include <stdarg.h>
@@ -35,6 +36,7 @@ struct rt_stage {
 	int init_called;
 	char err[2048];
 	char outdir[PATH_MAX];
+	char staging[PATH_MAX];       /* "" : temporaries beside the finals */
 	int threads;
 	msg_t **outs;
 	pending_file_t *files;
@@ -157,12 +159,20 @@ static int h_out_path(armstg_stage_t *st, const char *path, char *tmp,
 			      path);
 	const char *slash = strrchr(final, '/');
 	const char *base = slash ? slash + 1 : final;
-	if (!*base)
+	if (!*base || !strcmp(base, ".") || !strcmp(base, ".."))
 		return h_fail(st, ARMSTG_EINVAL,
 			      "output path '%s' names a folder, not a file",
 			      final);
+	if (!strncmp(base, ".armstg", 7))
+		return h_fail(st, ARMSTG_EINVAL,
+			      "output path '%s': names starting with "
+			      "'.armstg' are the runtime's own", final);
 	char dir[PATH_MAX] = ".";
-	if (slash) {
+	if (s->staging[0]) {
+		/* a run: every file is staged in one folder (nothing appears
+		 * under a final name before the run commits) */
+		snprintf(dir, sizeof dir, "%s", s->staging);
+	} else if (slash) {
 		size_t dl = (size_t)(slash - final);
 		memcpy(dir, final, dl);
 		dir[dl ? dl : 1] = 0;
@@ -187,9 +197,13 @@ static int h_out_path(armstg_stage_t *st, const char *path, char *tmp,
 	snprintf(f->final, sizeof f->final, "%s", final);
 	/* keep the basename's extension last: writers pick the format
 	 * (.nii.gz, .h5, .tsv) from it */
-	if (snprintf(f->tmp, sizeof f->tmp, "%s/.armstg-tmp-%ld-%d-%s", dir,
-		     (long)getpid(), atomic_fetch_add(&counter, 1), base) >=
-	    (int)sizeof f->tmp)
+	int w = s->staging[0]
+		? snprintf(f->tmp, sizeof f->tmp, "%s/%d-%s", dir,
+			   atomic_fetch_add(&counter, 1), base)
+		: snprintf(f->tmp, sizeof f->tmp, "%s/.armstg-tmp-%ld-%d-%s",
+			   dir, (long)getpid(), atomic_fetch_add(&counter, 1),
+			   base);
+	if (w >= (int)sizeof f->tmp)
 		return h_fail(st, ARMSTG_EINVAL, "output path too long: %s",
 			      final);
 	if (strlen(f->tmp) >= tmpsize)
@@ -385,6 +399,11 @@ void stage_set_outdir(rt_stage_t *s, const char *dir)
 	snprintf(s->outdir, sizeof s->outdir, "%s", dir ? dir : "");
 }
 
+void stage_set_staging(rt_stage_t *s, const char *dir)
+{
+	snprintf(s->staging, sizeof s->staging, "%s", dir ? dir : "");
+}
+
 void stage_set_threads(rt_stage_t *s, int n)
 {
 	s->threads = n > 0 ? n : 1;
@@ -419,10 +438,17 @@ static int parse_value(const armstg_param_t *p, const char *value, void *dst,
 		long long x = strtoll(value, &end, 10);
 		while (*end == ' ' || *end == '\t')
 			end++;
-		if (end == value || *end || errno) {
+		if (end == value || *end) {
 			snprintf(err, errsize,
 				 "parameter '%s': '%s' is not an integer",
 				 p->name, value);
+			return ARMSTG_EINVAL;
+		}
+		if (errno == ERANGE) {
+			snprintf(err, errsize,
+				 "parameter '%s': %s is out of range [%g, %g]%s",
+				 p->name, value, p->min, p->max,
+				 unit_sfx(p, u, sizeof u));
 			return ARMSTG_EINVAL;
 		}
 		if ((double)x < p->min || (double)x > p->max) {
@@ -441,7 +467,28 @@ static int parse_value(const armstg_param_t *p, const char *value, void *dst,
 		double x = strtod(value, &end);
 		while (*end == ' ' || *end == '\t')
 			end++;
-		if (end == value || *end || errno || !isfinite(x)) {
+		if (end == value || *end) {
+			snprintf(err, errsize,
+				 "parameter '%s': '%s' is not a number",
+				 p->name, value);
+			return ARMSTG_EINVAL;
+		}
+		if (errno == ERANGE) {
+			/* strtod's overflow (+-HUGE_VAL) or underflow (a
+			 * subnormal or 0) */
+			if (isinf(x))
+				snprintf(err, errsize, "parameter '%s': %s is "
+					 "too large in magnitude (the largest "
+					 "double is %g)", p->name, value,
+					 DBL_MAX);
+			else
+				snprintf(err, errsize, "parameter '%s': %s is "
+					 "too small in magnitude (the smallest "
+					 "normal double is %g; write 0 for "
+					 "zero)", p->name, value, DBL_MIN);
+			return ARMSTG_EINVAL;
+		}
+		if (!isfinite(x)) {
 			snprintf(err, errsize,
 				 "parameter '%s': '%s' is not a finite number",
 				 p->name, value);
@@ -509,6 +556,55 @@ static int parse_value(const armstg_param_t *p, const char *value, void *dst,
 	}
 }
 
+static int ends_with_ci(const char *s, const char *suf, size_t m)
+{
+	size_t n = strlen(s);
+	return n > m && s[n - m - 1] == '.' && !strncasecmp(s + n - m, suf, m);
+}
+
+/* an output file or folder parameter: a name that can be a file (or a
+ * folder), with one of the declared endings */
+static int check_out_path(const armstg_param_t *p, const char *value,
+			  char *err, size_t errsize)
+{
+	const char *slash = strrchr(value, '/');
+	const char *base = slash ? slash + 1 : value;
+	int file = (p->flags & PARAM_OUT_FILE) != 0;
+	if (!*value) {
+		snprintf(err, errsize, "parameter '%s': the %s name is empty",
+			 p->name, file ? "file" : "folder");
+		return ARMSTG_EINVAL;
+	}
+	if (file && (!*base || !strcmp(base, ".") || !strcmp(base, ".."))) {
+		snprintf(err, errsize, "parameter '%s': '%s' names a folder, "
+			 "not a file", p->name, value);
+		return ARMSTG_EINVAL;
+	}
+	if (!strncmp(base, ".armstg", 7)) {
+		snprintf(err, errsize, "parameter '%s': '%s': names starting "
+			 "with '.armstg' are the runtime's own", p->name, value);
+		return ARMSTG_EINVAL;
+	}
+	if (!file || !p->choices || !*p->choices)
+		return 0;
+	char list[256] = "";
+	size_t lo = 0;
+	for (const char *c = p->choices; *c;) {
+		size_t n = strcspn(c, "|");
+		if (ends_with_ci(value, c, n))
+			return 0;
+		const char *bar = c[n] ? "" : NULL;
+		lo = str_addf(list, sizeof list, lo, "%s.%.*s",
+			      lo ? (bar ? ", " : " or ") : "", (int)n, c);
+		c += n;
+		if (*c == '|')
+			c++;
+	}
+	snprintf(err, errsize, "parameter '%s': '%s' must end in %s", p->name,
+		 value, list);
+	return ARMSTG_EINVAL;
+}
+
 int stage_set_param(rt_stage_t *s, const char *key, const char *value,
 		    char *err, size_t errsize)
 {
@@ -530,6 +626,11 @@ int stage_set_param(rt_stage_t *s, const char *key, const char *value,
 		return ARMSTG_EINTERNAL;
 	}
 	void *dst = (char *)s->pub.priv + p->offset;
+	if (p->type == PT_STRING && (p->flags & (PARAM_OUT_FILE | PARAM_OUT_DIR))) {
+		int rc = check_out_path(p, value, err, errsize);
+		if (rc)
+			return rc;
+	}
 	if (p->type == PT_STRING) {
 		char *dup = strdup(value);
 		if (!dup)
@@ -715,7 +816,7 @@ void stage_discard_files(rt_stage_t *s)
 	s->nmade = 0;
 }
 
-/* list of final paths still pending (for the scheduler's summary) */
+/* list of final paths still pending */
 int stage_pending_files(rt_stage_t *s, const char ***paths)
 {
 	static __thread const char *buf[64];
@@ -724,6 +825,29 @@ int stage_pending_files(rt_stage_t *s, const char ***paths)
 		buf[i] = s->files[i].final;
 	*paths = buf;
 	return n;
+}
+
+int stage_nfiles(const rt_stage_t *s)
+{
+	return s->nfiles;
+}
+
+const char *stage_file_tmp(const rt_stage_t *s, int i)
+{
+	return i >= 0 && i < s->nfiles ? s->files[i].tmp : NULL;
+}
+
+const char *stage_file_final(const rt_stage_t *s, int i)
+{
+	return i >= 0 && i < s->nfiles ? s->files[i].final : NULL;
+}
+
+void stage_forget_files(rt_stage_t *s)
+{
+	s->nfiles = 0;
+	for (int i = 0; i < s->nmade; i++)
+		free(s->made_dirs[i]);
+	s->nmade = 0;
 }
 
 void stage_fini(rt_stage_t *s)

@@ -1,11 +1,14 @@
 #!/bin/sh
 # `make fuzz`: build libFuzzer targets with clang (ASan + UBSan) for the
-# MessagePack decoder, the graph file parser and the worker's frame decoder
-# (runtime/wire.c), run each for a bounded time
-# and print how many inputs ran without a crash.
+# MessagePack decoder, the graph file parser (with a dictionary of graph
+# keywords), the worker's frame decoder (runtime/wire.c) and the NIfTI-1
+# reader (header check, gzip/zlib data path, conversions), run each for a
+# bounded time and print how many inputs ran without a crash.
 #
 #   FUZZ_SECONDS=60     time per target (seconds)
-#   FUZZ_TARGETS="msgpack graph wire"
+#   FUZZ_RUNS=N         instead: N executions per target (no time limit),
+#                       e.g. FUZZ_RUNS=10000000 for bench/fuzz/results.md
+#   FUZZ_TARGETS="msgpack graph wire nifti"
 #   CLANG=clang
 #
 # Corpora and crash artifacts live in build-fuzz/ (kept between runs, so
@@ -16,7 +19,8 @@
 set -u
 CLANG=${CLANG:-clang}
 SECS=${FUZZ_SECONDS:-60}
-TARGETS=${FUZZ_TARGETS:-msgpack graph wire}
+TARGETS=${FUZZ_TARGETS:-msgpack graph wire nifti}
+RUNS=${FUZZ_RUNS:-}
 B=build-fuzz
 cd "$(dirname "$0")/.." || exit 2
 
@@ -83,15 +87,26 @@ for t in $TARGETS; do
         # shellcheck disable=SC2086
         "$CLANG" $CFLAGS $SAN tests/fuzz/mkseeds_wire.c $objs \
             -o "$B/mkseeds_wire" $LIBS && "$B/mkseeds_wire" "$seeds" || exit 2
+    elif [ "$t" = nifti ]; then
+        # shellcheck disable=SC2086
+        "$CLANG" $CFLAGS $SAN tests/fuzz/mkseeds_nifti.c $objs \
+            -o "$B/mkseeds_nifti" $LIBS && "$B/mkseeds_nifti" "$seeds" ||
+            exit 2
     else
         for f in graphs/*.ini tests/graphs/*/*.ini tests/graphs/*.ini; do
             [ -f "$f" ] && cp "$f" "$seeds/" 2>/dev/null
         done
     fi
     log="$B/fuzz_$t.log"
-    echo "fuzz: $t for ${SECS}s ($bin)"
+    if [ -n "$RUNS" ]; then
+        limit="-runs=$RUNS"
+        echo "fuzz: $t for $RUNS executions ($bin)"
+    else
+        limit="-max_total_time=$SECS"
+        echo "fuzz: $t for ${SECS}s ($bin)"
+    fi
     ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1} \
-    "$bin" -max_total_time="$SECS" -timeout=10 -rss_limit_mb=2048 \
+    "$bin" "$limit" -timeout=10 -rss_limit_mb=2048 \
         -max_len=4096 -dict="tests/fuzz/$t.dict" -print_final_stats=1 \
         -artifact_prefix="$B/artifacts/$t-" "$corpus" "$seeds" >"$log" 2>&1
     rc=$?

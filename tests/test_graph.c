@@ -239,7 +239,7 @@ static void test_failure_leaves_no_files(void **state)
 	char gp[256], err[4096], out[] = "/tmp/armstg-out-XXXXXX";
 	assert_non_null(mkdtemp(out));
 	/* 'other' writes its file successfully, then 'add' fails: nothing
-	 * but run.tsv may remain */
+	 * but the failed run's table may remain */
 	const char *sets[] = { "add.fail=true" };
 	graph_t *g = graph_load(write_tmp(good, gp, sizeof gp), sets, 1, err,
 				sizeof err);
@@ -249,7 +249,10 @@ static void test_failure_leaves_no_files(void **state)
 	assert_int_equal(rc, ARMSTG_ENUMERIC);
 	assert_string_equal(err, "stage 'add' (plugin tp_add) failed: asked "
 			    "to fail (NaN at voxel 3)");
-	assert_int_equal(count_files(out), 1); /* run.tsv only */
+	assert_int_equal(count_files(out), 1);
+	char rt[1200];
+	snprintf(rt, sizeof rt, "%s/run.failed.tsv", out);
+	assert_true(tu_exists(rt));
 	graph_free(g);
 	/* a sink that fails after writing its temporary file */
 	const char *sets2[] = { "out.fail_after_write=true" };
@@ -310,6 +313,351 @@ static void test_fuzz_entry_rejects_garbage(void **state)
 						sizeof err), 0);
 }
 
+
+/* ---- issue 27: hostile graphs, paths, plugins and exit codes ---- */
+
+static const char *cli_err(const char *args, const char *env, int *code)
+{
+	static char text[8192];
+	char cmd[4096], ef[] = "/tmp/armstg-graph-err-XXXXXX";
+	int fd = mkstemp(ef);
+	assert_true(fd >= 0);
+	close(fd);
+	snprintf(cmd, sizeof cmd, "%s %s/armstg %s >/dev/null 2>%s",
+		 env ? env : "", tu_build_dir(), args, ef);
+	int st = system(cmd);
+	FILE *f = fopen(ef, "r");
+	size_t n = f ? fread(text, 1, sizeof text - 1, f) : 0;
+	text[n] = 0;
+	if (f)
+		fclose(f);
+	unlink(ef);
+	*code = WIFEXITED(st) ? WEXITSTATUS(st) : 1000 + WTERMSIG(st);
+	return text;
+}
+
+/* ${A:-${B:-x}} expands like sh: the inner default when both are unset */
+static void test_nested_defaults(void **state)
+{
+	(void)state;
+	const char *text =
+		"[stage gen]\nplugin = tp_gen\n"
+		"[stage s]\nplugin = tp_sink\nvolume = gen.volume\n"
+		"path = ${ARMSTG_T_A:-${ARMSTG_T_B:-inner}}-$${x}.txt\n";
+	char gp[256], err[4096], out[] = "/tmp/armstg-out-XXXXXX";
+	assert_non_null(mkdtemp(out));
+	unsetenv("ARMSTG_T_A");
+	unsetenv("ARMSTG_T_B");
+	graph_t *g = graph_load(write_tmp(text, gp, sizeof gp), NULL, 0, err,
+				sizeof err);
+	if (!g)
+		fail_msg("%s", err);
+	run_opts_t o = { .outdir = out, .jobs = 1, .quiet = 1 };
+	assert_int_equal(graph_run(g, &o, err, sizeof err), 0);
+	graph_free(g);
+	char f[1200];
+	snprintf(f, sizeof f, "%s/inner-${x}.txt", out);
+	assert_true(tu_exists(f));
+	setenv("ARMSTG_T_B", "bee", 1);
+	g = graph_load(gp, NULL, 0, err, sizeof err);
+	assert_int_equal(graph_run(g, &o, err, sizeof err), 0);
+	graph_free(g);
+	snprintf(f, sizeof f, "%s/bee-${x}.txt", out);
+	assert_true(tu_exists(f));
+	setenv("ARMSTG_T_A", "ay", 1);
+	g = graph_load(gp, NULL, 0, err, sizeof err);
+	assert_int_equal(graph_run(g, &o, err, sizeof err), 0);
+	graph_free(g);
+	snprintf(f, sizeof f, "%s/ay-${x}.txt", out);
+	assert_true(tu_exists(f));
+	unsetenv("ARMSTG_T_A");
+	unsetenv("ARMSTG_T_B");
+	unlink(gp);
+	tu_cleanup(out);
+}
+
+/* a 248-character path fits; a line beyond the limit, a NUL byte, a graph
+ * path that is a folder and a garbage file get clear messages (control
+ * bytes shown as \xNN) */
+static void test_lines_bytes_and_files(void **state)
+{
+	(void)state;
+	char gp[256], err[8192], text[40000], out[] = "/tmp/armstg-out-XXXXXX";
+	char path[300];
+	assert_non_null(mkdtemp(out));
+	/* a 248-character relative path: 3 folders of 60 and a file */
+	int o = 0;
+	for (int d = 0; d < 3; d++) {
+		for (int i = 0; i < 60; i++)
+			path[o++] = (char)('a' + d);
+		path[o++] = '/';
+	}
+	while (o < 248 - 4)
+		path[o++] = 'f';
+	memcpy(path + o, ".txt", 5);
+	assert_int_equal(strlen(path), 248);
+	snprintf(text, sizeof text, "[stage gen]\nplugin = tp_gen\n"
+		 "[stage s]\nplugin = tp_sink\nvolume = gen.volume\n"
+		 "path   = %s   ; a realistic long path\n", path);
+	graph_t *g = graph_load(write_tmp(text, gp, sizeof gp), NULL, 0, err,
+				sizeof err);
+	if (!g)
+		fail_msg("%s", err);
+	run_opts_t ro = { .outdir = out, .jobs = 1, .quiet = 1 };
+	assert_int_equal(graph_run(g, &ro, err, sizeof err), 0);
+	graph_free(g);
+	char f[1400];
+	snprintf(f, sizeof f, "%s/%s", out, path);
+	assert_float_equal(tu_read_num(f), 1.0, 0);
+	/* a line of 16 400 characters is too long */
+	o = snprintf(text, sizeof text, "[stage gen]\nplugin = tp_gen\n"
+		     "label = ");
+	while (o < 28 + 16400)
+		text[o++] = 'x';
+	snprintf(text + o, sizeof text - (size_t)o, "\n");
+	assert_null(graph_load(write_tmp(text, gp, sizeof gp), NULL, 0, err,
+			       sizeof err));
+	char want[512];
+	snprintf(want, sizeof want, "%s:3: line longer than 16381 characters "
+		 "(the limit of a graph line)", gp);
+	assert_string_equal(err, want);
+	/* a NUL byte in a value */
+	FILE *fp = fopen(gp, "wb");
+	fputs("[stage gen]\nplugin = tp_gen\nlabel = ab", fp);
+	fputc(0, fp);
+	fputs("cd\n", fp);
+	fclose(fp);
+	assert_null(graph_load(gp, NULL, 0, err, sizeof err));
+	snprintf(want, sizeof want, "%s:3: NUL byte in the line: a graph file "
+		 "is text (is this the right file?)", gp);
+	assert_string_equal(err, want);
+	/* a folder */
+	assert_null(graph_load(out, NULL, 0, err, sizeof err));
+	snprintf(want, sizeof want, "%s: is a folder, not a graph file", out);
+	assert_string_equal(err, want);
+	/* garbage with terminal escapes: shown escaped */
+	fp = fopen(gp, "wb");
+	fputs("\x1b[31m\x01=\x02\n[x\x07]\n", fp);
+	fclose(fp);
+	assert_null(graph_load(gp, NULL, 0, err, sizeof err));
+	for (const char *c = err; *c; c++)
+		if ((unsigned char)*c < 0x20 && *c != '\n')
+			fail_msg("raw control byte 0x%02x in: %s", *c, err);
+	assert_non_null(strstr(err, "\\x1b[31m\\x01"));
+	assert_non_null(strstr(err, "unknown section [x\\x07]"));
+	int code;
+	const char *e = cli_err(gp, NULL, &code);
+	char args[300];
+	snprintf(args, sizeof args, "check %s", gp);
+	e = cli_err(args, NULL, &code);
+	assert_int_equal(code, 2);
+	assert_null(strchr(e, 0x1b));
+	assert_non_null(strstr(e, "\\x1b"));
+	unlink(gp);
+	tu_cleanup(out);
+}
+
+/* ARMSTG_LOG that is not a level is reported, not ignored */
+static void test_bad_log_setting(void **state)
+{
+	(void)state;
+	char err[600];
+	assert_int_equal(rt_log_configure("warn,demons=debug", err,
+					  sizeof err), 0);
+	assert_int_equal(rt_log_configure("verbose", err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_string_equal(err, "'verbose' is not LEVEL or STAGE=LEVEL "
+			    "(levels: error, warn, info, debug, trace)");
+	assert_int_equal(rt_log_configure("warn,demons=loud", err,
+					  sizeof err), ARMSTG_EINVAL);
+	assert_string_equal(err, "'demons=loud' is not LEVEL or STAGE=LEVEL "
+			    "(levels: error, warn, info, debug, trace)");
+	rt_log_configure("warn", err, sizeof err);
+	char gp[256], args[300];
+	write_tmp(good, gp, sizeof gp);
+	snprintf(args, sizeof args, "check %s", gp);
+	int code;
+	const char *e = cli_err(args, "ARMSTG_LOG=verbose", &code);
+	assert_int_equal(code, 0);
+	assert_non_null(strstr(e, "warning: ARMSTG_LOG: 'verbose' is not "
+				  "LEVEL or STAGE=LEVEL"));
+	unlink(gp);
+}
+
+/* two outputs that are one file once the output folder is known; the
+ * output folder checked before any stage runs */
+static void test_outputs_checked_before_running(void **state)
+{
+	(void)state;
+	char gp[256], err[4096], text[2048], out[] = "/tmp/armstg-out-XXXXXX";
+	char cnt[1200], f[1200];
+	assert_non_null(mkdtemp(out));
+	snprintf(cnt, sizeof cnt, "%s-count", out);
+	/* 'a' writes OUT/x.txt by a relative path, 'b' by an absolute one */
+	snprintf(text, sizeof text,
+		 "[stage gen]\nplugin = tp_gen\n"
+		 "[stage sc]\nplugin = tp_score\nvolume = gen.volume\n"
+		 "count_file = %s\n"
+		 "[stage a]\nplugin = tp_sink\nvolume = sc.volume\n"
+		 "path = sub/x.txt\n"
+		 "[stage b]\nplugin = tp_sink\nvolume = gen.volume\n"
+		 "path = %s/./sub//x.txt\n", cnt, out);
+	graph_t *g = graph_load(write_tmp(text, gp, sizeof gp), NULL, 0, err,
+				sizeof err);
+	if (!g)
+		fail_msg("%s", err);
+	run_opts_t o = { .outdir = out, .jobs = 1, .quiet = 1 };
+	assert_int_equal(graph_run(g, &o, err, sizeof err), ARMSTG_EINVAL);
+	assert_true(graph_run_refused(g));
+	char want[2048];
+	snprintf(want, sizeof want, "%s:14: stage 'b': key 'path': "
+		 "'%s/./sub//x.txt' is also written by stage 'a' (key 'path', "
+		 "line 10): two outputs cannot be one file", gp, out);
+	assert_string_equal(err, want);
+	assert_false(tu_exists(cnt)); /* no stage ran */
+	assert_int_equal(tu_count_entries(out), 0);
+	graph_free(g);
+	/* --out names a file */
+	snprintf(f, sizeof f, "%s/file", out);
+	FILE *fp = fopen(f, "w");
+	fclose(fp);
+	const char *sets[] = { "b.path=y.txt" };
+	g = graph_load(gp, sets, 1, err, sizeof err);
+	assert_non_null(g);
+	run_opts_t o2 = { .outdir = f, .jobs = 1, .quiet = 1 };
+	assert_int_equal(graph_run(g, &o2, err, sizeof err), ARMSTG_EINVAL);
+	assert_true(graph_run_refused(g));
+	snprintf(want, sizeof want, "output folder '%s' is a file, not a "
+		 "folder", f);
+	assert_string_equal(err, want);
+	assert_false(tu_exists(cnt));
+	/* --out "" */
+	run_opts_t o3 = { .outdir = "", .jobs = 1, .quiet = 1 };
+	assert_int_equal(graph_run(g, &o3, err, sizeof err), ARMSTG_EINVAL);
+	assert_string_equal(err, "the output folder name is empty (give --out "
+			    "DIR; '.' for the current folder)");
+	assert_false(tu_exists(cnt));
+	graph_free(g);
+	int code;
+	char args[2048];
+	snprintf(args, sizeof args, "run %s --set b.path=y.txt --out ''", gp);
+	const char *e = cli_err(args, NULL, &code);
+	assert_int_equal(code, 2);
+	assert_non_null(strstr(e, "--out needs a folder name"));
+	snprintf(args, sizeof args, "check %s --set b.path=y.txt --out %s",
+		 gp, f);
+	e = cli_err(args, NULL, &code);
+	assert_int_equal(code, 2);
+	assert_non_null(strstr(e, "is a file, not a folder"));
+	unlink(gp);
+	tu_cleanup(out);
+}
+
+/* the README's exit codes: 3 when a plugin cannot be loaded (run, check,
+ * plugins), 2 when the run is refused before any stage ran */
+static void test_exit_codes(void **state)
+{
+	(void)state;
+	char gp[256], args[2048], env[2048], out[] = "/tmp/armstg-out-XXXXXX";
+	char pd[1200], so[1300], src[1300];
+	assert_non_null(mkdtemp(out));
+	write_tmp(good, gp, sizeof gp);
+	/* a truncated tp_gen.so first in the path */
+	snprintf(pd, sizeof pd, "%s/plugins", out);
+	mkdir(pd, 0755);
+	snprintf(src, sizeof src, "%s/tp_gen.so", plugdir);
+	snprintf(so, sizeof so, "%s/tp_gen.so", pd);
+	FILE *in = fopen(src, "rb"), *o = fopen(so, "wb");
+	char buf[3000];
+	size_t n = fread(buf, 1, sizeof buf, in);
+	fwrite(buf, 1, n, o);
+	fclose(in);
+	fclose(o);
+	snprintf(env, sizeof env, "ARMSTG_PLUGIN_PATH=%s:%s", pd, plugdir);
+	int code;
+	const char *e;
+	snprintf(args, sizeof args, "plugins");
+	e = cli_err(args, env, &code);
+	assert_int_equal(code, 3);
+	assert_non_null(strstr(e, "tp_gen.so: truncated or corrupt"));
+	snprintf(args, sizeof args, "check %s", gp);
+	e = cli_err(args, env, &code);
+	assert_int_equal(code, 3);
+	assert_non_null(strstr(e, "key 'plugin': "));
+	assert_non_null(strstr(e, "tp_gen.so: truncated or corrupt"));
+	snprintf(args, sizeof args, "run %s --out %s/o1", gp, out);
+	e = cli_err(args, env, &code);
+	assert_int_equal(code, 3);
+	snprintf(args, sizeof args, "describe %s", so);
+	e = cli_err(args, env, &code);
+	assert_int_equal(code, 3);
+	/* an unknown target: 2, and no output folder made */
+	snprintf(args, sizeof args, "run %s --target nosuch --out %s/o2", gp,
+		 out);
+	e = cli_err(args, NULL, &code);
+	assert_int_equal(code, 2);
+	assert_non_null(strstr(e, "unknown target stage 'nosuch'"));
+	snprintf(so, sizeof so, "%s/o2", out);
+	assert_false(tu_exists(so));
+	/* an output folder that cannot be made: 2 */
+	snprintf(args, sizeof args, "run %s --out %s/%s/sub", gp, out,
+		 "plugins/tp_gen.so");
+	e = cli_err(args, NULL, &code);
+	assert_int_equal(code, 2);
+	assert_non_null(strstr(e, "cannot create output folder"));
+	unlink(gp);
+	tu_cleanup(out);
+}
+
+/* plugin_check_elf on damaged copies of a real plugin: each refused with
+ * a message naming the file (dlopen would crash on some: SIGBUS) */
+static void test_elf_check(void **state)
+{
+	(void)state;
+	char dir[] = "/tmp/armstg-elf-XXXXXX", src[1200], p[1200], err[1024];
+	assert_non_null(mkdtemp(dir));
+	snprintf(src, sizeof src, "%s/tp_gen.so", plugdir);
+	FILE *f = fopen(src, "rb");
+	assert_non_null(f);
+	static char so[1 << 20];
+	size_t n = fread(so, 1, sizeof so, f);
+	fclose(f);
+	assert_true(n > 4096 && n < sizeof so);
+	assert_int_equal(plugin_check_elf(src, err, sizeof err), 0);
+	struct { size_t len; size_t off; unsigned char byte; int wide;
+		 uint64_t val; const char *want; } cases[] = {
+		{ 3000, 0, 0, 0, 0, "truncated or corrupt: segment" },
+		{ 40, 0, 0, 0, 0, "shorter than an ELF header" },
+		{ 0, 0, 'X', 0, 0, "no ELF signature" },
+		{ 0, 4, 1, 0, 0, "another kind of machine" },
+		{ 0, 16, 2, 0, 0, "not a shared object (ELF type 2)" },
+		{ 0, 40, 0, 1, (uint64_t)1 << 40, "section header table" },
+		{ 0, 32, 0, 1, (uint64_t)n - 8, "program header table" },
+	};
+	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+		snprintf(p, sizeof p, "%s/c%zu.so", dir, i);
+		static char m[1 << 20];
+		memcpy(m, so, n);
+		size_t len = cases[i].len ? cases[i].len : n;
+		if (!cases[i].len && !cases[i].wide)
+			m[cases[i].off] = (char)cases[i].byte;
+		if (cases[i].wide)
+			memcpy(m + cases[i].off, &cases[i].val, 8);
+		f = fopen(p, "wb");
+		fwrite(m, 1, len, f);
+		fclose(f);
+		err[0] = 0;
+		assert_int_not_equal(plugin_check_elf(p, err, sizeof err), 0);
+		if (!strstr(err, cases[i].want) || strncmp(err, p, strlen(p)))
+			fail_msg("case %zu: want '%s' after the file name in: "
+				 "%s", i, cases[i].want, err);
+		rt_plugin_t pl;
+		assert_int_not_equal(plugin_load_file(p, &pl, err, sizeof err),
+				     0);
+	}
+	tu_cleanup(dir);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -320,6 +668,12 @@ int main(void)
 		cmocka_unit_test(test_failure_leaves_no_files),
 		cmocka_unit_test(test_cli),
 		cmocka_unit_test(test_fuzz_entry_rejects_garbage),
+		cmocka_unit_test(test_nested_defaults),
+		cmocka_unit_test(test_lines_bytes_and_files),
+		cmocka_unit_test(test_bad_log_setting),
+		cmocka_unit_test(test_outputs_checked_before_running),
+		cmocka_unit_test(test_exit_codes),
+		cmocka_unit_test(test_elf_check),
 	};
 	return cmocka_run_group_tests(tests, setup, NULL);
 }

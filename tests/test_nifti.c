@@ -628,6 +628,92 @@ static void test_errors(void **state)
 	msg_unref(&v->base);
 }
 
+
+/* issue 27, in one place: every hostile variant a user meets, made here,
+ * read, and refused with its message naming the file (or read exactly) */
+static void test_hostile_files(void **state)
+{
+	(void)state;
+	vol_t *v = rand_vol(16, 16, 16, 1, DT_F32, NULL);
+	write_ok(tmp("h.nii"), v);
+	write_ok(tmp("h.nii.gz"), v);
+	long sz = file_size(tmp("h.nii")), gsz = file_size(tmp("h.nii.gz"));
+	/* truncated, plain and gzip */
+	copy_prefix(tmp("h.nii"), tmp("h_cut.nii"), sz - 100);
+	expect_read_error(tmp("h_cut.nii"), "image data truncated: the header "
+			  "says 16384 bytes of FLOAT32 from byte 416, the file "
+			  "has 16316 bytes");
+	copy_prefix(tmp("h.nii.gz"), tmp("h_cut.nii.gz"), gsz * 2 / 3);
+	expect_read_error(tmp("h_cut.nii.gz"), "image data truncated or corrupt "
+			  "(expected 16384 bytes of FLOAT32 after byte 416)");
+	/* corrupt gzip: a flipped byte in the deflate stream */
+	copy_prefix(tmp("h.nii.gz"), tmp("h_bad.nii.gz"), gsz);
+	unsigned char x = 0xff;
+	patch(tmp("h_bad.nii.gz"), gsz / 2, &x, 1);
+	expect_read_error(tmp("h_bad.nii.gz"), "truncated or corrupt");
+	/* huge dimensions in a small file: refused before allocating */
+	copy_prefix(tmp("h.nii"), tmp("h_huge.nii"), sz);
+	int16_t big[3] = { 32767, 32767, 32767 };
+	patch(tmp("h_huge.nii"), 42, big, sizeof big);
+	expect_read_error(tmp("h_huge.nii"), "image data truncated: the header "
+			  "says 140724603846652 bytes of FLOAT32");
+	/* the same in a niftilib-written file of one voxel */
+	int d1[3] = { 1, 1, 1 };
+	nim_write(new_nim(3, d1, NIFTI_TYPE_FLOAT32), tmp("h_small.nii"));
+	copy_prefix(tmp("h_small.nii"), tmp("h_huge2.nii"),
+		    file_size(tmp("h_small.nii")));
+	int16_t big2[3] = { 2000, 2000, 2000 };
+	patch(tmp("h_huge2.nii"), 42, big2, sizeof big2);
+	expect_read_error(tmp("h_huge2.nii"), "the header says 32000000000 "
+			  "bytes of FLOAT32 from byte 352, the file has 356 "
+			  "bytes");
+	/* NaN and infinities are kept bit for bit (nifti_source refuses them
+	 * for an integer dtype: plugins/nifti_source/tests) */
+	vol_t *r;
+	read_ok(tmp("h.nii.gz"), &r);
+	assert_true(isnan(vol_get(r, 0)));
+	assert_true(isinf(vol_get(r, 1)) && vol_get(r, 1) < 0);
+	assert_true(msg_equal(&v->base, &r->base));
+	msg_unref(&r->base);
+	/* 2-D: read as one slice */
+	int d2[2] = { 5, 6 };
+	nim_write(new_nim(2, d2, NIFTI_TYPE_FLOAT32), tmp("h_2d.nii"));
+	read_ok(tmp("h_2d.nii"), &r);
+	assert_int_equal(r->nx * 100 + r->ny * 10 + r->nz, 561);
+	msg_unref(&r->base);
+	/* a 4-D series */
+	int d4[4] = { 4, 3, 2, 5 };
+	nim_write(new_nim(4, d4, NIFTI_TYPE_INT16), tmp("h_4d.nii.gz"));
+	expect_read_error(tmp("h_4d.nii.gz"), "is a 4-D series of 5 volumes: "
+			  "ARMSTG volumes are 3-D");
+	/* complex */
+	int d3[3] = { 2, 2, 2 };
+	nim_write(new_nim(3, d3, NIFTI_TYPE_COMPLEX64), tmp("h_cplx.nii"));
+	expect_read_error(tmp("h_cplx.nii"), "unsupported NIfTI datatype "
+			  "COMPLEX64 (code 32): use u8, i16, i32, f32 or f64");
+	/* a singular affine (sform with a zero row) and a qform of NaN */
+	copy_prefix(tmp("h.nii"), tmp("h_sing.nii"), sz);
+	float zeros[4] = { 0, 0, 0, 0 };
+	patch(tmp("h_sing.nii"), 296, zeros, sizeof zeros); /* srow_y */
+	expect_read_error(tmp("h_sing.nii"), "the sform affine is singular or "
+			  "not finite");
+	copy_prefix(tmp("h.nii"), tmp("h_nanq.nii"), sz);
+	int16_t zero = 0;
+	patch(tmp("h_nanq.nii"), 254, &zero, 2); /* sform_code */
+	float qnan = NAN;
+	patch(tmp("h_nanq.nii"), 268, &qnan, 4); /* qoffset_x */
+	expect_read_error(tmp("h_nanq.nii"), "the qform affine is singular or "
+			  "not finite");
+	/* not NIfTI at all, under a NIfTI name */
+	FILE *f = fopen(tmp("h_text.nii"), "w");
+	for (int i = 0; i < 400; i++)
+		fputc('a' + i % 26, f);
+	fclose(f);
+	expect_read_error(tmp("h_text.nii"), "not a NIfTI-1 file (sizeof_hdr "
+			  "is");
+	msg_unref(&v->base);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -639,6 +725,7 @@ int main(void)
 		cmocka_unit_test(test_vector_field_itk),
 		cmocka_unit_test(test_scaling_and_other_types),
 		cmocka_unit_test(test_errors),
+		cmocka_unit_test(test_hostile_files),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }

@@ -25,7 +25,7 @@
  *     below direct demons (same demons settings, no growth);
  *   - a phantom without a tumour makes the run fail with a message naming
  *     the empty tumour, and leaves no output file behind (only the run
- *     table run.tsv).
+ *     table of the failed run, run.failed.tsv).
  */
 #include <dirent.h>
 #include <math.h>
@@ -330,7 +330,8 @@ static int count_files(const char *dir)
 	int n = 0;
 	struct dirent *de;
 	while ((de = readdir(d)))
-		if (strcmp(de->d_name, "run.tsv") && /* the run table */
+		if (strcmp(de->d_name, "run.failed.tsv") && /* run tables */
+		    strcmp(de->d_name, "tune.failed.tsv") &&
 		    (strstr(de->d_name, ".nii") || strstr(de->d_name, ".h5") ||
 		     strstr(de->d_name, ".tsv") || strstr(de->d_name, ".png") ||
 		     !strcmp(de->d_name, "report")))

@@ -161,11 +161,12 @@ typedef struct ttab {
 	const tab_col_t *value, *score, *wall, *status, *chosen, *error;
 } ttab_t;
 
-static void tune_tsv(const char *out, ttab_t *tt)
+/* tune.tsv, or tune.failed.tsv after a failed run */
+static void tune_tsv_named(const char *out, const char *name, ttab_t *tt)
 {
 	char e[1024];
 	memset(tt, 0, sizeof *tt);
-	if (tab_read_file(in(out, "tune.tsv"), &tt->t, e, sizeof e))
+	if (tab_read_file(in(out, name), &tt->t, e, sizeof e))
 		fail_msg("%s", e);
 	tt->value = tab_col(tt->t, "value");
 	tt->score = tab_col(tt->t, "score");
@@ -183,6 +184,11 @@ static void tune_tsv(const char *out, ttab_t *tt)
 	assert_int_equal(tt->score->type, TAB_NUM);
 	assert_int_equal(tt->status->type, TAB_STR);
 	assert_int_equal(tt->chosen->type, TAB_NUM);
+}
+
+static void tune_tsv(const char *out, ttab_t *tt)
+{
+	tune_tsv_named(out, "tune.tsv", tt);
 }
 
 /* the value whose chosen column is 1 (NaN if none), checking it is the
@@ -421,15 +427,15 @@ static void test_all_candidates_fail(void **state)
 	assert_string_equal(r.err, "[tune] every value of sim.offset failed: "
 			    "3: stage 'sim' (plugin tp_score) failed: asked "
 			    "to fail at 3; 4: score sq is NaN");
-	/* no output file: only the two run tables */
+	/* no output file: only the two run tables, named as failed */
 	assert_int_equal(tu_count_entries(r.out), 2);
-	assert_true(tu_exists(in(r.out, "run.tsv")));
+	assert_true(tu_exists(in(r.out, "run.failed.tsv")));
 	ttab_t tt;
-	tune_tsv(r.out, &tt);
+	tune_tsv_named(r.out, "tune.failed.tsv", &tt);
 	assert_int_equal(tt.t->nrows, 2);
 	assert_true(isnan(chosen_value(&tt)));
 	ttab_free(&tt);
-	assert_non_null(strstr(slurp(in(r.out, "run.tsv")),
+	assert_non_null(strstr(slurp(in(r.out, "run.failed.tsv")),
 			       "\ntune\t-\tfailed\t"));
 	done(&r);
 	/* the command line: exit 1 */
@@ -603,8 +609,8 @@ static void no_outputs_after_interrupt(const char *out)
 	assert_non_null(d);
 	while ((de = readdir(d)))
 		if (strcmp(de->d_name, ".") && strcmp(de->d_name, "..") &&
-		    strcmp(de->d_name, "run.tsv") &&
-		    strcmp(de->d_name, "tune.tsv"))
+		    strcmp(de->d_name, "run.failed.tsv") &&
+		    strcmp(de->d_name, "tune.failed.tsv"))
 			fail_msg("%s left in %s after an interrupt", de->d_name,
 				 out);
 	closedir(d);
@@ -633,7 +639,7 @@ static void test_interrupt(void **state)
 	no_outputs_after_interrupt(r.out);
 	/* tune.tsv lists the one candidate that finished, none chosen */
 	ttab_t tt;
-	tune_tsv(r.out, &tt);
+	tune_tsv_named(r.out, "tune.failed.tsv", &tt);
 	assert_int_equal(tt.t->nrows, 1);
 	assert_string_equal(tt.status->str[0], "ok");
 	assert_true(isnan(chosen_value(&tt)));

@@ -20,15 +20,17 @@ typedef struct h5sink_priv {
 } h5sink_priv_t;
 
 #define OFF(f) offsetof(h5sink_priv_t, f)
+/* HDF5 (.h5, .hdf5), else a table as TSV (.tsv, .txt) */
+#define SINK_ENDINGS "h5|hdf5|tsv|txt"
 
 static const armstg_param_t params[] = {
 	{ "path", PT_STRING, NULL, 0, 0, "",
 	  "file for the point set (.h5), or for the table when only a table "
-	  "is connected (.h5 or .tsv); relative: under --out", NULL,
-	  OFF(path), PARAM_REQUIRED },
+	  "is connected (.h5 or .tsv); relative: under --out", SINK_ENDINGS,
+	  OFF(path), PARAM_REQUIRED | PARAM_OUT_FILE },
 	{ "table_path", PT_STRING, NULL, 0, 0, "",
 	  "file for the table (.h5 or .tsv); needed when both inputs are "
-	  "connected", NULL, OFF(table_path), 0 },
+	  "connected", SINK_ENDINGS, OFF(table_path), PARAM_OUT_FILE },
 };
 
 static const armstg_port_t inputs[] = {
@@ -67,14 +69,14 @@ static int h5sink_process(armstg_stage_t *st)
 		rc = h->ps_write(st, p->path, ps);
 		if (rc)
 			return rc;
-		h->log(st, LOG_INFO, "wrote %s: %lld points", p->path,
+		h->log(st, LOG_DEBUG, "staged %s: %lld points", p->path,
 		       (long long)ps->n);
 	}
 	if (t) {
 		rc = h->tab_write(st, tpath, t);
 		if (rc)
 			return rc;
-		h->log(st, LOG_INFO, "wrote %s: %lld rows x %d columns (%s)",
+		h->log(st, LOG_DEBUG, "staged %s: %lld rows x %d columns (%s)",
 		       tpath, (long long)t->nrows, t->ncols,
 		       is_h5(tpath) ? "HDF5" : "TSV");
 	}

@@ -8,11 +8,21 @@
  * else qform, else pixdim), ITK/ANTs 5-D vector images as RAS displacement
  * fields.  Optionally converts the element type (e.g. label volumes stored
  * as float32, like the BraTS 2013 OTMultiClass files, to u8).
+ *
+ * A conversion never changes a value silently: to an integer type (u8,
+ * i16, i32) every value must be a whole number in the type's range (no
+ * NaN, no fraction, no negative for u8); to f32 every finite value must
+ * stay finite (rounding to the nearest float is the conversion's purpose);
+ * f64 holds every stored value.  Otherwise the stage fails naming the file,
+ * the first voxel (i,j,k) (and component) and its value.
  */
+#include <math.h>
 #include <stddef.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "armstg/plugin.h"
+#include "armstg/volmath.h"
 
 typedef struct src_priv {
 	const char *path;
@@ -26,8 +36,9 @@ static const armstg_param_t params[] = {
 	  "NIfTI-1 file to read (.nii or .nii.gz)", NULL, OFF(path),
 	  PARAM_REQUIRED },
 	{ "dtype", PT_ENUM, "keep", 0, 0, "",
-	  "element type of the output (keep: as stored; integer types round "
-	  "and clamp)", "keep|u8|i16|i32|f32|f64", OFF(dtype), 0 },
+	  "element type of the output (keep: as stored; a value the type "
+	  "cannot hold exactly, e.g. NaN or 0.5 for u8, is an error)",
+	  "keep|u8|i16|i32|f32|f64", OFF(dtype), 0 },
 };
 
 static const armstg_port_t outputs[] = {
@@ -36,6 +47,30 @@ static const armstg_port_t outputs[] = {
 };
 
 static const int dtype_of[] = { 0, DT_U8, DT_I16, DT_I32, DT_F32, DT_F64 };
+
+static const char *const dtype_name[] = { "keep", "u8", "i16", "i32", "f32",
+					  "f64" };
+
+/* The first element that converting v to dtype want would change (see the
+ * top), or -1. */
+static int64_t first_changed(const vol_t *v, int want, double *val)
+{
+	double lo = want == DT_U8 ? 0 : want == DT_I16 ? -32768 : -2147483648.0;
+	double hi = want == DT_U8 ? 255 : want == DT_I16 ? 32767 : 2147483647.0;
+	int integer = want == DT_U8 || want == DT_I16 || want == DT_I32;
+	int64_t n = vol_nvox(v) * v->nc;
+	for (int64_t e = 0; e < n; e++) {
+		double x = vol_get(v, e);
+		int bad = integer ? !(x >= lo && x <= hi && x == floor(x))
+			  : want == DT_F32 ? isfinite(x) && !isfinite((float)x)
+					   : 0;
+		if (bad) {
+			*val = x;
+			return e;
+		}
+	}
+	return -1;
+}
 
 static int src_process(armstg_stage_t *st)
 {
@@ -46,6 +81,28 @@ static int src_process(armstg_stage_t *st)
 	if (rc)
 		return rc;
 	int want = dtype_of[p->dtype];
+	double x;
+	int64_t e = want && want != v->dtype ? first_changed(v, want, &x) : -1;
+	if (e >= 0) {
+		int64_t nv = vol_nvox(v), vox = e % nv;
+		int i = (int)(vox % v->nx), j = (int)(vox / v->nx % v->ny);
+		int k = (int)(vox / ((int64_t)v->nx * v->ny));
+		char comp[32] = "";
+		if (v->nc > 1)
+			snprintf(comp, sizeof comp, " component %d",
+				 (int)(e / nv));
+		h->msg_unref(&v->base);
+		return h->fail(st, ARMSTG_EINVAL,
+			       "'%s': voxel (%d,%d,%d)%s holds %.9g, which "
+			       "dtype = %s cannot hold (%s): the conversion "
+			       "would change it; use dtype = keep, or fix the "
+			       "file", p->path, i, j, k, comp, x,
+			       dtype_name[p->dtype],
+			       want == DT_U8 ? "whole numbers 0 to 255"
+			       : want == DT_I16 ? "whole numbers -32768 to 32767"
+			       : want == DT_I32 ? "whole numbers -2^31 to 2^31-1"
+						: "|x| up to 3.4e38");
+	}
 	if (want && want != v->dtype) {
 		vol_t *c = h->vol_convert(v, want);
 		h->msg_unref(&v->base);

@@ -41,8 +41,8 @@ typedef struct png_priv {
 
 static const armstg_param_t params[] = {
 	{ "path", PT_STRING, NULL, 0, 0, "",
-	  "PNG file to write (relative: under the run's --out folder)", NULL,
-	  OFF(path), PARAM_REQUIRED },
+	  "PNG file to write (relative: under the run's --out folder)", "png",
+	  OFF(path), PARAM_REQUIRED | PARAM_OUT_FILE },
 	{ "axis", PT_ENUM, "axial", 0, 0, "",
 	  "slice orientation in world coordinates",
 	  "axial|coronal|sagittal", OFF(axis), 0 },

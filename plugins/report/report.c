@@ -90,7 +90,7 @@ static const armstg_port_t report_outputs[] = {
 static const armstg_param_t report_params[] = {
 	{ "prefix", PT_STRING, "report", 0, 0, "",
 	  "folder of the report, relative to the run's --out folder", NULL,
-	  P(prefix), 0 },
+	  P(prefix), PARAM_OUT_DIR },
 	{ "ventricles", PT_STRING, NULL, 0, 0, "",
 	  "atlas ventricle labels to contour, e.g. \"4,5\" or \"201-414\"; "
 	  "unset = no ventricle contours", NULL, P(ventricles), 0 },

@@ -225,6 +225,39 @@ static int smp_process(armstg_stage_t *st)
 		if (!cnt)
 			H->log(st, LOG_WARN,
 			       "tumour mask is empty on the label grid");
+		/* the first stage that sees the tumour and the brain
+		 * together: a tumour outside the brain, or one that leaves
+		 * no brain to push, is refused here rather than as an
+		 * indirect failure of the growth */
+		int64_t in_brain = 0, brain = 0;
+		for (int64_t v = 0; v < nv; v++) {
+			brain += cls[v] != 0;
+			in_brain += tm[v] && cls[v] != 0;
+		}
+		if (cnt && !in_brain) {
+			rc = H->fail(st, ARMSTG_EINVAL,
+				     "the tumour (%lld voxels on the label "
+				     "grid) lies entirely outside the brain "
+				     "(labels 0 there): are the tumour mask "
+				     "and the labels in the same space?",
+				     (long long)cnt);
+			goto out;
+		}
+		if (brain && brain - in_brain < brain / 10) {
+			rc = H->fail(st, ARMSTG_EINVAL,
+				     "the tumour covers %.1f %% of the brain "
+				     "(%lld of %lld voxels): less than 10 %% "
+				     "of healthy tissue is left around it to "
+				     "push", 100.0 * (double)in_brain /
+					     (double)brain,
+				     (long long)in_brain, (long long)brain);
+			goto out;
+		}
+		if (cnt - in_brain > cnt / 10)
+			H->log(st, LOG_WARN, "%.1f %% of the tumour lies "
+			       "outside the brain (labels 0): those voxels are "
+			       "left out", 100.0 * (double)(cnt - in_brain) /
+						 (double)cnt);
 	}
 	if (sd && sd->n > 0) {
 		nseeds = sd->n;

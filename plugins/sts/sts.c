@@ -238,10 +238,14 @@ static int sts_process(armstg_stage_t *st)
 		for (int64_t i = 0; i < n; i++) {
 			double x = vol_get(in[IN_LABELS], i);
 			if (!(x == floor(x)) || fabs(x) > 1e6) {
+				const vol_t *lv = in[IN_LABELS];
 				rc = H->fail(st, ARMSTG_EINVAL,
-					     "labels: voxel %lld holds %g, not "
-					     "an integer label", (long long)i,
-					     x);
+					     "labels: voxel (%lld,%lld,%lld) "
+					     "holds %g, not an integer label",
+					     (long long)(i % lv->nx),
+					     (long long)(i / lv->nx % lv->ny),
+					     (long long)(i / ((int64_t)lv->nx *
+							      lv->ny)), x);
 				goto done;
 			}
 			lab[i] = (int32_t)x;

@@ -348,10 +348,11 @@ static void cond_summary(const sts_cond_t *c, double floor_, double k,
 
 /* ---- labels mode ---- */
 
-static int map_labels(const int32_t *lab, int64_t n, int scheme,
+static int map_labels(const int32_t *lab, const sts_grid_t *g, int scheme,
 		      uint8_t *tum, uint8_t *out, int64_t *ntum, char *err,
 		      size_t es)
 {
+	int64_t n = (int64_t)g->nx * g->ny * g->nz;
 	static const char *const sname[] = { "brats2013", "brats2023",
 					     "binary" };
 	*ntum = 0;
@@ -360,8 +361,11 @@ static int map_labels(const int32_t *lab, int64_t n, int scheme,
 		uint8_t c = 0;
 		if (l < 0)
 			return fail(err, es, ARMSTG_EINVAL,
-				    "labels: negative label %d at voxel %lld",
-				    (int)l, (long long)i);
+				    "labels: negative label %d at voxel "
+				    "(%lld,%lld,%lld)", (int)l,
+				    (long long)(i % g->nx),
+				    (long long)(i / g->nx % g->ny),
+				    (long long)(i / ((int64_t)g->nx * g->ny)));
 		switch (scheme) {
 		case 0: /* 1 necrosis, 2 edema, 3 non-enhancing, 4 enhancing */
 			if (l > 4)
@@ -385,10 +389,12 @@ static int map_labels(const int32_t *lab, int64_t n, int scheme,
 		continue;
 bad:
 		return fail(err, es, ARMSTG_EINVAL,
-			    "labels: value %d at voxel %lld is not a %s label "
-			    "(%s); set labels_scheme", (int)l, (long long)i,
-			    sname[scheme],
-			    scheme == 0 ? "0-4" : "0-3");
+			    "labels: value %d at voxel (%lld,%lld,%lld) is not "
+			    "a %s label (%s); set labels_scheme", (int)l,
+			    (long long)(i % g->nx),
+			    (long long)(i / g->nx % g->ny),
+			    (long long)(i / ((int64_t)g->nx * g->ny)),
+			    sname[scheme], scheme == 0 ? "0-4" : "0-3");
 	}
 	if (!*ntum)
 		return fail(err, es, ARMSTG_EINVAL,
@@ -532,7 +538,7 @@ int sts_segment(const sts_input_t *in, const sts_params_t *p,
 		o->labels = malloc((size_t)n);
 		if (!o->tumour || !o->labels)
 			goto fail_nomem;
-		rc = map_labels(in->labels, n, p->labels_scheme, o->tumour,
+		rc = map_labels(in->labels, g, p->labels_scheme, o->tumour,
 				o->labels, &o->n_tumour, err, es);
 		if (rc)
 			goto out;

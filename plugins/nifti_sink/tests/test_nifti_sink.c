@@ -120,7 +120,7 @@ static void test_refusals_leave_nothing(void **state)
 	const char *p[] = { "path=out.img", NULL };
 	assert_int_equal(tu_run_in(TU_PLUGIN(), p, in, NULL, sub, err,
 				   sizeof err), ARMSTG_EINVAL);
-	assert_non_null(strstr(err, "path 'out.img' must end in .nii or "
+	assert_non_null(strstr(err, "'out.img' must end in .nii or "
 				    ".nii.gz"));
 	/* an integer vector field cannot be written: no file, final or
 	 * temporary */

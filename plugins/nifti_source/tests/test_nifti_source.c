@@ -107,11 +107,71 @@ static void test_real_labels(void **state)
 	msg_unref(out[0]);
 }
 
+
+/* issue 27: a conversion that would change a value is an error naming the
+ * file and the voxel (i,j,k); keep reads the values as stored */
+static void test_conversion_never_silent(void **state)
+{
+	(void)state;
+	struct { int dtype; double x; const char *want; } cases[] = {
+		{ 1, NAN, "voxel (3,2,1) holds nan, which dtype = u8 cannot "
+			  "hold (whole numbers 0 to 255)" },
+		{ 1, -1, "voxel (3,2,1) holds -1, which dtype = u8" },
+		{ 1, 2.5, "voxel (3,2,1) holds 2.5, which dtype = u8" },
+		{ 1, 256, "voxel (3,2,1) holds 256, which dtype = u8" },
+		{ 2, 40000, "voxel (3,2,1) holds 40000, which dtype = i16 "
+			    "cannot hold (whole numbers -32768 to 32767)" },
+		{ 3, INFINITY, "voxel (3,2,1) holds inf, which dtype = i32" },
+		{ 4, 1e300, "voxel (3,2,1) holds 1e+300, which dtype = f32 "
+			    "cannot hold (|x| up to 3.4e38)" },
+	};
+	static const char *const dn[] = { "", "dtype=u8", "dtype=i16",
+					  "dtype=i32", "dtype=f32" };
+	for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+		vol_t *v = vol_new(6, 5, 4, 1, DT_F64, LPS);
+		for (int64_t e = 0; e < vol_nvox(v); e++)
+			vol_set(v, e, (double)(e % 5));
+		vol_set(v, vol_idx(v, 3, 2, 1), cases[c].x);
+		char path[512], arg[600], err[1024];
+		snprintf(path, sizeof path, "%s/bad%zu.nii.gz", dir, c);
+		assert_int_equal(vol_write_nifti(path, v, err, sizeof err), 0);
+		snprintf(arg, sizeof arg, "path=%s", path);
+		const char *p[] = { arg, dn[cases[c].dtype], NULL };
+		msg_t *out[1] = { NULL };
+		assert_int_equal(tu_run(TU_PLUGIN(), p, NULL, out, err,
+					sizeof err), ARMSTG_EINVAL);
+		assert_null(out[0]);
+		if (!strstr(err, cases[c].want) || !strstr(err, path))
+			fail_msg("case %zu: want '%s' and the file in: %s", c,
+				 cases[c].want, err);
+		/* as stored, the value is read */
+		const char *pk[] = { arg, NULL };
+		assert_int_equal(tu_run(TU_PLUGIN(), pk, NULL, out, err,
+					sizeof err), 0);
+		msg_unref(out[0]);
+		msg_unref(&v->base);
+	}
+	/* f64 -> f32 rounds (its purpose): 0.1 is accepted */
+	vol_t *v = vol_new(2, 2, 2, 1, DT_F64, LPS);
+	vol_set(v, 0, 0.1);
+	char path[512], arg[600], err[1024];
+	snprintf(path, sizeof path, "%s/tenth.nii", dir);
+	assert_int_equal(vol_write_nifti(path, v, err, sizeof err), 0);
+	snprintf(arg, sizeof arg, "path=%s", path);
+	const char *p[] = { arg, "dtype=f32", NULL };
+	msg_t *out[1] = { NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), p, NULL, out, err, sizeof err), 0);
+	assert_true(((float *)((vol_t *)out[0])->data)[0] == 0.1f);
+	msg_unref(out[0]);
+	msg_unref(&v->base);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_read_and_convert),
 		cmocka_unit_test(test_refusals),
+		cmocka_unit_test(test_conversion_never_silent),
 		cmocka_unit_test(test_real_labels),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);

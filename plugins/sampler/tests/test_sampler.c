@@ -621,6 +621,35 @@ static void test_errors(void **state)
 	msg_unref(&lab->base);
 }
 
+
+/* issue 27: a tumour outside the brain, or one that covers it, is refused
+ * with a message saying so (the growth would fail later and indirectly) */
+static void test_tumour_outside_or_covering(void **state)
+{
+	(void)state;
+	vol_t *img, *lab;
+	ps_t *nodes;
+	char err[512];
+	make_brain(RAS1, &img, &lab);
+	/* a ball in a corner of the grid, beyond the brain ellipsoid */
+	double far[3] = { -40, -45, -30 };
+	vol_t *tum = make_ball(RAS1, NX, NY, NZ, far, 4);
+	assert_int_equal(run_smp(img, lab, tum, NULL, NULL, &nodes, err),
+			 ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "voxels on the label grid) lies entirely "
+				    "outside the brain (labels 0 there)"));
+	msg_unref(&tum->base);
+	/* a ball larger than the brain */
+	double c0[3] = { 0, 0, 0 };
+	tum = make_ball(RAS1, NX, NY, NZ, c0, 80);
+	assert_int_equal(run_smp(img, lab, tum, NULL, NULL, &nodes, err),
+			 ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "the tumour covers 100.0 % of the brain"));
+	msg_unref(&tum->base);
+	msg_unref(&img->base);
+	msg_unref(&lab->base);
+}
+
 static void test_seed_cluster(void **state)
 {
 	(void)state;
@@ -691,6 +720,7 @@ int main(void)
 		cmocka_unit_test(test_grading),
 		cmocka_unit_test(test_tumour_world),
 		cmocka_unit_test(test_errors),
+		cmocka_unit_test(test_tumour_outside_or_covering),
 		cmocka_unit_test(test_seed_cluster),
 		cmocka_unit_test(test_sri24_brats),
 	};

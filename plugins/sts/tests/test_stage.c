@@ -350,8 +350,35 @@ static void test_labels_mode(void **state)
 	assert_int_equal(tu_run(TU_PLUGIN(), p23, in, out, err, sizeof err),
 			 ARMSTG_EINVAL);
 	print_message("%s\n", err);
-	assert_non_null(strstr(err, "value 4"));
-	assert_non_null(strstr(err, "not a brats2023 label"));
+	/* the voxel is named as (i,j,k): the first one holding 4 */
+	const vol_t *l13 = (const vol_t *)in[IN_LABELS];
+	int64_t first = 0;
+	while (vol_get(l13, first) != 4)
+		first++;
+	char want[160];
+	snprintf(want, sizeof want, "labels: value 4 at voxel (%d,%d,%d) is "
+		 "not a brats2023 label (0-3)", (int)(first % NX),
+		 (int)(first / NX % NY), (int)(first / (NX * NY)));
+	assert_non_null(strstr(err, want));
+
+	/* a negative label and a fraction, named by voxel too */
+	for (int k = 0; k < 2; k++) {
+		vol_t *bad = vol_clone(l13);
+		vol_t *fb = vol_convert(bad, DT_F32);
+		msg_unref(&bad->base);
+		vol_set(fb, vol_idx(fb, 5, 6, 7), k ? 1.5 : -2);
+		msg_freeze(&fb->base);
+		const msg_t *save = in[IN_LABELS];
+		in[IN_LABELS] = &fb->base;
+		assert_int_equal(tu_run(TU_PLUGIN(), p13, in, out, err,
+					sizeof err), ARMSTG_EINVAL);
+		assert_string_equal(err, k ? "labels: voxel (5,6,7) holds 1.5, "
+					     "not an integer label"
+					   : "labels: negative label -2 at "
+					     "voxel (5,6,7)");
+		in[IN_LABELS] = save;
+		msg_unref(&fb->base);
+	}
 
 	/* an empty segmentation is an error */
 	msg_unref((msg_t *)in[IN_LABELS]);

@@ -102,6 +102,14 @@ typedef enum armstg_param_type {
 } armstg_param_type_t;
 
 #define PARAM_REQUIRED 0x1u /* no default: the graph must set it */
+/* PT_STRING naming a file the stage writes (relative: under --out).
+ * choices: its accepted endings, "nii|nii.gz" (NULL: any).  The runtime
+ * checks the ending when the graph is loaded, and refuses two outputs of
+ * a graph that are the same file, before anything runs. */
+#define PARAM_OUT_FILE 0x2u
+/* PT_STRING naming a folder the stage writes its files into (relative:
+ * under --out); two stages may not share it */
+#define PARAM_OUT_DIR 0x4u
 
 typedef struct armstg_param {
 	const char *name;    /* [a-z][a-z0-9_]* */
@@ -111,9 +119,10 @@ typedef struct armstg_param {
 	double min, max;     /* inclusive range for PT_INT / PT_DOUBLE */
 	const char *unit;    /* "mm", "Pa", "s", "" for none */
 	const char *help;    /* one line */
-	const char *choices; /* PT_ENUM: "uniform|poisson|adaptive" */
+	const char *choices; /* PT_ENUM: "uniform|poisson|adaptive";
+	                        PARAM_OUT_FILE: endings, "nii|nii.gz" */
 	size_t offset;       /* where the value goes in priv */
-	uint32_t flags;      /* PARAM_REQUIRED */
+	uint32_t flags;      /* PARAM_REQUIRED, PARAM_OUT_FILE, PARAM_OUT_DIR */
 } armstg_param_t;
 
 typedef struct armstg_port {

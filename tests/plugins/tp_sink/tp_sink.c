@@ -13,8 +13,8 @@ static const armstg_port_t ins[] = {
 	{ "volume", MSG_VOLUME, 0, "volume to write" },
 };
 static const armstg_param_t params[] = {
-	{ "path", PT_STRING, NULL, 0, 0, "", "output text file", NULL,
-	  offsetof(priv_t, path), PARAM_REQUIRED },
+	{ "path", PT_STRING, NULL, 0, 0, "", "output text file", "txt|tsv",
+	  offsetof(priv_t, path), PARAM_REQUIRED | PARAM_OUT_FILE },
 	{ "fail_after_write", PT_BOOL, "false", 0, 1, "",
 	  "fail after writing (tests that no partial file is left)", NULL,
 	  offsetof(priv_t, fail_after_write), 0 },
