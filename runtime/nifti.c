@@ -174,6 +174,47 @@ static int header_check(const char *path, char *err, size_t errsize)
 	if (!nifti_is_valid_datatype(dt))
 		return ferr(err, errsize, ARMSTG_EUNSUPPORTED,
 			    "'%s': unknown NIfTI datatype code %d", path, dt);
+	/* niftilib replaces a NaN or infinite transform field by 0, which
+	 * would move the image silently: refuse the transform that will be
+	 * used (see nifti_affine) when it is not finite */
+	int qc = swap ? (int16_t)bswap16((uint16_t)h.qform_code) : h.qform_code;
+	int sc = swap ? (int16_t)bswap16((uint16_t)h.sform_code) : h.sform_code;
+	const float *fs[16];
+	int nf = 0;
+	const char *which;
+	if (sc > 0) {
+		which = "sform (srow_x, srow_y, srow_z)";
+		for (int c = 0; c < 4; c++) {
+			fs[nf++] = &h.srow_x[c];
+			fs[nf++] = &h.srow_y[c];
+			fs[nf++] = &h.srow_z[c];
+		}
+	} else if (qc > 0) {
+		which = "qform (quatern_b..d, qoffset_x..z, pixdim[0..3])";
+		const float *q[] = { &h.quatern_b, &h.quatern_c, &h.quatern_d,
+				     &h.qoffset_x, &h.qoffset_y, &h.qoffset_z,
+				     &h.pixdim[0], &h.pixdim[1], &h.pixdim[2],
+				     &h.pixdim[3] };
+		for (int k = 0; k < 10; k++)
+			fs[nf++] = q[k];
+	} else {
+		which = "pixdim[1..3]";
+		for (int k = 1; k <= 3; k++)
+			fs[nf++] = &h.pixdim[k];
+	}
+	for (int k = 0; k < nf; k++) {
+		uint32_t bits;
+		float f;
+		memcpy(&bits, fs[k], 4);
+		if (swap)
+			bits = bswap32(bits);
+		memcpy(&f, &bits, 4);
+		if (!isfinite(f))
+			return ferr(err, errsize, ARMSTG_EINVAL,
+				    "'%s': the %s holds %s: the image's position "
+				    "in space is unknown", path, which,
+				    isnan(f) ? "NaN" : "an infinity");
+	}
 	return 0;
 }
 

@@ -117,7 +117,8 @@ static const armstg_param_t affine_params[] = {
 	  "centroid|identity", OFF(init), 0 },
 	{ "path", PT_STRING, NULL, 0, 0, "",
 	  "write the transform as an ITK text file (.txt or .tfm; relative: "
-	  "under --out); antsApplyTransforms -t PATH", NULL, OFF(path), 0 },
+	  "under --out); antsApplyTransforms -t PATH", "txt|tfm", OFF(path),
+	  PARAM_OUT_FILE },
 };
 
 #define FAIL(code, ...) st->host->fail(st, code, __VA_ARGS__)
