@@ -30,7 +30,7 @@
  * into the same folder (outdir_open, holding the lock) rolls back by that
  * run's journal when it has one, then removes the dead run's temporaries
  * (.armstg-tmp-P*, also those of older versions that wrote them beside the
- * final files), anywhere under DIR.  A run is dead when no process P exists
+ * final files) under DIR (8 folders deep, the first 20 000 entries).  A run is dead when no process P exists
  * on this machine (kill(P, 0)).
  */
 #include <dirent.h>
@@ -216,18 +216,20 @@ static void rm_staging(const char *dir)
 	rmdir(dir);
 }
 
-/* What dead runs left under dir (depth-limited, links not followed).
- * Pass 0 rolls back the unfinished commits of dead runs by their journals
- * (before any of their backups is touched); pass 1 removes their staging
- * folders and temporary files.  Returns how many were removed. */
-static int clean_stale(const char *dir, int depth, long self, int pass)
+/* What dead runs left under dir (links not followed; at most 8 folders
+ * deep and *budget entries, so that --out . in a large folder stays
+ * cheap).  Pass 0 rolls back the unfinished commits of dead runs by their
+ * journals (before any of their backups is touched); pass 1 removes their
+ * staging folders and temporary files.  Returns how many were removed. */
+static int clean_stale(const char *dir, int depth, long self, int pass,
+		       long *budget)
 {
 	int n = 0;
 	DIR *dp = opendir(dir);
 	if (!dp)
 		return 0;
 	struct dirent *de;
-	while ((de = readdir(dp))) {
+	while ((de = readdir(dp)) && --*budget > 0) {
 		const char *nm = de->d_name;
 		if (!strcmp(nm, ".") || !strcmp(nm, ".."))
 			continue;
@@ -247,8 +249,9 @@ static int clean_stale(const char *dir, int depth, long self, int pass)
 			} else if (stale) {
 				rm_staging(p);
 				n++;
-			} else if (!pid && depth < 16) {
-				n += clean_stale(p, depth + 1, self, pass);
+			} else if (!pid && depth < 8) {
+				n += clean_stale(p, depth + 1, self, pass,
+						 budget);
 			}
 		} else if (stale && pass == 1 && !unlink(p)) {
 			n++;
@@ -357,8 +360,9 @@ int outdir_open(const char *dir, const char *graph, outdir_t **out,
 	rc = take_lock(od, graph, err, errsize);
 	if (rc)
 		goto fail;
-	clean_stale(dir, 0, (long)getpid(), 0);
-	int n = clean_stale(dir, 0, (long)getpid(), 1);
+	long b0 = 20000, b1 = 20000;
+	clean_stale(dir, 0, (long)getpid(), 0, &b0);
+	int n = clean_stale(dir, 0, (long)getpid(), 1, &b1);
 	if (n)
 		rt_log(NULL, LOG_INFO, "removed %d temporary file%s or folder%s "
 		       "of runs into %s that died", n, n > 1 ? "s" : "",

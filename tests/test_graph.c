@@ -538,6 +538,40 @@ static void test_outputs_checked_before_running(void **state)
 			    "DIR; '.' for the current folder)");
 	assert_false(tu_exists(cnt));
 	graph_free(g);
+	/* an output file whose name is a folder on disk: refused before the
+	 * first stage, nothing touched */
+	char sub[1200];
+	snprintf(sub, sizeof sub, "%s/dir", out);
+	mkdir(sub, 0755);
+	snprintf(sub, sizeof sub, "%s/dir/y.txt", out);
+	mkdir(sub, 0755);
+	const char *sets2[] = { "b.path=dir/y.txt" };
+	g = graph_load(gp, sets2, 1, err, sizeof err);
+	assert_non_null(g);
+	assert_int_equal(graph_run(g, &o, err, sizeof err), ARMSTG_EINVAL);
+	assert_true(graph_run_refused(g));
+	snprintf(want, sizeof want, "%s: --set: stage 'b': key 'path': "
+		 "'dir/y.txt' is a folder on disk (%s): the output file cannot "
+		 "replace it", gp, sub);
+	assert_string_equal(err, want);
+	assert_false(tu_exists(cnt));
+	graph_free(g);
+	/* the campaign's case on a shipped graph: two sinks into one file */
+	char both[2100];
+	snprintf(both, sizeof both, "%s:%s/plugins", plugdir, tu_build_dir());
+	setenv("ARMSTG_PLUGIN_PATH", both, 1);
+	const char *t2[] = { "nii_atlas_t2.path=atlas/t1.nii.gz" };
+	assert_null(graph_load("graphs/phantom.ini", t2, 1, err, sizeof err));
+	assert_string_equal(err, "graphs/phantom.ini: --set: stage "
+			    "'nii_atlas_t2': key 'path': 'atlas/t1.nii.gz' is "
+			    "also written by stage 'nii_atlas_t1' (key 'path', "
+			    "line 34): two outputs cannot be one file");
+	const char *t3[] = { "info.path=run.tsv" };
+	assert_null(graph_load("graphs/phantom.ini", t3, 1, err, sizeof err));
+	assert_string_equal(err, "graphs/phantom.ini: --set: stage 'info': key "
+			    "'path': 'run.tsv' is the name of the run table in "
+			    "the output folder: choose another");
+	setenv("ARMSTG_PLUGIN_PATH", plugdir, 1);
 	int code;
 	char args[2048];
 	snprintf(args, sizeof args, "run %s --set b.path=y.txt --out ''", gp);

@@ -14,7 +14,7 @@ cd "$(dirname "$0")/../.." || exit 2
 N=${1:-10000000}
 TARGETS=${2:-graph nifti msgpack}
 CPU=${FUZZ_CPU:-$(($(nproc) - 1))}
-commit=$(git rev-parse --short HEAD 2>/dev/null || echo unknown)
+commit=${FUZZ_COMMIT:-$(git rev-parse --short HEAD 2>/dev/null || echo unknown)}
 machine="$(nproc) cores, $(sed -n 's/^model name[^:]*: //p' /proc/cpuinfo | head -1)"
 for t in $TARGETS; do
     start=$(date -u +%Y-%m-%dT%H:%MZ)
