@@ -5,8 +5,9 @@
  * Through host->vol_write: the file is written under a temporary name and
  * renamed when the whole run succeeds (relative paths go under the run's
  * --out folder; the runtime checks the .nii / .nii.gz ending when the
- * graph is loaded: PARAM_OUT_FILE).  sform = the affine (exactly: see runtime/nifti.c), qform
- * too when the affine is rotation+scaling, units mm; 3-component volumes
+ * graph is loaded: PARAM_OUT_FILE).  sform = the affine (exactly: see
+ * runtime/nifti.c), qform too when the affine is rotation+scaling, units
+ * mm; 3-component volumes
  * become ITK/ANTs displacement fields (5-D, intent vector, LPS vectors) that
  * antsApplyTransforms and Slicer read directly.
  */
