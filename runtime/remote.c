@@ -429,6 +429,8 @@ static int msg_frames(zmsg_t *m, wire_buf_t *f)
 
 enum { CALL_OK = 0, CALL_FAILED, CALL_REFUSED, CALL_DEAD, CALL_CANCELLED };
 
+static int beat_ms(const remote_node_t *n);
+
 typedef struct call {
 	const remote_node_t *node;
 	rt_stage_t *st;
@@ -646,8 +648,8 @@ static int call_one(call_t *c)
 		rc = CALL_DEAD;
 		goto out;
 	}
-	double last_seen = now_s(), next_ping = now_s() + 1e-3 *
-							  WIRE_HEARTBEAT_MS;
+	double beat = 1e-3 * beat_ms(c->node);
+	double last_seen = now_s(), next_ping = now_s() + beat;
 	const char *state = "queued";
 	for (;;) {
 		if (rt_interrupted) {
@@ -658,7 +660,7 @@ static int call_one(call_t *c)
 		double t = now_s();
 		if (t >= next_ping) {
 			send_simple(s, "PING", c->id);
-			next_ping = t + 1e-3 * WIRE_HEARTBEAT_MS;
+			next_ping = t + beat;
 		}
 		if (t - last_seen > c->node->timeout_s) {
 			snprintf(c->why, sizeof c->why, "worker '%s' went "
@@ -668,7 +670,7 @@ static int call_one(call_t *c)
 			rc = CALL_DEAD;
 			break;
 		}
-		if (zpoller_wait(p, 100) != s)
+		if (zpoller_wait(p, 50) != s)
 			continue;
 		zmsg_t *m = zmsg_recv(s);
 		if (!m)
@@ -775,6 +777,17 @@ static int param_text(const armstg_stage_t *ps, int i, char *buf, size_t n)
 	return -1;
 }
 
+/* heartbeats (both ways) a quarter of the node's time-out apart, at most
+ * WIRE_HEARTBEAT_MS: three may be lost before the peer counts as gone (the
+ * Paranoid Pirate's liveness) */
+static int beat_ms(const remote_node_t *n)
+{
+	double ms = 250.0 * n->timeout_s;
+	if (ms > WIRE_HEARTBEAT_MS)
+		ms = WIRE_HEARTBEAT_MS;
+	return ms < 50 ? 50 : (int)ms;
+}
+
 static _Atomic unsigned long long next_id = 1;
 
 static shbuf_t *build_header(const remote_node_t *n, remote_ctx_t *ctx,
@@ -791,6 +804,7 @@ static shbuf_t *build_header(const remote_node_t *n, remote_ctx_t *ctx,
 		  wire_hdr_add(h, "stage", "%s", ps->name) ||
 		  wire_hdr_add(h, "threads", "%d", threads) ||
 		  wire_hdr_add(h, "inputs", "%d", nin) ||
+		  wire_hdr_add(h, "heartbeat_ms", "%d", beat_ms(n)) ||
 		  (ctx && ctx->casename &&
 		   wire_hdr_add(h, "case", "%s", ctx->casename));
 	for (int i = 0; !bad && i < pd->n_params; i++) {

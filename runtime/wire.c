@@ -260,6 +260,10 @@ int wire_req_decode(const wire_buf_t *f, int n, uint64_t cap, wire_req_t *req,
 				ERR("header: bad or repeated 'stage'");
 			dst = req->stage;
 			dsz = sizeof req->stage;
+		} else if (!strcmp(k, "heartbeat_ms")) {
+			if (wire_parse_u64(v, 50, 60000, &x))
+				ERR("header: bad 'heartbeat_ms' '%.40s' (50 to "
+				    "60000)", v);
 		} else if (!strcmp(k, "case")) {
 			if (req->casename[0] ||
 			    !is_label(v, sizeof req->casename))

@@ -18,8 +18,9 @@
  *
  * The coordinator opens a DEALER socket per stage, sends HELLO, and waits
  * for READY (the worker's name, version and size cap); then RUN.  While the
- * request waits or runs the worker sends HB every second; the coordinator
- * sends PING every second.  Silence longer than the node's time-out means
+ * request waits or runs the worker sends HB and the coordinator PING every
+ * heartbeat_ms (a RUN header field: a quarter of the node's time-out, at
+ * most a second).  Silence longer than the node's time-out means
  * the other side is gone (the Paranoid Pirate pattern of the ZeroMQ guide,
  * chapter 4): the coordinator retries on another worker, the worker cancels
  * the stage.  DONE or FAIL ends a request.

@@ -55,6 +55,8 @@ typedef struct job {
 	char stage[64];
 	zmsg_t *req;                 /* [proto, RUN, header, inputs...] */
 	double last_seen;            /* monotonic s: the client's last word */
+	double beat_s;               /* heartbeat interval the client asked */
+	double next_beat;            /* when its next heartbeat is due */
 	int cancelled;               /* client gone or CANCEL: no reply */
 	/* the reply, filled by the runner: owned buffers */
 	int nparts;
@@ -504,6 +506,7 @@ static void reply_fail(worker_t *w, zframe_t *peer, uint64_t id,
 
 static void heartbeat(worker_t *w, job_t *j, const char *state, int ahead)
 {
+	j->next_beat = now_s() + j->beat_s;
 	tab_t *h = wire_hdr_new();
 	if (h && !wire_hdr_add(h, "id", "%llu", (unsigned long long)j->id) &&
 	    !wire_hdr_add(h, "state", "%s", state) &&
@@ -523,13 +526,15 @@ static void cancel_running(worker_t *w, const char *why)
 	     w->running->addr, why);
 }
 
-static void every_second(worker_t *w)
+/* each waiting or running request's heartbeat when due (the client's
+ * interval), and the requests of clients silent for --timeout */
+static void beat(worker_t *w)
 {
 	double t = now_s();
 	if (w->running && !w->running->cancelled) {
 		if (t - w->running->last_seen > w->timeout_s)
 			cancel_running(w, "its client went silent");
-		else
+		else if (t >= w->running->next_beat)
 			heartbeat(w, w->running, "running", 0);
 	}
 	int ahead = 0;
@@ -543,7 +548,9 @@ static void every_second(worker_t *w)
 			job_free(j);
 			continue;
 		}
-		heartbeat(w, j, "queued", ahead++);
+		if (t >= j->next_beat)
+			heartbeat(w, j, "queued", ahead);
+		ahead++;
 		pp = &j->next;
 	}
 }
@@ -701,6 +708,13 @@ static void on_router(worker_t *w)
 		snprintf(j->addr, sizeof j->addr, "%s", addr);
 		snprintf(j->stage, sizeof j->stage, "%s", stage);
 		j->id = id;
+		/* the client's interval: a quarter of its time-out, at most
+		 * a second (wire.h) */
+		uint64_t hb = WIRE_HEARTBEAT_MS;
+		const char *hbs = wire_hdr_get(h, "heartbeat_ms");
+		if (hbs && wire_parse_u64(hbs, 50, 60000, &hb))
+			hb = WIRE_HEARTBEAT_MS;
+		j->beat_s = 1e-3 * (double)hb;
 		j->req = m;
 		m = NULL;
 		j->last_seen = now_s();
@@ -1076,19 +1090,15 @@ int worker_main(int argc, char **argv)
 	zpoller_t *poller = zpoller_new(w->router, w->runner, NULL);
 	if (w->mon)
 		zpoller_add(poller, w->mon);
-	double next_beat = now_s() + 1e-3 * WIRE_HEARTBEAT_MS;
 	while (!stop_flag) {
-		void *which = zpoller_wait(poller, 100);
+		void *which = zpoller_wait(poller, 50);
 		if (which == w->router)
 			on_router(w);
 		else if (which == w->runner)
 			on_result(w);
 		else if (w->mon && which == w->mon)
 			on_monitor(w);
-		if (now_s() >= next_beat) {
-			every_second(w);
-			next_beat = now_s() + 1e-3 * WIRE_HEARTBEAT_MS;
-		}
+		beat(w);
 		dispatch(w);
 	}
 	/* stopping: tell every client, let the running stage see the

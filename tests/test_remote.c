@@ -12,6 +12,9 @@
  *     on the node's fallback after the node's time-out (2 s) and the run's
  *     outputs are again the bytes of the local run; the run's remote
  *     context records the retry (stage, dead endpoint -> new one)
+ *   - a hung worker (SIGSTOP) in the middle of a 3 s stage: no heartbeat,
+ *     so after the node's 1 s time-out the stage is retried on the
+ *     fallback; the run ends well before the stage would have on it
  *   - a remote sink's file comes back under --out with the local bytes
  *   - a plugin's error on a worker fails the run naming the stage, node and
  *     worker, and is not retried on the fallback
@@ -263,6 +266,56 @@ static void test_worker_killed_mid_stage(void **state)
 	assert_string_equal(b.ctx.retries, want);
 	remote_ctx_destroy(&b.ctx);
 	same_outputs(local_dir, b.out);
+}
+
+/* SIGSTOP the worker running a 3 s stage: retried on the fallback */
+static void test_worker_hung(void **state)
+{
+	(void)state;
+	dt_worker_t h1;
+	const char *vv[] = { "-v", "-v", NULL };
+	assert_int_equal(dt_worker_start(&h1, "h1", vv), 0);
+	remote_endpoint_set_dead(h1.ep, 0); /* a port an earlier test had */
+	char g[600], text[2048], err[4096], out[600];
+	snprintf(g, sizeof g, "%s/hung.ini", tu_tmpdir());
+	snprintf(text, sizeof text,
+		 "[stage gen]\nplugin = tp_gen\nvalue = 1.5\n"
+		 "[stage add]\nplugin = tp_add\nsleep_ms = 3000\n"
+		 "a = gen.volume\nb = gen.volume\nnode = h\n"
+		 "[stage out]\nplugin = tp_sink\npath = sum.txt\n"
+		 "volume = add.sum\n"
+		 "[node h]\nendpoint = %s\nfallback = %s\ntimeout = 1\n",
+		 h1.ep, wb.ep);
+	write_text(g, text);
+	snprintf(out, sizeof out, "%s/hung-out", tu_tmpdir());
+	int before = dt_log_count(wb.log, "stage 'add' (tp_add");
+	pid_t pid = fork();
+	if (pid == 0) {
+		/* stop h1 once the stage has started there (a child: the run
+		 * below blocks this thread) */
+		if (dt_wait_log(h1.log, "start stage 'add'", 30)) {
+			dt_sleep(0.3);
+			kill(h1.pid, SIGSTOP);
+		}
+		_exit(0);
+	}
+	double t0 = dt_now();
+	int rc = run_graph(g, NULL, 0, out, err, sizeof err);
+	double dt = dt_now() - t0;
+	int st;
+	waitpid(pid, &st, 0);
+	kill(h1.pid, SIGCONT);
+	print_message("hung worker: run %.1f s: %s\n", dt, rc ? err : "ok");
+	assert_int_equal(rc, 0);
+	char sum[700];
+	snprintf(sum, sizeof sum, "%s/sum.txt", out);
+	assert_true(tu_read_num(sum) == 3.0); /* 1.5 + 1.5 */
+	assert_int_equal(dt_log_count(wb.log, "stage 'add' (tp_add"),
+			 before + 1);
+	/* 0.3 s + the 1 s time-out + the 3 s stage again, not 3 + 3 */
+	assert_true(dt > 4.0 && dt < 5.9);
+	assert_true(remote_endpoint_dead(h1.ep));
+	dt_worker_kill(&h1);
 }
 
 /* tp_gen -> tp_sink on node a: the file comes back under --out */
@@ -711,6 +764,7 @@ int main(void)
 		cmocka_unit_test(test_node_down),
 		cmocka_unit_test(test_bad_frames),
 		cmocka_unit_test(test_curve),
+		cmocka_unit_test(test_worker_hung),
 		cmocka_unit_test(test_remote_sink_file),
 		cmocka_unit_test(test_remote_stage_error),
 		cmocka_unit_test(test_distributed_equals_local),
