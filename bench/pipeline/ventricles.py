@@ -1,14 +1,19 @@
 #!/usr/bin/env python3
-"""Semi-automatic lateral-ventricle segmentation of the BraTS 2013 cases.
+"""Semi-automatic lateral-ventricle segmentation of the real cases.
 
 The thesis measured its ventricle metric S against ventricles segmented
 semi-automatically in each patient.  BraTS 2013 ships no ventricle labels, so
 this script regenerates them from ../shared/data (the masks are written under
---out, never committed):
+--out, never committed).  Cases: BraTS 2013 0001-0003 (FLAIR, T1c, manual
+labels), gli00001 (BraTS 2023 BraTS-GLI-00001: FLAIR, native T1; no labels:
+nothing is excluded as tumour, the seeds and the ball keep the growth in the
+ventricles) and tcga7294 (TCGA-DU-7294: FLAIR, native T1, its automatic
+fused labels excluded as tumour):
 
   1. tissue statistics: median and MAD-sigma of FLAIR and T1c over the brain
-     mask without the manual tumour labels (BraTS 2013 images are z-scored, so
-     only relative thresholds make sense);
+     mask without the tumour labels (BraTS 2013 images are z-scored, so
+     only relative thresholds make sense; the brain mask of the other cases
+     is the filled non-zero region of FLAIR and T1);
   2. CSF candidates: dark in BOTH modalities,
         FLAIR < median_F - K_FLAIR * sigma_F  and  T1c < median_T - K_T1C * sigma_T
      (FLAIR suppresses CSF; T1 shows it dark), inside the brain mask eroded by
@@ -56,7 +61,29 @@ SEEDS = {
              (-125.0, 124.0, 94.0)],  # (125, 115, 94)
     "0003": [(-118.0, 139.0, 94.0),   # (118, 100, 94)
              (-133.0, 124.0, 102.0)], # (133, 115, 102)
+    # chosen on axial FLAIR and T1 slices (2026-11-26)
+    "gli00001": [(-104.0, 104.0, 90.0),   # (104, 135, 90) right ventricle
+                 (-120.0, 139.0, 90.0)],  # (120, 100, 90) left (tumour side,
+                                          # compressed)
+    "tcga7294": [(-112.0, 114.0, 90.0),   # (112, 125, 90)
+                 (-128.0, 114.0, 90.0)],  # (128, 125, 90)
 }
+
+# file names per case: FLAIR, the T1-weighted image that shows CSF dark,
+# the tumour labels (None: none), the brain mask (None: FLAIR > 0)
+def case_files(data, p):
+    if p == "gli00001":
+        d = os.path.join(data, "brats2023-gli-00001", "BraTS-GLI-00001-000-")
+        return d + "t2f.nii.gz", d + "t1n.nii.gz", None, None
+    if p == "tcga7294":
+        d = os.path.join(data, "tcga-du-7294", "TCGA-DU-7294_")
+        return (d + "fla_bet.nii.gz", d + "t1_bet.nii.gz",
+                d + "auto_seg_mav.nii.gz", None)
+    d = os.path.join(data, "brats2013", f"brats_2013_pat{p}_1")
+    return (os.path.join(d, "Flair_subtrMeanDivStd.nii.gz"),
+            os.path.join(d, "T1c_subtrMeanDivStd.nii.gz"),
+            os.path.join(d, "OTMultiClass.nii.gz"),
+            os.path.join(d, "brainmask.nii.gz"))
 
 
 def robust(v):
@@ -71,16 +98,29 @@ def ball(radius_mm, sp):
     return d2 <= radius_mm ** 2
 
 
-def segment(case_dir, seeds):
-    fl_img = nib.load(os.path.join(case_dir, "Flair_subtrMeanDivStd.nii.gz"))
+def segment(files, seeds):
+    f_fl, f_t1, f_lab, f_bm = files
+    fl_img = nib.load(f_fl)
     fl = np.asarray(fl_img.dataobj, dtype=np.float64).squeeze()
-    t1 = np.asarray(nib.load(os.path.join(case_dir, "T1c_subtrMeanDivStd.nii.gz")).dataobj,
-                    dtype=np.float64).squeeze()
-    lab = np.asarray(nib.load(os.path.join(case_dir, "OTMultiClass.nii.gz")).dataobj).squeeze()
-    bm = np.asarray(nib.load(os.path.join(case_dir, "brainmask.nii.gz")).dataobj).squeeze() > 0.5
+    t1 = np.asarray(nib.load(f_t1).dataobj, dtype=np.float64).squeeze()
+    lab = (np.asarray(nib.load(f_lab).dataobj).squeeze() if f_lab
+           else np.zeros(fl.shape, np.uint8))
+    if f_bm:
+        bm = np.asarray(nib.load(f_bm).dataobj).squeeze() > 0.5
+    else:
+        # skull-stripped int16 files: CSF may hold 0 or small negative
+        # values, so the brain is the filled non-zero region of either image
+        bm = ndi.binary_fill_holes(ndi.binary_closing((fl != 0) | (t1 != 0),
+                                                      iterations=2))
     aff = fl_img.affine
     sp = np.sqrt((aff[:3, :3] ** 2).sum(axis=0))
     tissue = bm & (lab == 0)
+    if not f_lab:
+        # no tumour labels: leave the FLAIR-bright tail (tumour and edema)
+        # out of the statistics, or it inflates the MAD-sigma and the
+        # thresholds fall below the ventricles' FLAIR
+        mf0, sf0 = robust(fl[tissue])
+        tissue &= fl < mf0 + 1.0 * sf0
     mf, sf = robust(fl[tissue])
     mt, st = robust(t1[tissue])
     inner = ndi.binary_erosion(bm, structure=ball(ERODE_MM, sp))
@@ -125,14 +165,13 @@ def main():
     os.makedirs(a.out, exist_ok=True)
     shown = []
     for p in a.cases:
-        case_dir = os.path.join(a.data, "brats2013", f"brats_2013_pat{p}_1")
-        mask, fl, lab, aff, info, vox = segment(case_dir, SEEDS[p])
+        mask, fl, lab, aff, info, vox = segment(case_files(a.data, p), SEEDS[p])
         img = nib.Nifti1Image(mask, aff)
         img.set_qform(aff, code=1)
         img.set_sform(aff, code=1)
-        path = os.path.join(a.out, f"pat{p}_ventricles.nii.gz")
+        path = os.path.join(a.out, f"{'pat' if p.isdigit() else ''}{p}_ventricles.nii.gz")
         nib.save(img, path)
-        print(f"pat{p}: {info['voxels']} voxels = {info['ml']:.1f} ml in "
+        print(f"{p}: {info['voxels']} voxels = {info['ml']:.1f} ml in "
               f"{info['components']} component(s); FLAIR median {info['flair_median']:.2f} "
               f"sigma {info['flair_sigma']:.2f}, T1c median {info['t1c_median']:.2f} "
               f"sigma {info['t1c_sigma']:.2f} -> {path}")
@@ -151,7 +190,7 @@ def main():
             ax[r, c].imshow(fl[:, :, z].T, cmap="gray", origin="lower")
             ax[r, c].contour(mask[:, :, z].T, [0.5], colors="c", linewidths=0.8)
             ax[r, c].contour((lab[:, :, z] > 0).T, [0.5], colors="r", linewidths=0.8)
-            ax[r, c].set_title(f"pat{p} axial k={z} (voxel axes of the file)")
+            ax[r, c].set_title(f"{p} axial k={z} (voxel axes of the file)")
             ax[r, c].set_xlim(50, 190)
             ax[r, c].set_ylim(40, 210)
     fig.tight_layout()

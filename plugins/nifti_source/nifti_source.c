@@ -15,6 +15,14 @@
  * stay finite (rounding to the nearest float is the conversion's purpose);
  * f64 holds every stored value.  Otherwise the stage fails naming the file,
  * the first voxel (i,j,k) (and component) and its value.
+ *
+ * optional = true: an empty path or the word "none" (no NIfTI file is
+ * called that: they end in .nii or .nii.gz) means "no such image" and the
+ * stage sends
+ * no volume (the output stays empty; a stage whose optional input it feeds
+ * sees it unconnected, a required input fails naming it).  This lets one
+ * graph take whatever modalities a case has (graphs/armstg_auto.ini:
+ * PATIENT_T2= left empty).  A non-empty path must still be a readable file.
  */
 #include <math.h>
 #include <stddef.h>
@@ -27,6 +35,7 @@
 typedef struct src_priv {
 	const char *path;
 	int dtype; /* index into "keep|u8|i16|i32|f32|f64" */
+	int optional;
 } src_priv_t;
 
 #define OFF(f) offsetof(src_priv_t, f)
@@ -39,11 +48,15 @@ static const armstg_param_t params[] = {
 	  "element type of the output (keep: as stored; a value the type "
 	  "cannot hold exactly, e.g. NaN or 0.5 for u8, is an error)",
 	  "keep|u8|i16|i32|f32|f64", OFF(dtype), 0 },
+	{ "optional", PT_BOOL, "false", 0, 0, "",
+	  "an empty path or 'none' sends no volume (a modality the case does "
+	  "not have) instead of failing", NULL, OFF(optional), 0 },
 };
 
 static const armstg_port_t outputs[] = {
-	{ "volume", MSG_VOLUME, 0,
-	  "the volume, affine voxel->world RAS+ mm (fields: RAS vectors)" },
+	{ "volume", MSG_VOLUME, 1,
+	  "the volume, affine voxel->world RAS+ mm (fields: RAS vectors); "
+	  "empty only with optional = true and an empty path" },
 };
 
 static const int dtype_of[] = { 0, DT_U8, DT_I16, DT_I32, DT_F32, DT_F64 };
@@ -77,6 +90,11 @@ static int src_process(armstg_stage_t *st)
 	const src_priv_t *p = st->priv;
 	const armstg_host_t *h = st->host;
 	vol_t *v = NULL;
+	if (p->optional &&
+	    (!p->path || !p->path[0] || !strcmp(p->path, "none"))) {
+		h->log(st, LOG_INFO, "no file given (optional): no volume");
+		return 0;
+	}
 	int rc = h->vol_read(st, p->path, &v);
 	if (rc)
 		return rc;

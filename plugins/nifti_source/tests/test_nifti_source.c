@@ -78,6 +78,43 @@ static void test_refusals(void **state)
 	assert_non_null(strstr(err, "dtype"));
 }
 
+/* optional = true: an empty path or 'none' sends no volume; a given path is still
+ * read (and a missing file still fails); without optional an empty path
+ * is an error naming the stage's read */
+static void test_optional(void **state)
+{
+	(void)state;
+	char err[1024];
+	msg_t *out[1] = { NULL };
+	const char *p1[] = { "path=", "optional=true", NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), p1, NULL, out, err, sizeof err),
+			 0);
+	assert_null(out[0]);
+	const char *p1b[] = { "path=none", "optional=true", NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), p1b, NULL, out, err, sizeof err),
+			 0);
+	assert_null(out[0]);
+	const char *p2[] = { "path=", NULL };
+	assert_true(tu_run(TU_PLUGIN(), p2, NULL, out, err, sizeof err) < 0);
+	assert_null(out[0]);
+	char arg[600];
+	snprintf(arg, sizeof arg, "path=%s/absent.nii.gz", dir);
+	const char *p3[] = { arg, "optional=true", NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), p3, NULL, out, err, sizeof err),
+			 ARMSTG_EIO);
+	assert_non_null(strstr(err, "absent.nii.gz"));
+	vol_t *v = vol_new(3, 3, 3, 1, DT_F32, LPS);
+	((float *)v->data)[13] = 7.5f;
+	snprintf(arg, sizeof arg, "path=%s/given.nii.gz", dir);
+	assert_int_equal(vol_write_nifti(arg + 5, v, err, sizeof err), 0);
+	const char *p4[] = { arg, "optional=true", NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), p4, NULL, out, err, sizeof err),
+			 0);
+	assert_true(msg_equal(&v->base, out[0]));
+	msg_unref(out[0]);
+	msg_unref(&v->base);
+}
+
 /* the BraTS 2013 manual labels (float32 on disk) as u8, LPS */
 static void test_real_labels(void **state)
 {
@@ -171,6 +208,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_read_and_convert),
 		cmocka_unit_test(test_refusals),
+		cmocka_unit_test(test_optional),
 		cmocka_unit_test(test_conversion_never_silent),
 		cmocka_unit_test(test_real_labels),
 	};
