@@ -1,0 +1,473 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * masseffect: how far the patient's ventricles were pushed away from the
+ * tumour, measured on the images, and how far a grown atlas pushed its own
+ * (issue 25, point 3).  The growth's push depth can then be chosen so that
+ * the simulated mass effect equals the patient's ([tune] score
+ * `shift_error ventricles`, goal min: graphs/armstg.ini).
+ *
+ * Every input lies on ONE grid (the atlas's: the patient's images are
+ * resampled there first by the tumour-to-atlas map); world mm via the affine.
+ *
+ *   c_a   centroid of the atlas ventricles (input `ventricles`)
+ *   t     centroid of the tumour (input `tumour`, atlas space)
+ *   n     (c_a - t) / |c_a - t|: the direction the tumour pushes them
+ *   P     the patient's ventricles: voxels within `search_mm` of the atlas
+ *         ventricles, outside `exclude` (tumour + edema), dark in FLAIR
+ *         (< median - k_flair sigma) and dark in T1 (< median - k_t1 sigma;
+ *         each image that is connected), median and sigma (1.4826 MAD) over
+ *         the brain outside `exclude` (`brain`, else the atlas ventricles'
+ *         neighbourhood of 3 search_mm), 26-connected to such a voxel inside
+ *         the atlas ventricles (sulci and cisterns that do not touch them are
+ *         left out)
+ *   shift patient  = (centroid(P) - c_a) . n   (mm; > 0: away from the tumour)
+ *   shift grown    = (centroid(G) - c_a) . n   G = input `grown` (the atlas
+ *                    ventricles after the growth), when connected
+ *   shift_error    = |shift grown - shift patient|
+ *   dice ventricles = 2 |G n P| / (|G| + |P|): the overlap of the grown
+ *                    atlas's ventricles with the patient's (the [tune] score
+ *                    of the graphs, goal max: a centroid compares whole
+ *                    ventricular systems, and which horns the thresholds
+ *                    find in the patient moves it by more than the mass
+ *                    effect: 8-26 mm along n on the BraTS cases with the
+ *                    semi-automatic masks of bench/pipeline/ventricles.py;
+ *                    the overlap only loses a constant share to them)
+ *
+ * The centroid of the whole ventricular system moves away from a tumour both
+ * when the ventricles are displaced (midline shift) and when the one next to
+ * the tumour is compressed; a symmetric difference in size between atlas and
+ * patient does not move it.  What differs between atlas and patient without
+ * a tumour (shape, a partly segmented horn) is an offset the growth cannot
+ * explain: shift_error then has a floor above 0.
+ *
+ * Table (metric, structure, value, unit): shift patient, shift grown,
+ * shift_error ventricles, volume atlas_ventricles / patient_ventricles (ml),
+ * distance tumour_ventricles (|c_a - t|, mm); with `field` (the growth's
+ * pull field v, grown(x) = atlas(x + v(x))): jac_min growth, the least
+ * det(I + dv/dx) over the grid (central differences in world mm), so a
+ * [tune] over the push depth can drop a growth that folds.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "armstg/plugin.h"
+#include "armstg/volmath.h"
+
+typedef struct {
+	double search_mm, k_flair, k_t1;
+} priv_t;
+
+#define P(f) offsetof(priv_t, f)
+
+static const armstg_param_t params[] = {
+	{ "search_mm", PT_DOUBLE, "10", 0, 100, "mm",
+	  "the patient's ventricles are looked for this far from the atlas's",
+	  NULL, P(search_mm), 0 },
+	{ "k_flair", PT_DOUBLE, "2", 0, 20, "sigma",
+	  "CSF: FLAIR below median - k_flair sigma", NULL, P(k_flair), 0 },
+	{ "k_t1", PT_DOUBLE, "1.5", 0, 20, "sigma",
+	  "CSF: T1 below median - k_t1 sigma", NULL, P(k_t1), 0 },
+};
+
+enum { IN_VENT, IN_TUM, IN_T1, IN_FLAIR, IN_GROWN, IN_EXCL, IN_BRAIN,
+       IN_FIELD };
+
+static const armstg_port_t ins[] = {
+	{ "ventricles", MSG_VOLUME, 0, "atlas ventricle mask (> 0), the grid" },
+	{ "tumour", MSG_VOLUME, 0, "tumour mask in atlas space (> 0)" },
+	{ "t1", MSG_VOLUME, 1, "patient T1 or T1c on the atlas grid" },
+	{ "flair", MSG_VOLUME, 1, "patient FLAIR on the atlas grid" },
+	{ "grown", MSG_VOLUME, 1, "atlas ventricle mask after the growth" },
+	{ "exclude", MSG_VOLUME, 1, "tumour + edema on the atlas grid: "
+				    "never ventricle, not in the statistics" },
+	{ "brain", MSG_VOLUME, 1, "brain mask for the intensity statistics" },
+	{ "field", MSG_VOLUME, 1, "the growth's displacement field (3 "
+				  "components, mm): jac_min growth" },
+};
+
+static const armstg_port_t outs[] = {
+	{ "table", MSG_TABLE, 0, "shift patient/grown, shift_error, volumes, "
+				  "distance (metrics layout)" },
+	{ "patient_ventricles", MSG_VOLUME, 1,
+	  "the patient's ventricles found (u8), when t1 or flair is given" },
+};
+
+typedef struct {
+	armstg_stage_t *st;
+	tab_t *t;
+} ctx_t;
+
+static int row(ctx_t *c, const char *m, const char *s, double v,
+	       const char *u)
+{
+	const armstg_host_t *h = c->st->host;
+	int64_t r = h->tab_add_row(c->t);
+	if (r < 0 || h->tab_set_str(c->t, r, "metric", m) ||
+	    h->tab_set_str(c->t, r, "structure", s) ||
+	    h->tab_set_num(c->t, r, "value", v) ||
+	    h->tab_set_str(c->t, r, "unit", u))
+		return h->fail(c->st, ARMSTG_ENOMEM, "out of memory (table)");
+	return 0;
+}
+
+/* world centroid of v > 0; the count, 0 when empty */
+static int64_t centroid(const vol_t *v, double c[3])
+{
+	double s[3] = { 0, 0, 0 };
+	int64_t n = 0;
+	for (int k = 0; k < v->nz; k++)
+		for (int j = 0; j < v->ny; j++)
+			for (int i = 0; i < v->nx; i++)
+				if (vol_get(v, vol_idx(v, i, j, k)) > 0) {
+					s[0] += i, s[1] += j, s[2] += k;
+					n++;
+				}
+	if (n)
+		vol_to_world(v, s[0] / (double)n, s[1] / (double)n,
+			     s[2] / (double)n, c);
+	return n;
+}
+
+static int cmp_d(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return (x > y) - (x < y);
+}
+
+/* median and 1.4826 MAD of img over sel (n values) */
+static int robust(const vol_t *img, const uint8_t *sel, int64_t n,
+		  double *med, double *sig)
+{
+	int64_t nv = vol_nvox(img), m = 0;
+	double *x = malloc((size_t)(n ? n : 1) * sizeof *x);
+	if (!x)
+		return -1;
+	for (int64_t e = 0; e < nv; e++)
+		if (sel[e])
+			x[m++] = vol_get(img, e);
+	qsort(x, (size_t)m, sizeof *x, cmp_d);
+	*med = x[m / 2];
+	for (int64_t i = 0; i < m; i++)
+		x[i] = fabs(x[i] - *med);
+	qsort(x, (size_t)m, sizeof *x, cmp_d);
+	*sig = 1.4826 * x[m / 2];
+	free(x);
+	return 0;
+}
+
+/* in-place dilation of a 0/1 mask by r mm: alternate 6- and 26-neighbour
+ * steps of one voxel (an octagon-like ball), spacing sp */
+static int dilate(uint8_t *m, int nx, int ny, int nz, const double sp[3],
+		  double r)
+{
+	double h = fmin(sp[0], fmin(sp[1], sp[2]));
+	int steps = (int)floor(r / h + 0.5);
+	int64_t nv = (int64_t)nx * ny * nz;
+	uint8_t *o = malloc((size_t)nv);
+	if (!o)
+		return -1;
+	for (int s = 0; s < steps; s++) {
+		int full = s % 2; /* 0: 6-neighbours, 1: 26 */
+		memcpy(o, m, (size_t)nv);
+		for (int k = 0; k < nz; k++)
+			for (int j = 0; j < ny; j++)
+				for (int i = 0; i < nx; i++) {
+					int64_t e = i + (int64_t)nx * (j + (int64_t)ny * k);
+					if (o[e])
+						continue;
+					int hit = 0;
+					for (int dk = -1; dk <= 1 && !hit; dk++)
+						for (int dj = -1; dj <= 1 && !hit; dj++)
+							for (int di = -1; di <= 1 && !hit; di++) {
+								int a = abs(di) + abs(dj) + abs(dk);
+								if (!a || (!full && a > 1))
+									continue;
+								int ii = i + di, jj = j + dj, kk = k + dk;
+								if (ii < 0 || jj < 0 || kk < 0 || ii >= nx ||
+								    jj >= ny || kk >= nz)
+									continue;
+								hit = o[ii + (int64_t)nx * (jj + (int64_t)ny * kk)];
+							}
+					if (hit)
+						m[e] = 1;
+				}
+	}
+	free(o);
+	return 0;
+}
+
+/* least det(I + dv/dx) of a 3-component field over its grid: central
+ * differences in voxel index, chained through the inverse of the affine's
+ * 3x3 part (world mm); the border voxels are left out */
+static double jac_min(const vol_t *f)
+{
+	double A[16], Ai[16];
+	memcpy(A, f->affine, sizeof A);
+	if (aff_invert(A, Ai))
+		return NAN;
+	int64_t nv = vol_nvox(f);
+	double m = INFINITY;
+	for (int k = 1; k < f->nz - 1; k++)
+		for (int j = 1; j < f->ny - 1; j++)
+			for (int i = 1; i < f->nx - 1; i++) {
+				int64_t e = vol_idx(f, i, j, k);
+				int64_t st3[3] = { 1, f->nx,
+						   (int64_t)f->nx * f->ny };
+				double g[3][3], J[3][3];
+				for (int c = 0; c < 3; c++)
+					for (int a = 0; a < 3; a++)
+						g[c][a] = 0.5 * (vol_get(f, e + st3[a] + c * nv) -
+								 vol_get(f, e - st3[a] + c * nv));
+				/* dv_c/dx_b = sum_a dv_c/di_a * di_a/dx_b */
+				for (int c = 0; c < 3; c++)
+					for (int b = 0; b < 3; b++) {
+						J[c][b] = c == b;
+						for (int a = 0; a < 3; a++)
+							J[c][b] += g[c][a] * Ai[4 * a + b];
+					}
+				double d = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) -
+					   J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
+					   J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+				if (d < m)
+					m = d;
+			}
+	return isfinite(m) ? m : NAN;
+}
+
+static int process(armstg_stage_t *st)
+{
+	const priv_t *p = st->priv;
+	const armstg_host_t *h = st->host;
+	const vol_t *vent = (const vol_t *)st->in[IN_VENT];
+	const vol_t *tum = (const vol_t *)st->in[IN_TUM];
+	static const char *const nm[] = { "ventricles", "tumour", "t1",
+					  "flair", "grown", "exclude",
+					  "brain", "field" };
+	for (int i = 1; i < 8; i++) {
+		const vol_t *v = (const vol_t *)st->in[i];
+		if (!v)
+			continue;
+		if (v->nc != (i == IN_FIELD ? 3 : 1))
+			return h->fail(st, ARMSTG_EINVAL, "input '%s' has %d "
+				       "components: %s is needed", nm[i], v->nc,
+				       i == IN_FIELD ? "a 3-component field"
+						     : "a scalar volume");
+		if (!vol_same_grid(v, vent, 1e-3))
+			return h->fail(st, ARMSTG_EINVAL, "input '%s' is not "
+				       "on the grid of 'ventricles' (%dx%dx%d "
+				       "vs %dx%dx%d, or another affine): "
+				       "resample it first (warp)", nm[i],
+				       v->nx, v->ny, v->nz, vent->nx,
+				       vent->ny, vent->nz);
+	}
+	ctx_t c = { st, h->tab_new() };
+	if (!c.t)
+		return h->fail(st, ARMSTG_ENOMEM, "out of memory (table)");
+	int rc = 0;
+	uint8_t *cand = NULL, *sel = NULL, *pv = NULL;
+	int32_t *queue = NULL;
+	double ca[3], tc[3], sp[3];
+	vol_spacing(vent, sp);
+	double dv = sp[0] * sp[1] * sp[2] / 1000.0; /* ml per voxel */
+	int64_t na = centroid(vent, ca), nt = centroid(tum, tc);
+	if (!na || !nt) {
+		rc = h->fail(st, ARMSTG_EINVAL, "input '%s' is empty: no "
+			     "centroid, no direction of the push",
+			     na ? "tumour" : "ventricles");
+		goto out;
+	}
+	double n[3] = { ca[0] - tc[0], ca[1] - tc[1], ca[2] - tc[2] };
+	double r = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+	if (!(r > 1e-6)) {
+		rc = h->fail(st, ARMSTG_EINVAL, "the tumour and the ventricles "
+			     "have the same centroid: no direction of the "
+			     "push");
+		goto out;
+	}
+	for (int a = 0; a < 3; a++)
+		n[a] /= r;
+	if ((rc = row(&c, "distance", "tumour_ventricles", r, "mm")) ||
+	    (rc = row(&c, "volume", "atlas_ventricles", (double)na * dv,
+		      "ml")))
+		goto out;
+	if (st->in[IN_FIELD]) {
+		double jm = jac_min((const vol_t *)st->in[IN_FIELD]);
+		if ((rc = row(&c, "jac_min", "growth", jm, "")))
+			goto out;
+	}
+	double sg = NAN, sp_ = NAN;
+	if (st->in[IN_GROWN]) {
+		double cg[3];
+		if (centroid((const vol_t *)st->in[IN_GROWN], cg))
+			sg = (cg[0] - ca[0]) * n[0] + (cg[1] - ca[1]) * n[1] +
+			     (cg[2] - ca[2]) * n[2];
+		if ((rc = row(&c, "shift", "grown", sg, "mm")))
+			goto out;
+	}
+	const vol_t *t1 = (const vol_t *)st->in[IN_T1];
+	const vol_t *fl = (const vol_t *)st->in[IN_FLAIR];
+	const vol_t *ex = (const vol_t *)st->in[IN_EXCL];
+	const vol_t *br = (const vol_t *)st->in[IN_BRAIN];
+	if (t1 || fl) {
+		int64_t nv = vol_nvox(vent);
+		cand = malloc((size_t)nv);
+		sel = malloc((size_t)nv);
+		queue = malloc((size_t)nv * sizeof *queue);
+		if (!cand || !sel || !queue) {
+			rc = h->fail(st, ARMSTG_ENOMEM, "out of memory");
+			goto out;
+		}
+		/* search region; the statistics region */
+		for (int64_t e = 0; e < nv; e++)
+			cand[e] = vol_get(vent, e) > 0;
+		memcpy(sel, cand, (size_t)nv);
+		if (dilate(cand, vent->nx, vent->ny, vent->nz, sp,
+			   p->search_mm) ||
+		    (!br && dilate(sel, vent->nx, vent->ny, vent->nz, sp,
+				   3 * p->search_mm))) {
+			rc = h->fail(st, ARMSTG_ENOMEM, "out of memory");
+			goto out;
+		}
+		int64_t ns = 0;
+		for (int64_t e = 0; e < nv; e++) {
+			int s = br ? vol_get(br, e) > 0 : sel[e];
+			s = s && !(ex && vol_get(ex, e) > 0);
+			sel[e] = (uint8_t)s;
+			ns += s;
+		}
+		if (ns < 100) {
+			rc = h->fail(st, ARMSTG_EINVAL, "only %lld voxels for "
+				     "the intensity statistics (brain outside "
+				     "the excluded region)", (long long)ns);
+			goto out;
+		}
+		double mt = 0, stt = 0, mf = 0, sf = 0;
+		if ((t1 && robust(t1, sel, ns, &mt, &stt)) ||
+		    (fl && robust(fl, sel, ns, &mf, &sf))) {
+			rc = h->fail(st, ARMSTG_ENOMEM, "out of memory");
+			goto out;
+		}
+		for (int64_t e = 0; e < nv; e++) {
+			int d = cand[e] && !(ex && vol_get(ex, e) > 0);
+			if (d && t1)
+				d = vol_get(t1, e) < mt - p->k_t1 * stt;
+			if (d && fl)
+				d = vol_get(fl, e) < mf - p->k_flair * sf;
+			cand[e] = (uint8_t)d;
+		}
+		/* keep what is 26-connected to a candidate inside the atlas
+		 * ventricles */
+		vol_t *out = h->vol_new(vent->nx, vent->ny, vent->nz, 1, DT_U8,
+					vent->affine);
+		if (!out) {
+			rc = h->fail(st, ARMSTG_ENOMEM, "out of memory");
+			goto out;
+		}
+		pv = out->data;
+		int64_t qn = 0, qh = 0, np = 0;
+		for (int64_t e = 0; e < nv; e++)
+			if (cand[e] && vol_get(vent, e) > 0) {
+				pv[e] = 1;
+				queue[qn++] = (int32_t)e;
+			}
+		int nx = vent->nx, ny = vent->ny, nz = vent->nz;
+		double s[3] = { 0, 0, 0 };
+		while (qh < qn) {
+			int64_t e = queue[qh++];
+			int i = (int)(e % nx), j = (int)(e / nx % ny),
+			    k = (int)(e / ((int64_t)nx * ny));
+			s[0] += i, s[1] += j, s[2] += k;
+			np++;
+			for (int dk = -1; dk <= 1; dk++)
+				for (int dj = -1; dj <= 1; dj++)
+					for (int di = -1; di <= 1; di++) {
+						int ii = i + di, jj = j + dj,
+						    kk = k + dk;
+						if (ii < 0 || jj < 0 || kk < 0 ||
+						    ii >= nx || jj >= ny ||
+						    kk >= nz)
+							continue;
+						int64_t f = ii + (int64_t)nx *
+							(jj + (int64_t)ny * kk);
+						if (cand[f] && !pv[f]) {
+							pv[f] = 1;
+							queue[qn++] = (int32_t)f;
+						}
+					}
+		}
+		st->out[1] = &out->base;
+		if ((rc = row(&c, "volume", "patient_ventricles",
+			      (double)np * dv, "ml")))
+			goto out;
+		if (np) {
+			double cp[3];
+			vol_to_world(vent, s[0] / (double)np,
+				     s[1] / (double)np, s[2] / (double)np, cp);
+			sp_ = (cp[0] - ca[0]) * n[0] +
+			      (cp[1] - ca[1]) * n[1] + (cp[2] - ca[2]) * n[2];
+		} else {
+			h->log(st, LOG_WARN, "no ventricle found in the "
+			       "patient's images (thresholds median - k "
+			       "sigma): shift patient is NaN");
+		}
+		if ((rc = row(&c, "shift", "patient", sp_, "mm")))
+			goto out;
+		h->log(st, LOG_INFO, "patient ventricles %.1f ml (atlas %.1f "
+		       "ml), shift %.2f mm away from the tumour (%.1f mm "
+		       "from it)%s", (double)np * dv, (double)na * dv, sp_,
+		       r, "");
+	}
+	if (st->in[IN_GROWN] && (t1 || fl)) {
+		const vol_t *gv = (const vol_t *)st->in[IN_GROWN];
+		int64_t ng = 0, np2 = 0, nb = 0, nv = vol_nvox(gv);
+		for (int64_t e = 0; e < nv; e++) {
+			int g = vol_get(gv, e) > 0;
+			ng += g;
+			np2 += pv[e];
+			nb += g && pv[e];
+		}
+		double dice = ng + np2 ? 2.0 * (double)nb / (double)(ng + np2)
+				       : NAN;
+		if ((rc = row(&c, "shift_error", "ventricles", fabs(sg - sp_),
+			      "mm")) ||
+		    (rc = row(&c, "dice", "ventricles", dice, "")))
+			goto out;
+		h->log(st, LOG_INFO, "grown atlas vs patient ventricles: Dice "
+		       "%.4f", dice);
+		h->log(st, LOG_INFO, "grown atlas: shift %.2f mm, patient "
+		       "%.2f mm: error %.2f mm", sg, sp_, fabs(sg - sp_));
+	}
+out:
+	free(cand);
+	free(sel);
+	free(queue);
+	if (rc) {
+		h->msg_unref(&c.t->base);
+		if (st->out[1]) {
+			h->msg_unref(st->out[1]);
+			st->out[1] = NULL;
+		}
+		return rc;
+	}
+	st->out[0] = &c.t->base;
+	return 0;
+}
+
+static const armstg_plugin_t desc = {
+	ARMSTG_PLUGIN_HEADER,
+	.name = "masseffect",
+	.description = "the mass effect the patient shows (how far the "
+		       "ventricles moved away from the tumour, from T1 and "
+		       "FLAIR) and how far a grown atlas moved its own",
+	.version = "1.0",
+	.license = "MIT",
+	ARMSTG_INPUTS(ins),
+	ARMSTG_OUTPUTS(outs),
+	ARMSTG_PARAMS(params),
+	.priv_size = sizeof(priv_t),
+	.devices = DEV_CPU,
+	.process = process,
+};
+ARMSTG_PLUGIN(desc)

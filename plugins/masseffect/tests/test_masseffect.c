@@ -1,0 +1,234 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * masseffect on the phantom, whose true patient ventricles are known
+ * (plugins/phantom: patient_labels 4, 5 are the atlas ventricles moved by
+ * the true field).  Atlas and patient on one grid (both LPS, no
+ * inter-subject deformation), so the atlas ventricles are the patient's
+ * before the tumour.
+ *
+ * Known answers:
+ *   - `grown` = the TRUE patient ventricles: shift grown is the true shift
+ *     of the ventricles' centroid away from the tumour; with mass_effect 5
+ *     it is > 1 mm, with mass_effect 0 below 0.2 mm;
+ *   - shift patient, measured from T1 and FLAIR alone (noise and bias on),
+ *     matches it within 0.5 mm in both cases (shift_error < 0.5 mm);
+ *   - a grown atlas without a push (the atlas ventricles) gives
+ *     shift_error = the true shift (within 0.5 mm), and a lower ventricle
+ *     Dice with the patient's found ventricles than the true ones (the
+ *     [tune] score, goal max);
+ *   - jac_min growth of a linear field is its exact determinant;
+ *   - inputs on another grid and an empty tumour fail with messages naming
+ *     them.
+ */
+#include <math.h>
+
+#include "testutil.h"
+#include "graph.h"
+
+static char dir[] = "/tmp/armstg-masseffect-XXXXXX";
+
+static const char graph_fmt[] =
+	"[graph]\nname = me\n"
+	"[stage phantom]\nplugin = phantom\norientation = LPS\n"
+	"atlas_orientation = LPS\ndeform_mm = 0\nmass_effect = %g\n"
+	"[stage vent]\nplugin = labelmap\nop = select\nlabels = 4,5\n"
+	"volume = phantom.atlas_labels\n"
+	"[stage truth]\nplugin = labelmap\nop = select\nlabels = 4,5\n"
+	"volume = phantom.patient_labels\n"
+	"[stage core]\nplugin = labelmap\nop = select\nlabels = 1,3,4\n"
+	"volume = phantom.patient_tumour\n"
+	"[stage all]\nplugin = labelmap\nop = select\nlabels = nonzero\n"
+	"volume = phantom.patient_tumour\n"
+	"[stage me]\nplugin = masseffect\nventricles = vent.volume\n"
+	"tumour = core.volume\nt1 = phantom.patient_t1\n"
+	"flair = phantom.patient_flair\ngrown = %s\n"
+	"exclude = all.volume\nbrain = phantom.patient_mask\n"
+	"[stage save]\nplugin = h5_sink\npath = me.tsv\ntable = me.table\n";
+
+static double value(const char *out, const char *m, const char *s)
+{
+	char path[1200], line[512];
+	snprintf(path, sizeof path, "%s/me.tsv", out);
+	FILE *f = fopen(path, "r");
+	if (!f)
+		return NAN;
+	double v = NAN;
+	while (fgets(line, sizeof line, f)) {
+		char a[128], b[128], c[128];
+		if (sscanf(line, "%127[^\t]\t%127[^\t]\t%127[^\t\n]", a, b, c) ==
+			    3 && !strcmp(a, m) && !strcmp(b, s))
+			v = strtod(c, NULL);
+	}
+	fclose(f);
+	return v;
+}
+
+static int run(double mass, const char *grown, const char *tag, char *err,
+	       size_t errsize, char *out, size_t outsize)
+{
+	char text[4096], gp[1200];
+	snprintf(text, sizeof text, graph_fmt, mass, grown);
+	snprintf(gp, sizeof gp, "%s/%s.ini", dir, tag);
+	snprintf(out, outsize, "%s/%s", dir, tag);
+	FILE *f = fopen(gp, "w");
+	if (!f)
+		return -1;
+	fputs(text, f);
+	fclose(f);
+	graph_t *g = graph_load(gp, NULL, 0, err, errsize);
+	if (!g)
+		return -1000;
+	run_opts_t o = { .outdir = out, .jobs = 2, .quiet = 1 };
+	int rc = graph_run(g, &o, err, errsize);
+	graph_free(g);
+	return rc;
+}
+
+static int setup(void **state)
+{
+	(void)state;
+	if (!getenv("ARMSTG_PLUGIN_PATH")) {
+		char p[1024];
+		snprintf(p, sizeof p, "%s/plugins", tu_build_dir());
+		setenv("ARMSTG_PLUGIN_PATH", p, 1);
+	}
+	return mkdtemp(dir) ? 0 : -1;
+}
+
+static int teardown(void **state)
+{
+	(void)state;
+	tu_cleanup(dir);
+	return 0;
+}
+
+static void test_known_shift(void **state)
+{
+	(void)state;
+	char err[4096], out[1300];
+	double masses[2] = { 5, 0 }, dice_true = NAN;
+	for (int m = 0; m < 2; m++) {
+		char tag[32];
+		snprintf(tag, sizeof tag, "m%g", masses[m]);
+		if (run(masses[m], "truth.volume", tag, err, sizeof err, out,
+			sizeof out))
+			fail_msg("mass_effect %g: %s", masses[m], err);
+		double sg = value(out, "shift", "grown");
+		double sp = value(out, "shift", "patient");
+		double se = value(out, "shift_error", "ventricles");
+		double vp = value(out, "volume", "patient_ventricles");
+		double va = value(out, "volume", "atlas_ventricles");
+		print_message("mass_effect %g: true shift %.3f mm, measured "
+			      "%.3f mm (error %.3f); ventricles %.1f ml "
+			      "found, atlas %.1f ml\n", masses[m], sg, sp, se,
+			      vp, va);
+		if (masses[m] > 0)
+			assert_true(sg > 1.0);
+		else
+			assert_true(fabs(sg) < 0.2);
+		assert_true(se < 0.5);
+		assert_true(vp > 0.5 * va);
+		if (masses[m] > 0)
+			dice_true = value(out, "dice", "ventricles");
+	}
+	/* no push: the atlas's own ventricles as the grown ones */
+	if (run(5, "vent.volume", "nopush", err, sizeof err, out, sizeof out))
+		fail_msg("%s", err);
+	double sp = value(out, "shift", "patient");
+	double sg = value(out, "shift", "grown");
+	double se = value(out, "shift_error", "ventricles");
+	double dice0 = value(out, "dice", "ventricles");
+	print_message("no push: grown %.3f, patient %.3f, error %.3f mm; "
+		      "ventricle Dice with the patient's found: true "
+		      "ventricles %.4f, atlas ventricles %.4f\n", sg, sp, se,
+		      dice_true, dice0);
+	/* the overlap score prefers the true mass effect to none */
+	assert_true(dice_true > dice0 + 0.02);
+	assert_true(dice_true > 0.8);
+	assert_true(fabs(sg) < 1e-9);
+	assert_true(fabs(se - sp) < 1e-9);
+	assert_true(se > 1.0);
+}
+
+/* jac_min growth of a linear field v = (0.1 x - 0.3 y, 0, 0.2 z) on a 2 mm
+ * LPS grid: det(I + dv/dx) = 1.1 * 1.2 = 1.32 everywhere */
+static void test_jacobian(void **state)
+{
+	(void)state;
+	static const double LPS2[16] = { -2, 0, 0, 10, 0, -2, 0, 30, 0, 0, 2,
+					 -5, 0, 0, 0, 1 };
+	vol_t *a = vol_new(10, 10, 10, 1, DT_U8, LPS2);
+	vol_t *t = vol_new(10, 10, 10, 1, DT_U8, LPS2);
+	vol_t *f = vol_new(10, 10, 10, 3, DT_F32, LPS2);
+	((uint8_t *)a->data)[vol_idx(a, 2, 2, 2)] = 1;
+	((uint8_t *)t->data)[vol_idx(t, 7, 7, 7)] = 1;
+	int64_t nv = vol_nvox(f);
+	for (int k = 0; k < 10; k++)
+		for (int j = 0; j < 10; j++)
+			for (int i = 0; i < 10; i++) {
+				double w[3];
+				vol_to_world(f, i, j, k, w);
+				int64_t e = vol_idx(f, i, j, k);
+				vol_set(f, e, 0.1 * w[0] - 0.3 * w[1]);
+				vol_set(f, e + 2 * nv, 0.2 * w[2]);
+			}
+	const msg_t *in[8] = { &a->base, &t->base, NULL, NULL, NULL, NULL,
+			       NULL, &f->base };
+	msg_t *out[2] = { NULL, NULL };
+	char err[1024];
+	int rc = tu_run(TU_PLUGIN(), NULL, in, out, err, sizeof err);
+	if (rc)
+		fail_msg("%s", err);
+	const tab_t *tb = (const tab_t *)out[0];
+	const tab_col_t *m = tab_col(tb, "metric"), *v = tab_col(tb, "value");
+	double j = NAN, d = NAN;
+	for (int64_t r = 0; r < tb->nrows; r++) {
+		if (!strcmp(m->str[r], "jac_min"))
+			j = v->num[r];
+		if (!strcmp(m->str[r], "distance"))
+			d = v->num[r];
+	}
+	assert_float_equal(j, 1.32, 1e-5);
+	assert_float_equal(d, 2.0 * 5.0 * sqrt(3.0), 1e-9);
+	assert_null(out[1]); /* no images: no patient ventricles */
+	msg_unref(out[0]);
+	msg_unref(&a->base);
+	msg_unref(&t->base);
+	msg_unref(&f->base);
+}
+
+static void test_refusals(void **state)
+{
+	(void)state;
+	vol_t *a = vol_new(8, 8, 8, 1, DT_U8, NULL);
+	vol_t *b = vol_new(8, 8, 9, 1, DT_U8, NULL);
+	vol_t *z = vol_new(8, 8, 8, 1, DT_U8, NULL);
+	((uint8_t *)a->data)[vol_idx(a, 2, 2, 2)] = 1;
+	char err[1024];
+	msg_t *out[2] = { NULL, NULL };
+	const msg_t *in1[8] = { &a->base, &a->base, &b->base, NULL, NULL, NULL,
+				NULL, NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), NULL, in1, out, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "input 't1' is not on the grid"));
+	const msg_t *in2[8] = { &a->base, &z->base, NULL, NULL, NULL, NULL,
+				NULL, NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), NULL, in2, out, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "input 'tumour' is empty"));
+	assert_null(out[0]);
+	assert_null(out[1]);
+	msg_unref(&a->base);
+	msg_unref(&b->base);
+	msg_unref(&z->base);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_known_shift),
+		cmocka_unit_test(test_jacobian),
+		cmocka_unit_test(test_refusals),
+	};
+	return cmocka_run_group_tests(tests, setup, teardown);
+}
