@@ -73,6 +73,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "img/edt.h"
 
 enum { OP_SELECT, OP_PAINT, OP_SPHERE, OP_POINTS };
 enum { OUTLINE_POINTS, OUTLINE_BALLS };
@@ -288,92 +289,6 @@ static double mean_nn(const double *xyz, int64_t n)
 	free(idx);
 	free(cell);
 	return cnt ? sum / (double)cnt : -1;
-}
-
-/* 1-D lower envelope of parabolas (Felzenszwalb & Huttenlocher 2012,
- * algorithm DT(f)): out[q] = min_p h^2 (q-p)^2 + f[p]; f >= LM_BIG/2 marks
- * an absent sample.  v, z: work arrays of n and n+1. */
-static void lower_env(const double *f, double *out, int n, double h,
-		      int *v, double *z)
-{
-	double h2 = h * h;
-	int k = -1;
-	for (int q = 0; q < n; q++) {
-		if (f[q] >= LM_BIG / 2)
-			continue;
-		if (k < 0) {
-			k = 0;
-			v[0] = q;
-			z[0] = -LM_BIG;
-			z[1] = LM_BIG;
-			continue;
-		}
-		double s;
-		for (;;) {
-			int p = v[k];
-			s = ((f[q] + h2 * q * q) - (f[p] + h2 * (double)p * p)) /
-			    (2 * h2 * (q - p));
-			if (s > z[k] || k == 0)
-				break;
-			k--;
-		}
-		if (s <= z[k]) { /* k == 0 and q dominates everywhere */
-			v[0] = q;
-			z[1] = LM_BIG;
-			continue;
-		}
-		k++;
-		v[k] = q;
-		z[k] = s;
-		z[k + 1] = LM_BIG;
-	}
-	if (k < 0) {
-		for (int q = 0; q < n; q++)
-			out[q] = LM_BIG;
-		return;
-	}
-	k = 0;
-	for (int q = 0; q < n; q++) {
-		while (z[k + 1] < q)
-			k++;
-		out[q] = h2 * (double)(q - v[k]) * (q - v[k]) + f[v[k]];
-	}
-}
-
-/* g <- min over the grid of |x-y|^2 + g(y), in place, separable. */
-static int envelope3(double *g, const int dim[3], const double sp[3])
-{
-	int nmax = dim[0] > dim[1] ? dim[0] : dim[1];
-	nmax = dim[2] > nmax ? dim[2] : nmax;
-	double *fb = malloc((size_t)nmax * sizeof *fb);
-	double *ob = malloc((size_t)nmax * sizeof *ob);
-	double *z = malloc(((size_t)nmax + 1) * sizeof *z);
-	int *v = malloc((size_t)nmax * sizeof *v);
-	if (!fb || !ob || !z || !v) {
-		free(fb);
-		free(ob);
-		free(z);
-		free(v);
-		return -1;
-	}
-	int64_t stride[3] = { 1, dim[0], (int64_t)dim[0] * dim[1] };
-	for (int a = 0; a < 3; a++) {
-		int b = a == 0 ? 1 : 0, c = a == 2 ? 1 : 2;
-		for (int jb = 0; jb < dim[b]; jb++)
-			for (int jc = 0; jc < dim[c]; jc++) {
-				int64_t base = jb * stride[b] + jc * stride[c];
-				for (int q = 0; q < dim[a]; q++)
-					fb[q] = g[base + q * stride[a]];
-				lower_env(fb, ob, dim[a], sp[a], v, z);
-				for (int q = 0; q < dim[a]; q++)
-					g[base + q * stride[a]] = ob[q];
-			}
-	}
-	free(fb);
-	free(ob);
-	free(z);
-	free(v);
-	return 0;
 }
 
 /* Does point label l match the selection? */
@@ -627,11 +542,12 @@ static int op_points(armstg_stage_t *st)
 			double w = sqrt(g[e]) - keep;
 			g[e] = w > 0 ? -w * w : 0;
 		} else {
-			g[e] = LM_BIG;
+			g[e] = INFINITY; /* no parabola */
 		}
 	}
 	free(out_o);
-	if (envelope3(g, dim, sp)) {
+	/* g <- min over the grid of |x-y|^2 + g(y) (lib/img, FH 2012) */
+	if (img_dt_sq(g, dim, sp, 1)) {
 		free(g);
 		st->host->msg_unref(&o->base);
 		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");

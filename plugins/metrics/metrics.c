@@ -74,6 +74,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "img/edt.h"
 #include "mtx.h"
 
 enum { IN_PL, IN_AL, IN_FIELD, IN_TRUE, IN_MASK, IN_TUM, IN_ATUM, IN_IMG,
@@ -570,8 +571,8 @@ static int band_select(mctx_t *c, const vol_t *g, const char *what, int side,
 			continue;
 		for (int64_t e = 0; e < n; e++)
 			feat[e] = (uint8_t)(sd == 0 ? t[e] != 0 : t[e] == 0);
-		if ((rc = mtx_edt_sq(feat, g->nx, g->ny, g->nz, sp, c->nthreads,
-				     d2))) {
+		const int dims[3] = { g->nx, g->ny, g->nz };
+		if ((rc = img_edt_sq(feat, dims, sp, c->nthreads, d2))) {
 			rc = c->h->fail(st, rc, "out of memory");
 			goto out;
 		}

@@ -7,8 +7,6 @@
  *   grids          volumes brought onto a reference grid THROUGH WORLD
  *                  COORDINATES (nearest neighbour for labels and masks,
  *                  trilinear for displacement fields)
- *   EDT            exact Euclidean distance transform in mm on grids with
- *                  anisotropic spacing (Felzenszwalb & Huttenlocher 2012)
  *   surfaces       boundary voxels and directed/symmetric surface distances
  *   fields         Jacobian determinant of x -> x + u(x) in world mm
  *
@@ -108,19 +106,7 @@ double mtx_sample_linear(const vol_t *v, int comp, const double p[3]);
 double mtx_sample_nearest(const vol_t *v, int comp, const double p[3],
 			  int *inside);
 
-/* ---- distance transform and surfaces ---- */
-
-/*
- * Exact squared Euclidean distance transform (mm^2) of a binary feature
- * image on an nx*ny*nz grid with orthogonal axes of spacing sp[] mm:
- *     d2[v] = min over f with feat[f] != 0 of sum_c (sp[c] (v_c - f_c))^2
- * (+INFINITY when feat is empty).  Separable lower envelope of parabolas,
- * Felzenszwalb & Huttenlocher, "Distance Transforms of Sampled Functions",
- * Theory of Computing 8 (2012), section 3, with the sample positions scaled
- * by the spacing.  O(n) per line; nthreads OpenMP threads.  ENOMEM.
- */
-int mtx_edt_sq(const uint8_t *feat, int nx, int ny, int nz, const double sp[3],
-	       int nthreads, float *d2);
+/* ---- surfaces (distances by lib/img's exact transform) ---- */
 
 /* Inclusive voxel bounding box; empty when lo[0] > hi[0]. */
 typedef struct mtx_box {

@@ -1,126 +1,15 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Exact Euclidean distance transform in mm, surface distances, quantiles.
- * See mtx.h.
+ * Surface distances (through lib/img's exact distance transform),
+ * quantiles.  See mtx.h.
  */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "armstg/plugin.h"
+#include "img/edt.h"
 #include "mtx.h"
-
-/*
- * One line of the separable transform (Felzenszwalb & Huttenlocher 2012,
- * algorithm DT(f), with sample q at position w*q mm):
- *     d(q) = min_p ( w^2 (q - p)^2 + f(p) )
- * The lower envelope of the parabolas rooted at the finite samples is built
- * left to right; z[k] is where parabola k starts to be the lowest, in index
- * units:  s = ((f(q) + w^2 q^2) - (f(p) + w^2 p^2)) / (2 w^2 (q - p)).
- * Samples with f = +inf have no parabola; a line without finite samples
- * stays +inf.  Scratch: v (int, n), z (double, n+1).
- */
-static void edt_line(const double *f, int n, double w, double *d, int *v,
-		     double *z)
-{
-	double w2 = w * w;
-	int k = -1;
-	for (int q = 0; q < n; q++) {
-		if (isinf(f[q]))
-			continue;
-		if (k < 0) {
-			k = 0;
-			v[0] = q;
-			z[0] = -INFINITY;
-			z[1] = INFINITY;
-			continue;
-		}
-		/* z[0] = -inf, so the loop stops at k = 0 at the latest */
-		double s;
-		for (;;) {
-			int p = v[k];
-			s = ((f[q] + w2 * (double)q * q) -
-			     (f[p] + w2 * (double)p * p)) /
-			    (2 * w2 * (q - p));
-			if (s > z[k])
-				break;
-			k--;
-		}
-		k++;
-		v[k] = q;
-		z[k] = s;
-		z[k + 1] = INFINITY;
-	}
-	if (k < 0) {
-		for (int q = 0; q < n; q++)
-			d[q] = INFINITY;
-		return;
-	}
-	k = 0;
-	for (int q = 0; q < n; q++) {
-		while (z[k + 1] < q)
-			k++;
-		double dq = q - v[k];
-		d[q] = w2 * dq * dq + f[v[k]];
-	}
-}
-
-int mtx_edt_sq(const uint8_t *feat, int nx, int ny, int nz, const double sp[3],
-	       int nthreads, float *d2)
-{
-	int64_t nxy = (int64_t)nx * ny, nvox = nxy * nz;
-	int nmax = nx > ny ? nx : ny;
-	nmax = nz > nmax ? nz : nmax;
-	int fail = 0;
-	if (nthreads < 1)
-		nthreads = 1;
-	for (int64_t e = 0; e < nvox; e++)
-		d2[e] = feat[e] ? 0.0f : INFINITY;
-
-	/* pass c runs along axis c: stride and the two other axes */
-	for (int c = 0; c < 3; c++) {
-		int n = c == 0 ? nx : c == 1 ? ny : nz;
-		int64_t stride = c == 0 ? 1 : c == 1 ? nx : nxy;
-		int64_t nlines = nvox / n;
-		if (n == 1)
-			continue; /* nothing moves along a 1-voxel axis */
-#pragma omp parallel num_threads(nthreads) if (nvox > (1 << 17))
-		{
-			double *f = malloc(sizeof(double) * (size_t)nmax);
-			double *d = malloc(sizeof(double) * (size_t)nmax);
-			double *z = malloc(sizeof(double) * (size_t)(nmax + 1));
-			int *v = malloc(sizeof(int) * (size_t)nmax);
-			if (!f || !d || !z || !v) {
-#pragma omp atomic write
-				fail = 1;
-			}
-#pragma omp for schedule(static)
-			for (int64_t l = 0; l < nlines; l++) {
-				if (!f || !d || !z || !v)
-					continue;
-				int64_t base;
-				if (c == 0)
-					base = l * nx;
-				else if (c == 1)
-					base = (l / nx) * nxy + l % nx;
-				else
-					base = l;
-				for (int q = 0; q < n; q++)
-					f[q] = d2[base + q * stride];
-				edt_line(f, n, sp[c], d, v, z);
-				for (int q = 0; q < n; q++)
-					d2[base + q * stride] = (float)d[q];
-			}
-			free(f);
-			free(d);
-			free(z);
-			free(v);
-		}
-		if (fail)
-			return ARMSTG_ENOMEM;
-	}
-	return 0;
-}
 
 /* ---- quantiles ---- */
 
@@ -227,7 +116,8 @@ static int64_t directed(const int32_t *la, const mtx_lset_t *sa,
 					(uint8_t)is_boundary(lb, sb, n,
 						i + b->lo[0], j + b->lo[1],
 						k + b->lo[2]);
-	if (mtx_edt_sq(feat, bx, by, bz, sp, nthreads, d2)) {
+	const int bn3[3] = { bx, by, bz };
+	if (img_edt_sq(feat, bn3, sp, nthreads, d2)) {
 		free(feat);
 		free(d2);
 		return -1;

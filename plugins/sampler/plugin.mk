@@ -1,3 +1,3 @@
-# sampler: shares the anisotropic distance transform with plugins/levelset
-sampler_EXTRA_SRC := plugins/levelset/ls_edt.c
+# sampler: the distance transform of lib/img
+sampler_LIBS := img
 sampler_CFLAGS := -fvisibility=hidden

@@ -8,7 +8,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
-#include "../levelset/ls_edt.h"
+#include "img/edt.h"
 
 #define PI 3.14159265358979323846
 
@@ -860,8 +860,8 @@ int smp_run(const smp_input_t *in, const smp_params_t *p, smp_result_t *r)
 				  "inside the label volume");
 			goto out;
 		}
-		int e = edt_sq(site, in->nx, in->ny, in->nz, c.h, c.dist,
-			       p->threads);
+		const int dims[3] = { in->nx, in->ny, in->nz };
+		int e = img_edt_sq(site, dims, c.h, p->threads, c.dist);
 		free(site);
 		if (e)
 			goto nomem;

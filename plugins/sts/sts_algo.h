@@ -205,10 +205,6 @@ typedef struct sts_grid {
 	int threads;     /* OpenMP threads (<= 0: 1) */
 } sts_grid_t;
 
-/* Squared Euclidean distance (mm^2) from every voxel to the nearest voxel
- * with f[i] != 0 (Felzenszwalb & Huttenlocher 2012, separable lower
- * envelope of parabolas); INFINITY where f has no such voxel. */
-int sts_edt2(const sts_grid_t *g, const uint8_t *f, float *d2);
 /* out = m dilated / eroded by a ball of radius r mm.  out may be m. */
 int sts_dilate(const sts_grid_t *g, const uint8_t *m, double r_mm,
 	       uint8_t *out);

@@ -1,12 +1,13 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * sts: binary morphology in mm (exact Euclidean distance transform),
+ * sts: binary morphology in mm (lib/img's exact distance transform),
  * geodesic reconstruction, hole filling, connected components.
  */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "img/edt.h"
 #include "sts_algo.h"
 
 static inline int64_t gidx(const sts_grid_t *g, int i, int j, int k)
@@ -17,118 +18,6 @@ static inline int64_t gidx(const sts_grid_t *g, int i, int j, int k)
 static inline int64_t gnvox(const sts_grid_t *g)
 {
 	return (int64_t)g->nx * g->ny * g->nz;
-}
-
-/*
- * 1-D squared distance transform of f (n samples, spacing^2 w) into d:
- * d(q) = min_p w (q-p)^2 + f(p)  (Felzenszwalb & Huttenlocher, Theory of
- * Computing 8, 2012, algorithm DT(f)).  Samples with f = INF are skipped;
- * v, z are scratch (n and n+1).
- */
-static void edt1(const float *f, int n, double w, float *d, int *v, double *z)
-{
-	int k = -1;
-	for (int q = 0; q < n; q++) {
-		if (!isfinite(f[q]))
-			continue;
-		double fq = f[q] + w * (double)q * q;
-		while (k >= 0) {
-			int p = v[k];
-			double s = (fq - (f[p] + w * (double)p * p)) /
-				   (2 * w * (q - p));
-			if (s <= z[k]) {
-				k--;
-				continue;
-			}
-			k++;
-			v[k] = q;
-			z[k] = s;
-			z[k + 1] = INFINITY;
-			break;
-		}
-		if (k < 0) {
-			k = 0;
-			v[0] = q;
-			z[0] = -INFINITY;
-			z[1] = INFINITY;
-		}
-	}
-	if (k < 0) {
-		for (int q = 0; q < n; q++)
-			d[q] = INFINITY;
-		return;
-	}
-	int j = 0;
-	for (int q = 0; q < n; q++) {
-		while (z[j + 1] < q)
-			j++;
-		double dq = q - v[j];
-		d[q] = (float)(w * dq * dq + f[v[j]]);
-	}
-}
-
-int sts_edt2(const sts_grid_t *g, const uint8_t *f, float *d2)
-{
-	int64_t n = gnvox(g);
-	int nx = g->nx, ny = g->ny, nz = g->nz;
-	int nmax = nx > ny ? nx : ny;
-	nmax = nmax > nz ? nmax : nz;
-	for (int64_t i = 0; i < n; i++)
-		d2[i] = f[i] ? 0.0f : INFINITY;
-	int err = 0;
-	double w[3] = { g->sp[0] * g->sp[0], g->sp[1] * g->sp[1],
-			g->sp[2] * g->sp[2] };
-#pragma omp parallel num_threads(g->threads > 0 ? g->threads : 1)
-	{
-		float *in = malloc(sizeof(float) * nmax);
-		float *out = malloc(sizeof(float) * nmax);
-		int *v = malloc(sizeof(int) * nmax);
-		double *z = malloc(sizeof(double) * (nmax + 1));
-		int ok = in && out && v && z;
-		if (!ok) {
-#pragma omp atomic write
-			err = 1;
-		}
-		/* x lines */
-#pragma omp for collapse(2) schedule(static)
-		for (int k = 0; k < nz; k++)
-			for (int j = 0; j < ny; j++) {
-				if (!ok)
-					continue;
-				float *row = d2 + gidx(g, 0, j, k);
-				memcpy(in, row, sizeof(float) * nx);
-				edt1(in, nx, w[0], row, v, z);
-			}
-		/* y lines */
-#pragma omp for collapse(2) schedule(static)
-		for (int k = 0; k < nz; k++)
-			for (int i = 0; i < nx; i++) {
-				if (!ok)
-					continue;
-				for (int j = 0; j < ny; j++)
-					in[j] = d2[gidx(g, i, j, k)];
-				edt1(in, ny, w[1], out, v, z);
-				for (int j = 0; j < ny; j++)
-					d2[gidx(g, i, j, k)] = out[j];
-			}
-		/* z lines */
-#pragma omp for collapse(2) schedule(static)
-		for (int j = 0; j < ny; j++)
-			for (int i = 0; i < nx; i++) {
-				if (!ok)
-					continue;
-				for (int k = 0; k < nz; k++)
-					in[k] = d2[gidx(g, i, j, k)];
-				edt1(in, nz, w[2], out, v, z);
-				for (int k = 0; k < nz; k++)
-					d2[gidx(g, i, j, k)] = out[k];
-			}
-		free(in);
-		free(out);
-		free(v);
-		free(z);
-	}
-	return err ? -2 : 0;
 }
 
 /* Bounding box of m grown by `margin` voxels per axis (clipped). Returns 0
@@ -198,7 +87,8 @@ static int morph(const sts_grid_t *g, const uint8_t *m, double r_mm,
 						   k + lo[2])] != 0;
 				sub[gidx(&sg, i, j, k)] = erode ? !b : b;
 			}
-	int rc = sts_edt2(&sg, sub, d2);
+	const int sdim[3] = { sg.nx, sg.ny, sg.nz };
+	int rc = img_edt_sq(sub, sdim, sg.sp, sg.threads, d2);
 	if (!rc) {
 		float r2 = (float)(r_mm * r_mm);
 		memset(out, 0, (size_t)n);

@@ -1,7 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Kernels of the metrics plugin against brute force: the exact EDT on an
- * anisotropic grid, quantiles, label-set parsing, trilinear sampling.
+ * Kernels of the metrics plugin against brute force: quantiles, label-set
+ * parsing, trilinear sampling (the exact EDT is tested in lib/img/tests).
  */
 #include <stdlib.h>
 
@@ -13,55 +13,6 @@ static double urand(void)
 {
 	rng = rng * 1664525u + 1013904223u;
 	return (rng >> 8) / 16777216.0;
-}
-
-/* EDT vs O(n^2) brute force: random sparse features, spacing (0.7, 1.3,
- * 2.1) mm, a grid with a 1-voxel axis, and an empty feature set */
-static void test_edt_brute(void **state)
-{
-	(void)state;
-	const int dims[3][3] = { { 17, 13, 11 }, { 9, 1, 7 }, { 5, 6, 4 } };
-	const double sp[3] = { 0.7, 1.3, 2.1 };
-	for (int g = 0; g < 3; g++) {
-		int nx = dims[g][0], ny = dims[g][1], nz = dims[g][2];
-		int64_t n = (int64_t)nx * ny * nz;
-		uint8_t *f = calloc((size_t)n, 1);
-		float *d2 = malloc(sizeof(float) * (size_t)n);
-		int nf = 0;
-		for (int64_t e = 0; e < n; e++)
-			if (g < 2 && urand() < 0.02) {
-				f[e] = 1;
-				nf++;
-			}
-		if (g < 2 && !nf)
-			f[n / 2] = 1, nf = 1;
-		assert_int_equal(mtx_edt_sq(f, nx, ny, nz, sp, 2, d2), 0);
-		double worst = 0;
-		for (int64_t e = 0; e < n; e++) {
-			int i = (int)(e % nx), j = (int)(e / nx % ny),
-			    k = (int)(e / ((int64_t)nx * ny));
-			double best = INFINITY;
-			for (int64_t q = 0; q < n; q++) {
-				if (!f[q])
-					continue;
-				double di = sp[0] * (i - (int)(q % nx)),
-				       dj = sp[1] * (j - (int)(q / nx % ny)),
-				       dk = sp[2] * (k - (int)(q / ((int64_t)nx * ny)));
-				double d = di * di + dj * dj + dk * dk;
-				best = d < best ? d : best;
-			}
-			if (isinf(best)) {
-				assert_true(isinf(d2[e]));
-				continue;
-			}
-			double err = fabs(d2[e] - best) / (best + 1);
-			worst = err > worst ? err : worst;
-		}
-		/* float storage: 24-bit mantissa */
-		assert_true(worst < 1e-6);
-		free(f);
-		free(d2);
-	}
 }
 
 static int cmpd(const void *a, const void *b)
@@ -167,7 +118,6 @@ static void test_sample(void **state)
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
-		cmocka_unit_test(test_edt_brute),
 		cmocka_unit_test(test_quantile),
 		cmocka_unit_test(test_lset),
 		cmocka_unit_test(test_sample),

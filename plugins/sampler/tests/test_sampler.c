@@ -9,7 +9,7 @@
 #include <string.h>
 
 #include "testutil.h"
-#include "../../levelset/ls_edt.h"
+#include "img/edt.h"
 #include "../smp_core.h"
 
 #define NX 90
@@ -356,10 +356,11 @@ static void test_adaptive_density(void **state)
 		s2[e] = l != 4;
 		s3[e] = l != 3;
 	}
-	double h[3] = { 1, 1, 1 };
-	assert_int_equal(edt_sq(s1, NX, NY, NZ, h, dv, 1), 0);
-	assert_int_equal(edt_sq(s2, NX, NY, NZ, h, dn, 1), 0);
-	assert_int_equal(edt_sq(s3, NX, NY, NZ, h, dw, 1), 0);
+	const double h[3] = { 1, 1, 1 };
+	const int dims[3] = { NX, NY, NZ };
+	assert_int_equal(img_edt_sq(s1, dims, h, 1, dv), 0);
+	assert_int_equal(img_edt_sq(s2, dims, h, 1, dn), 0);
+	assert_int_equal(img_edt_sq(s3, dims, h, 1, dw), 0);
 	uint8_t *reg = calloc((size_t)nv, 1);
 	int64_t vol_near = 0, vol_deep = 0;
 	for (int64_t e = 0; e < nv; e++) {

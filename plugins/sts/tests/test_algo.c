@@ -2,8 +2,9 @@
 /*
  * sts algorithm pieces against known answers: Savitzky-Golay coefficients,
  * histogram thresholds on a synthetic three-class mixture, the healthy
- * reference of one image given another (sts_cond), exact distance
- * transform, morphology, reconstruction, hole filling, components.
+ * reference of one image given another (sts_cond), morphology (its exact
+ * distance transform is tested in lib/img/tests), reconstruction, hole
+ * filling, components.
  */
 #include <math.h>
 
@@ -352,35 +353,6 @@ static void test_hist_quantised_no_comb(void **state)
 
 /* ---- morphology ---- */
 
-static void test_edt_bruteforce(void **state)
-{
-	(void)state;
-	sts_grid_t g = { 9, 7, 6, { 1.0, 0.7, 2.5 }, 2 };
-	int64_t n = 9 * 7 * 6;
-	uint8_t f[9 * 7 * 6];
-	float d2[9 * 7 * 6];
-	uint32_t r = 99;
-	for (int64_t i = 0; i < n; i++) {
-		r = r * 1664525u + 1013904223u;
-		f[i] = (r >> 24) < 12;
-	}
-	assert_int_equal(sts_edt2(&g, f, d2), 0);
-	for (int64_t a = 0; a < n; a++) {
-		int ai = a % 9, aj = (a / 9) % 7, ak = a / 63;
-		double best = INFINITY;
-		for (int64_t b = 0; b < n; b++) {
-			if (!f[b])
-				continue;
-			double dx = (ai - b % 9) * 1.0,
-			       dy = (aj - (b / 9) % 7) * 0.7,
-			       dz = (ak - b / 63) * 2.5;
-			double d = dx * dx + dy * dy + dz * dz;
-			best = d < best ? d : best;
-		}
-		assert_true(fabs(d2[a] - best) < 1e-4 * (1 + best));
-	}
-}
-
 static void test_morphology(void **state)
 {
 	(void)state;
@@ -478,7 +450,6 @@ int main(void)
 		cmocka_unit_test(test_hist_quantised_no_comb),
 		cmocka_unit_test(test_hist_peak),
 		cmocka_unit_test(test_cond_reference),
-		cmocka_unit_test(test_edt_bruteforce),
 		cmocka_unit_test(test_morphology),
 		cmocka_unit_test(test_reconstruct_and_components),
 	};

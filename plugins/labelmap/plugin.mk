@@ -1,0 +1,2 @@
+# labelmap: the distance transform of lib/img
+labelmap_LIBS := img

@@ -1,0 +1,2 @@
+# metrics: the distance transform of lib/img
+metrics_LIBS := img

@@ -1,0 +1,2 @@
+# sts: the distance transform of lib/img
+sts_LIBS := img
