@@ -31,7 +31,7 @@
  *   labels  'all' every point, 'nonzero' label != 0 (default: tled_cpu's
  *           tumour labels 3, 4, 5 all), or a list ('4', '3-5').
  *   nn      mean distance from each selected point to its nearest
- *           distinct neighbour (uniform grid hash, not O(n^2))
+ *           distinct neighbour (lib/img's k-d tree, not O(n^2))
  *   r       `radius`, or 0.75 nn when 0
  *   c       `close`, or r when 0;  rho = r + c
  *   off     `offset`, or 0.15 nn when -1
@@ -74,6 +74,7 @@
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
 #include "img/edt.h"
+#include "img/kdtree.h"
 
 enum { OP_SELECT, OP_PAINT, OP_SPHERE, OP_POINTS };
 enum { OUTLINE_POINTS, OUTLINE_BALLS };
@@ -175,119 +176,27 @@ static int check_finite(armstg_stage_t *st, const vol_t *v, const char *what)
 
 /* ---------------------------------------------------------------- points */
 
-#define LM_BIG 1e300
-
 /* Mean distance (mm) from each point to its nearest distinct neighbour
- * (duplicates closer than 1e-9 mm are skipped), with a uniform grid hash:
- * cells of about one mean spacing, rings searched outwards until the best
- * distance found is below the ring's guaranteed minimum.  Returns -1 when
- * no point has a distinct neighbour, -2 when out of memory. */
+ * (duplicates closer than 1e-9 mm are skipped), by lib/img's k-d tree.
+ * Returns -1 when no point has a distinct neighbour, -2 when out of
+ * memory. */
 static double mean_nn(const double *xyz, int64_t n)
 {
-	double lo[3], hi[3], ext = 0;
-	for (int a = 0; a < 3; a++) {
-		lo[a] = LM_BIG;
-		hi[a] = -LM_BIG;
-	}
-	for (int64_t i = 0; i < n; i++)
-		for (int a = 0; a < 3; a++) {
-			double x = xyz[3 * i + a];
-			lo[a] = x < lo[a] ? x : lo[a];
-			hi[a] = x > hi[a] ? x : hi[a];
-		}
-	for (int a = 0; a < 3; a++)
-		ext = hi[a] - lo[a] > ext ? hi[a] - lo[a] : ext;
-	if (n < 2 || !(ext > 1e-9))
+	if (n < 2)
 		return -1;
-	double s = ext / ceil(cbrt((double)n));
-	int64_t dim[3], nc = 1;
-	for (int a = 0; a < 3; a++) {
-		dim[a] = (int64_t)floor((hi[a] - lo[a]) / s) + 1;
-		nc *= dim[a];
-	}
-	int64_t *start = calloc((size_t)nc + 1, sizeof *start);
-	int64_t *idx = malloc((size_t)n * sizeof *idx);
-	int64_t *cell = malloc((size_t)n * sizeof *cell);
-	if (!start || !idx || !cell) {
-		free(start);
-		free(idx);
-		free(cell);
+	kdtree_t t;
+	if (kd_build(&t, xyz, n))
 		return -2;
-	}
-	for (int64_t i = 0; i < n; i++) {
-		int64_t c[3];
-		for (int a = 0; a < 3; a++) {
-			c[a] = (int64_t)floor((xyz[3 * i + a] - lo[a]) / s);
-			c[a] = c[a] < 0 ? 0 : c[a] >= dim[a] ? dim[a] - 1 : c[a];
-		}
-		cell[i] = (c[2] * dim[1] + c[1]) * dim[0] + c[0];
-		start[cell[i] + 1]++;
-	}
-	for (int64_t c = 0; c < nc; c++)
-		start[c + 1] += start[c];
-	{
-		int64_t *fill = malloc((size_t)nc * sizeof *fill);
-		if (!fill) {
-			free(start);
-			free(idx);
-			free(cell);
-			return -2;
-		}
-		memcpy(fill, start, (size_t)nc * sizeof *fill);
-		for (int64_t i = 0; i < n; i++)
-			idx[fill[cell[i]]++] = i;
-		free(fill);
-	}
-	int64_t maxdim = dim[0] > dim[1] ? dim[0] : dim[1];
-	maxdim = dim[2] > maxdim ? dim[2] : maxdim;
 	double sum = 0;
 	int64_t cnt = 0;
 	for (int64_t i = 0; i < n; i++) {
-		const double *p = xyz + 3 * i;
-		int64_t c0 = cell[i] % dim[0], c1 = cell[i] / dim[0] % dim[1],
-			c2 = cell[i] / (dim[0] * dim[1]);
-		double best = LM_BIG;
-		for (int64_t k = 0; k <= maxdim; k++) {
-			for (int64_t dz = -k; dz <= k; dz++)
-				for (int64_t dy = -k; dy <= k; dy++)
-					for (int64_t dx = -k; dx <= k; dx++) {
-						int64_t m = llabs(dx) > llabs(dy)
-							? llabs(dx) : llabs(dy);
-						m = llabs(dz) > m ? llabs(dz) : m;
-						if (m != k)
-							continue;
-						int64_t x = c0 + dx, y = c1 + dy,
-							z = c2 + dz;
-						if (x < 0 || y < 0 || z < 0 ||
-						    x >= dim[0] || y >= dim[1] ||
-						    z >= dim[2])
-							continue;
-						int64_t c = (z * dim[1] + y) *
-							dim[0] + x;
-						for (int64_t e = start[c];
-						     e < start[c + 1]; e++) {
-							const double *q =
-								xyz + 3 * idx[e];
-							double d2 =
-							  (p[0] - q[0]) * (p[0] - q[0]) +
-							  (p[1] - q[1]) * (p[1] - q[1]) +
-							  (p[2] - q[2]) * (p[2] - q[2]);
-							if (d2 > 1e-18 && d2 < best)
-								best = d2;
-						}
-					}
-			/* points beyond ring k are > k*s away */
-			if (best <= (double)k * s * (double)k * s)
-				break;
-		}
-		if (best < LM_BIG) {
+		double best = INFINITY;
+		if (kd_nearest_beyond(&t, xyz + 3 * i, 1e-18, &best) >= 0) {
 			sum += sqrt(best);
 			cnt++;
 		}
 	}
-	free(start);
-	free(idx);
-	free(cell);
+	kd_free(&t);
 	return cnt ? sum / (double)cnt : -1;
 }
 

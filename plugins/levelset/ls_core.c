@@ -9,7 +9,7 @@
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
 #include "ls_incl.h"
-#include "ls_kdtree.h"
+#include "img/kdtree.h"
 #include "ls_weno.h"
 
 static inline void vol_to_world_A(const double A[16], double i, double j,

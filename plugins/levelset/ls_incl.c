@@ -8,7 +8,7 @@
 #include <string.h>
 
 #include "armstg/volmath.h"
-#include "ls_kdtree.h"
+#include "img/kdtree.h"
 
 int ls_incl_field(const ls_incl_grid_t *g, double *v)
 {

@@ -13,6 +13,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "img/kdtree.h"
 
 #define NT(n) ((n) > 0 ? (n) : omp_default_threads())
 
@@ -934,88 +935,6 @@ int fimg_jacobian(const fimg_t *u, fimg_t *out, field_jac_stats_t *stats,
 /* scattered points -> dense field                                     */
 /* ------------------------------------------------------------------ */
 
-/* bucket grid over the points' bounding box */
-typedef struct buckets {
-	double lo[3], cell;
-	int n[3];
-	int64_t *start; /* ncell+1 */
-	int64_t *idx;   /* point indices sorted by cell */
-} buckets_t;
-
-static int64_t bucket_of(const buckets_t *b, const double p[3], int cl[3])
-{
-	for (int a = 0; a < 3; a++) {
-		int c = (int)floor((p[a] - b->lo[a]) / b->cell);
-		cl[a] = c;
-	}
-	for (int a = 0; a < 3; a++)
-		if (cl[a] < 0 || cl[a] >= b->n[a])
-			return -1;
-	return ((int64_t)cl[2] * b->n[1] + cl[1]) * b->n[0] + cl[0];
-}
-
-static int buckets_build(buckets_t *b, const double *xyz, int64_t n,
-			 double cell)
-{
-	memset(b, 0, sizeof *b);
-	double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX },
-	       hi[3] = { -DBL_MAX, -DBL_MAX, -DBL_MAX };
-	for (int64_t p = 0; p < n; p++)
-		for (int a = 0; a < 3; a++) {
-			if (xyz[3 * p + a] < lo[a])
-				lo[a] = xyz[3 * p + a];
-			if (xyz[3 * p + a] > hi[a])
-				hi[a] = xyz[3 * p + a];
-		}
-	/* keep the cell count bounded (<= ~2^24) */
-	for (;;) {
-		int64_t tot = 1;
-		for (int a = 0; a < 3; a++) {
-			b->n[a] = (int)floor((hi[a] - lo[a]) / cell) + 1;
-			tot *= b->n[a];
-		}
-		if (tot <= (1 << 24))
-			break;
-		cell *= 1.5;
-	}
-	b->cell = cell;
-	memcpy(b->lo, lo, sizeof lo);
-	int64_t nc = (int64_t)b->n[0] * b->n[1] * b->n[2];
-	b->start = calloc((size_t)nc + 1, sizeof(int64_t));
-	b->idx = malloc(sizeof(int64_t) * (size_t)(n ? n : 1));
-	int64_t *cellof = malloc(sizeof(int64_t) * (size_t)(n ? n : 1));
-	if (!b->start || !b->idx || !cellof) {
-		free(cellof);
-		return ARMSTG_ENOMEM;
-	}
-	for (int64_t p = 0; p < n; p++) {
-		int cl[3];
-		cellof[p] = bucket_of(b, xyz + 3 * p, cl);
-		if (cellof[p] < 0) /* rounding at hi edge */
-			cellof[p] = nc - 1;
-		b->start[cellof[p] + 1]++;
-	}
-	for (int64_t c = 0; c < nc; c++)
-		b->start[c + 1] += b->start[c];
-	int64_t *fill = malloc(sizeof(int64_t) * (size_t)nc);
-	if (!fill) {
-		free(cellof);
-		return ARMSTG_ENOMEM;
-	}
-	memcpy(fill, b->start, sizeof(int64_t) * (size_t)nc);
-	for (int64_t p = 0; p < n; p++)
-		b->idx[fill[cellof[p]]++] = p;
-	free(fill);
-	free(cellof);
-	return 0;
-}
-
-static void buckets_free(buckets_t *b)
-{
-	free(b->start);
-	free(b->idx);
-}
-
 /* cubic smoothstep: 0 for x <= a, 1 for x >= b, C1 in between */
 static double smoothstep(double x, double a, double b)
 {
@@ -1048,8 +967,8 @@ static double smoothstep(double x, double a, double b)
  * nearest node, so the field falls smoothly to zero away from the cloud.
  * Weights are exp(-(r^2 - dmin^2) / 2 sigma^2) (a common factor, which
  * cancels in every normalised moment, avoids underflow far from nodes).
- * dmin is searched within Rs = max(3 sigma, sigma + taper) (3 sigma first,
- * the cheap common case); the fit uses the nodes within
+ * dmin is searched within Rs = max(3 sigma, sigma + taper) (lib/img's
+ * k-d tree for both queries); the fit uses the nodes within
  * min(Rs, dmin + 3 sigma) (relative weight >= exp(-4.5), as the plain 3 sigma
  * cut-off had).  Returns 0 (and out = 0) when no node is within Rs.
  */
@@ -1057,76 +976,76 @@ typedef struct mls_acc {
 	double S0, S1[3], S2[3][3], R0[3], R1[3][3], dmax2;
 } mls_acc_t;
 
-/* visit the nodes within radius R of y: acc NULL -> *rmin2 = min r^2,
- * else accumulate the weighted moments with w = exp(-(r^2 - rmin2) is2) */
-static void mls_scan(const buckets_t *b, const double *xyz, const double *vec,
-		     const double y[3], double R, double is2, double *rmin2,
-		     mls_acc_t *acc)
+/* the nodes within radius R of y (the k-d tree's radius query into the
+ * caller's buffer, grown as needed); *m gets their count.  0 or ENOMEM. */
+typedef struct mls_buf {
+	int64_t *idx, cap;
+} mls_buf_t;
+
+static int mls_near(const kdtree_t *t, const double y[3], double R,
+		    mls_buf_t *B, int64_t *m)
 {
-	const double R2 = R * R;
-	int cl[3];
-	for (int a = 0; a < 3; a++)
-		cl[a] = (int)floor((y[a] - b->lo[a]) / b->cell);
-	int span = (int)ceil(R / b->cell);
-	for (int cz = cl[2] - span; cz <= cl[2] + span; cz++) {
-		if (cz < 0 || cz >= b->n[2])
-			continue;
-		for (int cy = cl[1] - span; cy <= cl[1] + span; cy++) {
-			if (cy < 0 || cy >= b->n[1])
-				continue;
-			for (int cx = cl[0] - span; cx <= cl[0] + span; cx++) {
-				if (cx < 0 || cx >= b->n[0])
-					continue;
-				int64_t c = ((int64_t)cz * b->n[1] + cy) * b->n[0] + cx;
-				for (int64_t t = b->start[c]; t < b->start[c + 1]; t++) {
-					int64_t p = b->idx[t];
-					double q[3] = { xyz[3 * p] - y[0],
-							xyz[3 * p + 1] - y[1],
-							xyz[3 * p + 2] - y[2] };
-					double r2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2];
-					if (r2 > R2)
-						continue;
-					if (!acc) {
-						if (r2 < *rmin2)
-							*rmin2 = r2;
-						continue;
-					}
-					double w = exp(-(r2 - *rmin2) * is2);
-					const double *d = vec + 3 * p;
-					double dn2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-					if (dn2 > acc->dmax2)
-						acc->dmax2 = dn2;
-					acc->S0 += w;
-					for (int a = 0; a < 3; a++) {
-						acc->S1[a] += w * q[a];
-						acc->R0[a] += w * d[a];
-						for (int bb = 0; bb < 3; bb++) {
-							acc->S2[a][bb] += w * q[a] * q[bb];
-							acc->R1[a][bb] += w * q[a] * d[bb];
-						}
-					}
-				}
+	int64_t k = kd_within(t, y, R, B->idx, B->cap);
+	if (k > B->cap) {
+		int64_t cap = k + k / 2 + 64;
+		int64_t *nb = realloc(B->idx, sizeof(int64_t) * (size_t)cap);
+		if (!nb)
+			return ARMSTG_ENOMEM;
+		B->idx = nb;
+		B->cap = cap;
+		k = kd_within(t, y, R, B->idx, B->cap);
+	}
+	*m = k;
+	return 0;
+}
+
+/* accumulate the weighted moments of nodes idx[0..m) with
+ * w = exp(-(r^2 - rmin2) is2) */
+static void mls_sum(const double *xyz, const double *vec, const int64_t *idx,
+		    int64_t m, const double y[3], double is2, double rmin2,
+		    mls_acc_t *acc)
+{
+	for (int64_t t = 0; t < m; t++) {
+		int64_t p = idx[t];
+		double q[3] = { xyz[3 * p] - y[0], xyz[3 * p + 1] - y[1],
+				xyz[3 * p + 2] - y[2] };
+		double r2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2];
+		double w = exp(-(r2 - rmin2) * is2);
+		const double *d = vec + 3 * p;
+		double dn2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+		if (dn2 > acc->dmax2)
+			acc->dmax2 = dn2;
+		acc->S0 += w;
+		for (int a = 0; a < 3; a++) {
+			acc->S1[a] += w * q[a];
+			acc->R0[a] += w * d[a];
+			for (int bb = 0; bb < 3; bb++) {
+				acc->S2[a][bb] += w * q[a] * q[bb];
+				acc->R1[a][bb] += w * q[a] * d[bb];
 			}
 		}
 	}
 }
 
-static int mls_at(const buckets_t *b, const double *xyz, const double *vec,
-		  const double y[3], double sigma, double taper, double out[3])
+/* 1 with out set, 0 (out = 0) when no node is within Rs, ENOMEM */
+static int mls_at(const kdtree_t *t, const double *xyz, const double *vec,
+		  const double y[3], double sigma, double taper,
+		  mls_buf_t *B, double out[3])
 {
 	const double Rs = fmax(3 * sigma, sigma + taper),
 		     is2 = 0.5 / (sigma * sigma);
 	out[0] = out[1] = out[2] = 0;
-	double rmin2 = DBL_MAX;
-	mls_scan(b, xyz, vec, y, 3 * sigma, is2, &rmin2, NULL);
-	if (rmin2 > 9 * sigma * sigma && Rs > 3 * sigma)
-		mls_scan(b, xyz, vec, y, Rs, is2, &rmin2, NULL);
-	if (rmin2 > Rs * Rs)
+	/* the nearest node within Rs (inclusive) */
+	double rmin2 = nextafter(Rs * Rs, INFINITY);
+	if (kd_nearest(t, y, &rmin2) < 0)
 		return 0;
 	const double dmin = sqrt(rmin2);
 	mls_acc_t A;
 	memset(&A, 0, sizeof A);
-	mls_scan(b, xyz, vec, y, fmin(Rs, dmin + 3 * sigma), is2, &rmin2, &A);
+	int64_t nnear;
+	if (mls_near(t, y, fmin(Rs, dmin + 3 * sigma), B, &nnear))
+		return ARMSTG_ENOMEM;
+	mls_sum(xyz, vec, B->idx, nnear, y, is2, rmin2, &A);
 	if (!(A.S0 > 0))
 		return 0;
 	double m[3], md[3], C[3][3], X[3][3];
@@ -1237,46 +1156,65 @@ int field_from_points(const double *xyz, const double *vec, int64_t n,
 	double *res = passes > 1 ? malloc(sizeof(double) * (size_t)n * 3) : NULL;
 	double *fit = passes > 1 ? malloc(sizeof(double) * (size_t)n * 3) : NULL;
 	uint8_t *ok = malloc((size_t)cnv);
-	buckets_t b;
-	int rc = buckets_build(&b, xyz, n, 3 * sigma_mm);
+	kdtree_t t;
+	int rc = kd_build(&t, xyz, n);
 	if (!cv || !ok || rc || (passes > 1 && (!pv || !res || !fit))) {
 		free(cv);
 		free(pv);
 		free(res);
 		free(fit);
 		free(ok);
-		buckets_free(&b);
+		if (!rc)
+			kd_free(&t);
 		return ARMSTG_ENOMEM;
 	}
+	int fail = 0;
 	/* pass k fits vk (pass 0: the values; then the residuals at the
 	 * points) and adds the fit to cv */
 	const double *vk = vec;
 	if (passes > 1)
 		memcpy(res, vec, sizeof(double) * (size_t)n * 3);
-	for (int k = 0; k < passes; k++) {
+	for (int k = 0; k < passes && !fail; k++) {
 		double *dst = k ? pv : cv;
-#pragma omp parallel for num_threads(NT(nthreads)) schedule(dynamic, 64)
-		for (int64_t e = 0; e < cnv; e++) {
-			double p[3] = { (double)(e % cn[0]),
-					(double)(e / cn[0] % cn[1]),
-					(double)(e / ((int64_t)cn[0] * cn[1])) },
-			       y[3];
-			aff_apply(cg.v2w, p, y);
-			int o = mls_at(&b, xyz, vk, y, sigma_mm, taper_mm,
-				       dst + 3 * e);
-			if (!k)
-				ok[e] = (uint8_t)o;
+#pragma omp parallel num_threads(NT(nthreads))
+		{
+			mls_buf_t B = { NULL, 0 };
+#pragma omp for schedule(dynamic, 64)
+			for (int64_t e = 0; e < cnv; e++) {
+				double p[3] = { (double)(e % cn[0]),
+						(double)(e / cn[0] % cn[1]),
+						(double)(e / ((int64_t)cn[0] * cn[1])) },
+				       y[3];
+				aff_apply(cg.v2w, p, y);
+				int o = mls_at(&t, xyz, vk, y, sigma_mm, taper_mm,
+					       &B, dst + 3 * e);
+				if (o < 0) {
+#pragma omp atomic write
+					fail = 1;
+				}
+				if (!k)
+					ok[e] = (uint8_t)(o > 0);
+			}
+			free(B.idx);
 		}
 		if (k)
 			for (int64_t e = 0; e < 3 * cnv; e++)
 				cv[e] += pv[e];
-		if (k + 1 == passes)
+		if (k + 1 == passes || fail)
 			break;
 		/* residuals at the points: r -= S r */
-#pragma omp parallel for num_threads(NT(nthreads)) schedule(dynamic, 64)
-		for (int64_t q = 0; q < n; q++)
-			mls_at(&b, xyz, res, xyz + 3 * q, sigma_mm, taper_mm,
-			       fit + 3 * q);
+#pragma omp parallel num_threads(NT(nthreads))
+		{
+			mls_buf_t B = { NULL, 0 };
+#pragma omp for schedule(dynamic, 64)
+			for (int64_t q = 0; q < n; q++)
+				if (mls_at(&t, xyz, res, xyz + 3 * q, sigma_mm,
+					   taper_mm, &B, fit + 3 * q) < 0) {
+#pragma omp atomic write
+					fail = 1;
+				}
+			free(B.idx);
+		}
 		for (int64_t q = 0; q < 3 * n; q++)
 			res[q] -= fit[q];
 		vk = res;
@@ -1284,7 +1222,12 @@ int field_from_points(const double *xyz, const double *vec, int64_t n,
 	free(pv);
 	free(res);
 	free(fit);
-	buckets_free(&b);
+	kd_free(&t);
+	if (fail) {
+		free(cv);
+		free(ok);
+		return ARMSTG_ENOMEM;
+	}
 	/* trilinear refinement onto the output grid (exact for linear) */
 	int64_t nuns = 0;
 #pragma omp parallel for num_threads(NT(nthreads)) schedule(static) \

@@ -1,2 +1,3 @@
-# warp: field.h is included by the tests as "field.h"
+# warp: field.h is included by the tests as "field.h"; the k-d tree of lib/img
+warp_LIBS := img
 warp_CFLAGS := -Iplugins/warp

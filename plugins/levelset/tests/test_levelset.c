@@ -25,7 +25,7 @@
 
 #include "testutil.h"
 #include "../ls_incl.h"
-#include "../ls_kdtree.h"
+#include "img/kdtree.h"
 
 #define PI 3.14159265358979323846
 

@@ -1,12 +1,14 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * A static 3-D k-d tree over points in world mm (Bentley 1975; Friedman,
- * Bentley and Finkel 1977 for the nearest-neighbour search).  Used by the
- * levelset stage for exact Euclidean distances to the sub-voxel tumour
- * boundary and by the sampler for nearest-node queries.
+ * Bentley and Finkel 1977 for the nearest-neighbour search): the one
+ * neighbour search of the plugins.  levelset: exact Euclidean distances to
+ * the sub-voxel tumour boundary and the inclusion layers' neighbourhoods;
+ * labelmap: nearest distinct neighbours; lib/field: the moving least-squares
+ * supports of field_from_points.
  */
-#ifndef LS_KDTREE_H
-#define LS_KDTREE_H
+#ifndef IMG_KDTREE_H
+#define IMG_KDTREE_H
 
 #include <stdint.h>
 
@@ -30,6 +32,12 @@ void kd_free(kdtree_t *t);
  * within the bound.
  */
 int64_t kd_nearest(const kdtree_t *t, const double q[3], double *best_d2);
+
+/* The same, skipping the points within sqrt(min_d2) of q (inclusive): the
+ * nearest point farther than that, e.g. a point's nearest distinct
+ * neighbour (min_d2 a little above 0). */
+int64_t kd_nearest_beyond(const kdtree_t *t, const double q[3], double min_d2,
+			  double *best_d2);
 
 /* Number of points within distance r of q (inclusive); stops counting at
  * max (>0) when reached. */

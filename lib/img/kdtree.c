@@ -1,5 +1,5 @@
 /* SPDX-License-Identifier: MIT */
-#include "ls_kdtree.h"
+#include "img/kdtree.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -40,8 +40,7 @@ static void select_k(const double *xyz, int64_t *idx, int64_t lo, int64_t hi,
 
 static void build_rec(kdtree_t *t, int64_t lo, int64_t hi)
 {
-	/* explicit stack instead of recursion depth worries: depth is
-	 * log2(n) anyway, recursion is fine */
+	/* recursion depth is log2(n) */
 	if (hi - lo <= 1) {
 		if (hi - lo == 1) {
 			t->axis[lo] = 0;
@@ -116,8 +115,10 @@ static inline double box_d2(const double *b, const double q[3])
 	return s;
 }
 
+/* nearest point to q strictly closer than *best and farther than min_d2
+ * (min_d2 < 0: no exclusion) */
 static void nn_rec(const kdtree_t *t, int64_t lo, int64_t hi,
-		   const double q[3], double *best, int64_t *bi)
+		   const double q[3], double min_d2, double *best, int64_t *bi)
 {
 	while (hi > lo) {
 		int64_t mid = lo + (hi - lo) / 2;
@@ -128,7 +129,7 @@ static void nn_rec(const kdtree_t *t, int64_t lo, int64_t hi,
 		const double *p = t->xyz + 3 * t->idx[mid];
 		double dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
 		double d2 = dx * dx + dy * dy + dz * dz;
-		if (d2 < *best) {
+		if (d2 < *best && d2 > min_d2) {
 			*best = d2;
 			*bi = t->idx[mid];
 		}
@@ -142,7 +143,7 @@ static void nn_rec(const kdtree_t *t, int64_t lo, int64_t hi,
 		} else {
 			nlo = mid + 1, nhi = hi, flo = lo, fhi = mid;
 		}
-		nn_rec(t, nlo, nhi, q, best, bi);
+		nn_rec(t, nlo, nhi, q, min_d2, best, bi);
 		lo = flo;
 		hi = fhi;
 	}
@@ -151,7 +152,15 @@ static void nn_rec(const kdtree_t *t, int64_t lo, int64_t hi,
 int64_t kd_nearest(const kdtree_t *t, const double q[3], double *best_d2)
 {
 	int64_t bi = -1;
-	nn_rec(t, 0, t->n, q, best_d2, &bi);
+	nn_rec(t, 0, t->n, q, -1.0, best_d2, &bi);
+	return bi;
+}
+
+int64_t kd_nearest_beyond(const kdtree_t *t, const double q[3], double min_d2,
+			  double *best_d2)
+{
+	int64_t bi = -1;
+	nn_rec(t, 0, t->n, q, min_d2, best_d2, &bi);
 	return bi;
 }
 
