@@ -15,7 +15,7 @@
 
 #include <stdint.h>
 
-#include "field.h"
+#include "field/field.h"
 
 typedef struct afr_xform {
 	double A[9];   /* row-major 3x3, RAS world */

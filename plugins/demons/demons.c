@@ -79,7 +79,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
-#include "field.h"
+#include "field/field.h"
 
 #define MAX_LEVELS 8
 

@@ -1,4 +1,2 @@
-# demons uses the shared field library of the warp plugin
-demons_EXTRA_SRC := plugins/warp/field.c
-demons_LIBS := img
-demons_CFLAGS := -Iplugins/warp
+# demons: the field library (lib/field) and lib/img beneath it
+demons_LIBS := field img

@@ -1,3 +1,2 @@
-# warp: field.h is included by the tests as "field.h"; the k-d tree of lib/img
-warp_LIBS := img
-warp_CFLAGS := -Iplugins/warp
+# warp: the field library (lib/field) and lib/img beneath it
+warp_LIBS := field img

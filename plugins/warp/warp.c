@@ -33,7 +33,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
-#include "field.h"
+#include "field/field.h"
 
 enum { MODE_RESAMPLE, MODE_COMPOSE, MODE_INVERT, MODE_EXP, MODE_POINTS,
        MODE_JACOBIAN };

@@ -28,7 +28,7 @@
 #include "testutil.h"
 #include "graph.h"
 #include "afr.h"
-#include "field.h"
+#include "field/field.h"
 
 enum { O_FIELD, O_WARPED, O_XFORM, O_TABLE, O_N };
 

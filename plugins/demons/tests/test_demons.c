@@ -9,7 +9,7 @@
 #include <math.h>
 
 #include "testutil.h"
-#include "field.h"
+#include "field/field.h"
 
 enum { IN_FIXED, IN_MOVING, IN_FMASK, IN_MMASK, IN_INIT };
 enum { OUT_FIELD, OUT_WARPED, OUT_TABLE };

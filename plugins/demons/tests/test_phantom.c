@@ -13,7 +13,7 @@
 #include <math.h>
 
 #include "testutil.h"
-#include "field.h"
+#include "field/field.h"
 
 /* phantom output ports (plugins/phantom/phantom.c) */
 static int port(const armstg_plugin_t *d, const char *name)

@@ -7,7 +7,7 @@
 #include <math.h>
 
 #include "testutil.h"
-#include "field.h"
+#include "field/field.h"
 
 enum { IN_VOLUME, IN_FIELD, IN_FIELD2, IN_POINTS, IN_REFERENCE };
 enum { OUT_VOLUME, OUT_FIELD, OUT_TABLE };

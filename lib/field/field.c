@@ -3,7 +3,7 @@
  * field.c: displacement fields and resampling (see field.h for the
  * conventions).  Pure C + OpenMP; no runtime calls.
  */
-#include "field.h"
+#include "field/field.h"
 
 #include <float.h>
 #include <math.h>

@@ -1,11 +1,12 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * field.h: displacement fields and resampling, a small pure-C library shared
- * by the warp and demons plugins (and metrics, report, pipeline).  It never
- * calls the runtime: link it into a plugin with, in plugins/NAME/plugin.mk,
+ * field.h: displacement fields and resampling, a small pure-C library
+ * beneath the warp and demons plugins (lib/field, built on lib/img).  It
+ * never calls the runtime: a plugin links it with, in its plugin.mk,
  *
- *     NAME_EXTRA_SRC := plugins/warp/field.c
- *     NAME_CFLAGS    := -Iplugins/warp
+ *     NAME_LIBS := field img
+ *
+ * and includes "field/field.h".
  *
  * Conventions (msg.h):
  *   - World coordinates are RAS+ mm; every operation goes through the
@@ -38,8 +39,8 @@
  * negative ARMSTG_E* code; those taking err/errsize write a message naming
  * the problem.
  */
-#ifndef ARMSTG_FIELD_H
-#define ARMSTG_FIELD_H
+#ifndef LIB_FIELD_H
+#define LIB_FIELD_H
 
 #include <stddef.h>
 #include <stdint.h>

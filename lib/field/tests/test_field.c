@@ -7,7 +7,7 @@
 #include <math.h>
 
 #include "testutil.h"
-#include "field.h"
+#include "field/field.h"
 
 /* LAS 1.5 mm grid with a small rotation about z (oblique) */
 static void aff_oblique(double A[16], double sp, double ang)
