@@ -13,6 +13,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "img/gauss.h"
 #include "img/kdtree.h"
 
 #define NT(n) ((n) > 0 ? (n) : omp_default_threads())
@@ -515,147 +516,6 @@ int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
 /* Gaussian smoothing                                                  */
 /* ------------------------------------------------------------------ */
 
-/*
- * Discrete Gaussian kernel of variance t = sigma_vox^2 (Lindeberg, "Scale-
- * space for discrete signals", IEEE PAMI 12(3) 1990): k(n) = e^-t I_n(t),
- * I_n the modified Bessel functions.  Unlike the sampled exp(-n^2/2t), its
- * variance is t for every sigma: a sampled Gaussian of sigma 0.375 voxel
- * has an effective sigma of only 0.23 voxel, so coarse pyramid levels
- * were smoothed less than asked.  Bessel values by Miller's backward
- * recurrence I_{n-1} = I_{n+1} + (2n/t) I_n, started 10 sigma (at least
- * 20) beyond the radius and normalised with e^t = I_0 + 2 sum I_n.
- * Truncated at 3 sigma (radius >= 2) and renormalised to sum 1.
- */
-static float *gauss_kernel(double sigma_vox, int *radius)
-{
-	const double t = sigma_vox * sigma_vox;
-	int r = (int)ceil(3.0 * sigma_vox);
-	if (r < 2) /* radius 1 would lose t^2 of the variance t */
-		r = 2;
-	int nmax = r + (int)fmax(20.0, ceil(10.0 * sigma_vox));
-	double *q = calloc((size_t)nmax + 2, sizeof *q);
-	float *k = malloc(sizeof(float) * (2 * r + 1));
-	if (!q || !k) {
-		free(q);
-		free(k);
-		return NULL;
-	}
-	q[nmax] = 1e-30;
-	for (int n = nmax; n > 0; n--) {
-		q[n - 1] = q[n + 1] + (2.0 * n / t) * q[n];
-		if (q[n - 1] > 1e250)
-			for (int m = n - 1; m <= nmax; m++)
-				q[m] *= 1e-250;
-	}
-	double s = q[0];
-	for (int n = 1; n <= r; n++)
-		s += 2 * q[n];
-	for (int n = -r; n <= r; n++)
-		k[n + r] = (float)(q[n < 0 ? -n : n] / s);
-	free(q);
-	*radius = r;
-	return k;
-}
-
-static inline int clampi(int a, int lo, int hi)
-{
-	return a < lo ? lo : a > hi ? hi : a;
-}
-
-static int smooth_axis(float *d, const fgrid_t *g, int axis,
-		       const float *ker, int r, int nthreads)
-{
-	const int nx = g->nx, ny = g->ny, nz = g->nz;
-	int fail = 0;
-	if (axis == 0) {
-#pragma omp parallel num_threads(NT(nthreads))
-		{
-			float *buf = malloc(sizeof(float) * (nx + 2 * r));
-			if (!buf) {
-#pragma omp atomic write
-				fail = 1;
-			}
-#pragma omp for schedule(static)
-			for (int64_t line = 0; line < (int64_t)ny * nz; line++) {
-				if (!buf)
-					continue;
-				float *p = d + line * nx;
-				for (int i = -r; i < nx + r; i++)
-					buf[i + r] = p[clampi(i, 0, nx - 1)];
-				for (int i = 0; i < nx; i++) {
-					float s = 0;
-					for (int t = 0; t <= 2 * r; t++)
-						s += ker[t] * buf[i + t];
-					p[i] = s;
-				}
-			}
-			free(buf);
-		}
-	} else if (axis == 1) {
-#pragma omp parallel num_threads(NT(nthreads))
-		{
-			float *buf = malloc(sizeof(float) * (size_t)nx * ny);
-			if (!buf) {
-#pragma omp atomic write
-				fail = 1;
-			}
-#pragma omp for schedule(static)
-			for (int k = 0; k < nz; k++) {
-				if (!buf)
-					continue;
-				float *p = d + (int64_t)k * nx * ny;
-				memcpy(buf, p, sizeof(float) * (size_t)nx * ny);
-				for (int j = 0; j < ny; j++) {
-					float *o = p + (int64_t)j * nx;
-					for (int i = 0; i < nx; i++)
-						o[i] = 0;
-					for (int t = -r; t <= r; t++) {
-						const float *s =
-							buf + (int64_t)clampi(j + t, 0, ny - 1) * nx;
-						float w = ker[t + r];
-						for (int i = 0; i < nx; i++)
-							o[i] += w * s[i];
-					}
-				}
-			}
-			free(buf);
-		}
-	} else {
-		const int64_t nxy = (int64_t)nx * ny;
-#pragma omp parallel num_threads(NT(nthreads))
-		{
-			float *buf = malloc(sizeof(float) * (size_t)nx * nz);
-			if (!buf) {
-#pragma omp atomic write
-				fail = 1;
-			}
-#pragma omp for schedule(static)
-			for (int j = 0; j < ny; j++) {
-				if (!buf)
-					continue;
-				for (int k = 0; k < nz; k++)
-					memcpy(buf + (int64_t)k * nx,
-					       d + k * nxy + (int64_t)j * nx,
-					       sizeof(float) * nx);
-				for (int k = 0; k < nz; k++) {
-					float *o = d + k * nxy + (int64_t)j * nx;
-					for (int i = 0; i < nx; i++)
-						o[i] = 0;
-					for (int t = -r; t <= r; t++) {
-						const float *s =
-							buf + (int64_t)clampi(k + t, 0, nz - 1) * nx;
-						float w = ker[t + r];
-						for (int i = 0; i < nx; i++)
-							o[i] += w * s[i];
-					}
-				}
-			}
-			free(buf);
-		}
-	}
-	return fail ? ARMSTG_ENOMEM : 0;
-}
-
 int fimg_smooth(fimg_t *f, double sigma_mm, int nthreads)
 {
 	if (!f || !f->d)
@@ -664,23 +524,19 @@ int fimg_smooth(fimg_t *f, double sigma_mm, int nthreads)
 		return 0;
 	const int64_t nv = fgrid_nvox(&f->g);
 	const int dims[3] = { f->g.nx, f->g.ny, f->g.nz };
+	/* lib/img's discrete Gaussian; below 0.05 voxel an axis is left
+	 * alone */
+	double sv[3];
 	for (int a = 0; a < 3; a++) {
-		double sv = sigma_mm / f->g.sp[a];
-		if (sv < 0.05 || dims[a] < 2)
-			continue;
-		int r;
-		float *ker = gauss_kernel(sv, &r);
-		if (!ker)
-			return ARMSTG_ENOMEM;
-		for (int c = 0; c < f->nc; c++) {
-			int rc = smooth_axis(f->d + c * nv, &f->g, a, ker, r,
-					     nthreads);
-			if (rc) {
-				free(ker);
-				return rc;
-			}
-		}
-		free(ker);
+		sv[a] = sigma_mm / f->g.sp[a];
+		if (sv[a] < 0.05)
+			sv[a] = 0;
+	}
+	for (int c = 0; c < f->nc; c++) {
+		int rc = img_gauss_smooth(f->d + c * nv, dims, sv,
+					  IMG_GAUSS_DISCRETE, NT(nthreads));
+		if (rc)
+			return rc;
 	}
 	return 0;
 }

@@ -129,7 +129,8 @@ int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
 
 /*
  * Separable Gaussian smoothing in place, sigma in mm (per axis
- * sigma/spacing voxels; discrete Gaussian kernel e^-t I_n(t), t = sigma^2,
+ * sigma/spacing voxels; lib/img's discrete Gaussian kernel e^-t I_n(t),
+ * t = sigma^2,
  * so the variance is right even below one voxel; truncated at 3 sigma,
  * replicated borders).
  * All components.  sigma <= 0: no-op.  On an oblique grid the kernel

@@ -1,3 +1,3 @@
-# sampler: the distance transform of lib/img
+# sampler: the distance transform and the Gaussian of lib/img
 sampler_LIBS := img
 sampler_CFLAGS := -fvisibility=hidden

@@ -9,6 +9,7 @@
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
 #include "img/edt.h"
+#include "img/gauss.h"
 
 #define PI 3.14159265358979323846
 
@@ -545,69 +546,6 @@ static int run_uniform(ctx_t *c, int64_t npre)
 	return 0;
 }
 
-/* separable Gaussian (index space, sigma_i = sigma/h_i), in place */
-static int gauss3(float *f, int n[3], const double h[3], double sigma,
-		  int threads)
-{
-	int nmax = n[0] > n[1] ? n[0] : n[1];
-	if (n[2] > nmax)
-		nmax = n[2];
-	int64_t nxy = (int64_t)n[0] * n[1], nv = nxy * n[2];
-	int fail = 0;
-	for (int ax = 0; ax < 3; ax++) {
-		double s = sigma / h[ax];
-		if (s < 0.1 || n[ax] == 1)
-			continue;
-		int R = (int)ceil(3 * s);
-		double *kern = malloc((size_t)(2 * R + 1) * sizeof *kern);
-		if (!kern)
-			return -1;
-		double sum = 0;
-		for (int i = -R; i <= R; i++)
-			sum += kern[i + R] = exp(-0.5 * i * i / (s * s));
-		for (int i = 0; i <= 2 * R; i++)
-			kern[i] /= sum;
-		int64_t stride = ax == 0 ? 1 : ax == 1 ? n[0] : nxy;
-		int64_t nl = nv / n[ax];
-#pragma omp parallel num_threads(threads) reduction(| : fail)
-		{
-			double *line = malloc((size_t)nmax * sizeof *line);
-			if (!line) {
-				fail = 1;
-			} else {
-#pragma omp for schedule(static)
-				for (int64_t l = 0; l < nl; l++) {
-					int64_t base = ax == 0 ? l * n[0]
-						: ax == 1 ? (l / n[0]) * nxy +
-								    l % n[0]
-						: l;
-					for (int q = 0; q < n[ax]; q++)
-						line[q] = f[base + q * stride];
-					for (int q = 0; q < n[ax]; q++) {
-						double acc = 0;
-						for (int i = -R; i <= R; i++) {
-							int qq = q + i;
-							qq = qq < 0 ? 0
-							   : qq >= n[ax]
-								   ? n[ax] - 1
-								   : qq;
-							acc += kern[i + R] *
-							       line[qq];
-						}
-						f[base + q * stride] =
-							(float)acc;
-					}
-				}
-			}
-			free(line);
-		}
-		free(kern);
-		if (fail)
-			return -1;
-	}
-	return 0;
-}
-
 /* largest |eigenvalue| of a symmetric 3x3 (trigonometric solution,
  * Smith, CACM 4(4) 1961) */
 static double max_abs_eig(double a, double b, double cc, double d, double e,
@@ -654,7 +592,15 @@ static int run_adaptive(ctx_t *c, int64_t npre)
 	if (!sm || !feat)
 		goto out;
 	memcpy(sm, in->image, (size_t)nv * sizeof *sm);
-	if (gauss3(sm, n, c->h, p->sigma, p->threads))
+	/* lib/img's sampled Gaussian, sigma_i = sigma / h_i voxels (axes
+	 * below 0.1 voxel left alone) */
+	double sv[3];
+	for (int a = 0; a < 3; a++) {
+		sv[a] = p->sigma / c->h[a];
+		if (sv[a] < 0.1)
+			sv[a] = 0;
+	}
+	if (img_gauss_smooth(sm, n, sv, IMG_GAUSS_SAMPLED, p->threads))
 		goto out;
 	/* feature: largest |second directional derivative| (Hessian of the
 	 * smoothed image by central differences, per mm^2) */

@@ -1,0 +1,178 @@
+/* SPDX-License-Identifier: MIT */
+/* Separable Gaussian smoothing (see gauss.h). */
+#include "img/gauss.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "armstg/plugin.h"
+
+/*
+ * Discrete kernel: I_n(t) by Miller's backward recurrence
+ * I_{n-1} = I_{n+1} + (2n/t) I_n, started 10 sigma (at least 20) beyond
+ * the radius, rescaled against overflow, normalised over the truncated
+ * support (which is e^t (I_0 + 2 sum I_n) up to the tail).
+ */
+static int discrete(double sigma_vox, double *k, int r)
+{
+	const double t = sigma_vox * sigma_vox;
+	int nmax = r + (int)fmax(20.0, ceil(10.0 * sigma_vox));
+	double *q = calloc((size_t)nmax + 2, sizeof *q);
+	if (!q)
+		return -1;
+	q[nmax] = 1e-30;
+	for (int n = nmax; n > 0; n--) {
+		q[n - 1] = q[n + 1] + (2.0 * n / t) * q[n];
+		if (q[n - 1] > 1e250)
+			for (int m = n - 1; m <= nmax; m++)
+				q[m] *= 1e-250;
+	}
+	double s = q[0];
+	for (int n = 1; n <= r; n++)
+		s += 2 * q[n];
+	for (int n = -r; n <= r; n++)
+		k[n + r] = q[n < 0 ? -n : n] / s;
+	free(q);
+	return 0;
+}
+
+double *img_gauss_kernel(double sigma_vox, int kind, int *radius)
+{
+	if (!(sigma_vox > 0))
+		return NULL;
+	int r = (int)ceil(3.0 * sigma_vox);
+	if (kind == IMG_GAUSS_DISCRETE && r < 2)
+		r = 2; /* radius 1 would lose t^2 of the variance t */
+	double *k = malloc(sizeof(double) * (size_t)(2 * r + 1));
+	if (!k)
+		return NULL;
+	if (kind == IMG_GAUSS_DISCRETE) {
+		if (discrete(sigma_vox, k, r)) {
+			free(k);
+			return NULL;
+		}
+	} else {
+		double sum = 0;
+		for (int i = -r; i <= r; i++)
+			sum += k[i + r] = exp(-0.5 * i * i /
+					      (sigma_vox * sigma_vox));
+		for (int i = 0; i <= 2 * r; i++)
+			k[i] /= sum;
+	}
+	*radius = r;
+	return k;
+}
+
+static inline int clampi(int a, int lo, int hi)
+{
+	return a < lo ? lo : a > hi ? hi : a;
+}
+
+/* along i: each row through a padded copy */
+static int pass_x(float *d, const int n[3], const double *ker, int r,
+		  int threads)
+{
+	const int nx = n[0];
+	const int64_t nrows = (int64_t)n[1] * n[2];
+	int fail = 0;
+#pragma omp parallel num_threads(threads)
+	{
+		double *buf = malloc(sizeof(double) * (size_t)(nx + 2 * r));
+		if (!buf) {
+#pragma omp atomic write
+			fail = 1;
+		}
+#pragma omp for schedule(static)
+		for (int64_t row = 0; row < nrows; row++) {
+			if (!buf)
+				continue;
+			float *p = d + row * nx;
+			for (int i = -r; i < nx + r; i++)
+				buf[i + r] = p[clampi(i, 0, nx - 1)];
+			for (int i = 0; i < nx; i++) {
+				double s = 0;
+				for (int t = 0; t <= 2 * r; t++)
+					s += ker[t] * buf[i + t];
+				p[i] = (float)s;
+			}
+		}
+		free(buf);
+	}
+	return fail;
+}
+
+/*
+ * Along j (axis 1) or k (axis 2): whole rows of nx voxels at a time (the
+ * inner loop runs along i, contiguous).  For each plane (k fixed for axis
+ * 1, j fixed for axis 2) the m = n[axis] rows are copied to buf, then each
+ * output row is the kernel-weighted sum of the clamped input rows.
+ */
+static int pass_rows(float *d, const int n[3], int axis, const double *ker,
+		     int r, int threads)
+{
+	const int nx = n[0], m = n[axis];
+	const int nplanes = axis == 1 ? n[2] : n[1];
+	const int64_t nxy = (int64_t)n[0] * n[1];
+	/* row q of plane l starts at d + base(l) + q * step */
+	const int64_t step = axis == 1 ? nx : nxy;
+	int fail = 0;
+#pragma omp parallel num_threads(threads)
+	{
+		float *buf = malloc(sizeof(float) * (size_t)nx * m);
+		double *acc = malloc(sizeof(double) * (size_t)nx);
+		const int ok = buf && acc;
+		if (!ok) {
+#pragma omp atomic write
+			fail = 1;
+		}
+#pragma omp for schedule(static)
+		for (int l = 0; l < nplanes; l++) {
+			if (!ok)
+				continue;
+			float *base = d + (axis == 1 ? (int64_t)l * nxy
+						     : (int64_t)l * nx);
+			for (int q = 0; q < m; q++)
+				memcpy(buf + (int64_t)q * nx, base + q * step,
+				       sizeof(float) * nx);
+			for (int q = 0; q < m; q++) {
+				for (int i = 0; i < nx; i++)
+					acc[i] = 0;
+				for (int t = -r; t <= r; t++) {
+					const float *s =
+						buf + (int64_t)clampi(q + t, 0, m - 1) * nx;
+					const double w = ker[t + r];
+					for (int i = 0; i < nx; i++)
+						acc[i] += w * s[i];
+				}
+				float *o = base + q * step;
+				for (int i = 0; i < nx; i++)
+					o[i] = (float)acc[i];
+			}
+		}
+		free(buf);
+		free(acc);
+	}
+	return fail;
+}
+
+int img_gauss_smooth(float *d, const int n[3], const double sigma_vox[3],
+		     int kind, int threads)
+{
+	if (threads < 1)
+		threads = 1;
+	for (int a = 0; a < 3; a++) {
+		if (!(sigma_vox[a] > 0) || n[a] < 2)
+			continue;
+		int r;
+		double *ker = img_gauss_kernel(sigma_vox[a], kind, &r);
+		if (!ker)
+			return ARMSTG_ENOMEM;
+		int fail = a == 0 ? pass_x(d, n, ker, r, threads)
+				  : pass_rows(d, n, a, ker, r, threads);
+		free(ker);
+		if (fail)
+			return ARMSTG_ENOMEM;
+	}
+	return 0;
+}
