@@ -15,6 +15,7 @@
 #include "armstg/volmath.h"
 #include "img/gauss.h"
 #include "img/kdtree.h"
+#include "img/sample.h"
 
 #define NT(n) ((n) > 0 ? (n) : omp_default_threads())
 
@@ -77,10 +78,25 @@ int fgrid_same(const fgrid_t *a, const fgrid_t *b, double tol)
 	return 1;
 }
 
-static inline int inside_c(const fgrid_t *g, const double c[3])
+/* lib/img's stencil on grid g at continuous voxel index c */
+static inline int lin_at(const fgrid_t *g, const double c[3], int edge,
+			 img_lin_t *s)
 {
-	return c[0] >= -0.5 && c[0] <= g->nx - 0.5 && c[1] >= -0.5 &&
-	       c[1] <= g->ny - 0.5 && c[2] >= -0.5 && c[2] <= g->nz - 0.5;
+	const int n[3] = { g->nx, g->ny, g->nz };
+	return img_lin_at(n, c, edge, s);
+}
+
+/* trilinear value of one float plane, as float */
+static inline float lin_eval(const float *d, const img_lin_t *s)
+{
+	return (float)img_lin_f32(d, s);
+}
+
+/* nearest voxel (ITK's extent rule, no tolerance); 0 outside */
+static inline int near_at(const fgrid_t *g, const double c[3], int64_t *o)
+{
+	const int n[3] = { g->nx, g->ny, g->nz };
+	return img_near_at(n, c, 0, o);
 }
 
 double fgrid_overlap(const fgrid_t *a, const fgrid_t *b)
@@ -94,8 +110,9 @@ double fgrid_overlap(const fgrid_t *a, const fgrid_t *b)
 				double p[3] = { i, j, k }, w[3], c[3];
 				aff_apply(a->v2w, p, w);
 				aff_apply(b->w2v, w, c);
+				int64_t o;
 				n++;
-				in += inside_c(b, c);
+				in += near_at(b, c, &o);
 			}
 	return n ? (double)in / (double)n : 0;
 }
@@ -280,147 +297,13 @@ int field_vol_all_zero(const vol_t *v)
 /* interpolation kernels                                               */
 /* ------------------------------------------------------------------ */
 
-/* Axis set-up for "inside" sampling: 0 when c is outside [-0.5, n-0.5]. */
-#define FIELD_INLINE static inline __attribute__((always_inline))
-
-FIELD_INLINE int ax_in(double c, int n, int *a, int *b, float *t)
-{
-	if (!(c >= -0.5 && c <= n - 0.5))
-		return 0;
-	if (c < 0) {
-		*a = *b = 0;
-		*t = 0;
-		return 1;
-	}
-	int i = (int)c; /* c >= 0: truncation is floor, no libm call */
-	if (i >= n - 1) {
-		*a = *b = n - 1;
-		*t = 0;
-	} else {
-		*a = i;
-		*b = i + 1;
-		*t = (float)(c - i);
-	}
-	return 1;
-}
-
-/* Clamped axis set-up: always succeeds. */
-FIELD_INLINE void ax_clamp(double c, int n, int *a, int *b, float *t)
-{
-	if (!(c > 0)) { /* also NaN */
-		*a = *b = 0;
-		*t = 0;
-		return;
-	}
-	if (c >= n - 1) {
-		*a = *b = n - 1;
-		*t = 0;
-		return;
-	}
-	int i = (int)c; /* c > 0: truncation is floor */
-	*a = i;
-	*b = i + 1;
-	*t = (float)(c - i);
-}
-
-typedef struct stencil {
-	int64_t o[8];
-	float w[8];
-} stencil_t;
-
-FIELD_INLINE void stencil_make(const fgrid_t *g, int i0, int i1, float ti,
-				int j0, int j1, float tj, int k0, int k1,
-				float tk, stencil_t *s)
-{
-	int64_t nx = g->nx, nxy = (int64_t)g->nx * g->ny;
-	int64_t r00 = j0 * nx + k0 * nxy, r10 = j1 * nx + k0 * nxy,
-		r01 = j0 * nx + k1 * nxy, r11 = j1 * nx + k1 * nxy;
-	s->o[0] = r00 + i0;
-	s->o[1] = r00 + i1;
-	s->o[2] = r10 + i0;
-	s->o[3] = r10 + i1;
-	s->o[4] = r01 + i0;
-	s->o[5] = r01 + i1;
-	s->o[6] = r11 + i0;
-	s->o[7] = r11 + i1;
-	float ui = 1 - ti, uj = 1 - tj, uk = 1 - tk;
-	s->w[0] = ui * uj * uk;
-	s->w[1] = ti * uj * uk;
-	s->w[2] = ui * tj * uk;
-	s->w[3] = ti * tj * uk;
-	s->w[4] = ui * uj * tk;
-	s->w[5] = ti * uj * tk;
-	s->w[6] = ui * tj * tk;
-	s->w[7] = ti * tj * tk;
-}
-
-FIELD_INLINE float stencil_eval(const float *d, const stencil_t *s)
-{
-	return s->w[0] * d[s->o[0]] + s->w[1] * d[s->o[1]] +
-	       s->w[2] * d[s->o[2]] + s->w[3] * d[s->o[3]] +
-	       s->w[4] * d[s->o[4]] + s->w[5] * d[s->o[5]] +
-	       s->w[6] * d[s->o[6]] + s->w[7] * d[s->o[7]];
-}
-
-FIELD_INLINE void stencil_clamp(const fgrid_t *g, const double c[3],
-				 stencil_t *s)
-{
-	int i0, i1, j0, j1, k0, k1;
-	float ti, tj, tk;
-	ax_clamp(c[0], g->nx, &i0, &i1, &ti);
-	ax_clamp(c[1], g->ny, &j0, &j1, &tj);
-	ax_clamp(c[2], g->nz, &k0, &k1, &tk);
-	stencil_make(g, i0, i1, ti, j0, j1, tj, k0, k1, tk, s);
-}
-
-/* 0 when outside */
-FIELD_INLINE int stencil_in(const fgrid_t *g, const double c[3],
-			     stencil_t *s)
-{
-	int i0, i1, j0, j1, k0, k1;
-	float ti, tj, tk;
-	if (!ax_in(c[0], g->nx, &i0, &i1, &ti) ||
-	    !ax_in(c[1], g->ny, &j0, &j1, &tj) ||
-	    !ax_in(c[2], g->nz, &k0, &k1, &tk))
-		return 0;
-	stencil_make(g, i0, i1, ti, j0, j1, tj, k0, k1, tk, s);
-	return 1;
-}
-
 float fimg_sample_clamp(const fimg_t *f, int c, const double w[3])
 {
 	double v[3];
-	stencil_t s;
+	img_lin_t s;
 	aff_apply(f->g.w2v, w, v);
-	stencil_clamp(&f->g, v, &s);
-	return stencil_eval(f->d + (int64_t)c * fgrid_nvox(&f->g), &s);
-}
-
-/* per-label linear: label with the largest summed weight among the 8 */
-static inline float stencil_label(const float *d, const stencil_t *s)
-{
-	float lab[8], wt[8];
-	int n = 0;
-	for (int q = 0; q < 8; q++) {
-		if (s->w[q] <= 0)
-			continue;
-		float l = d[s->o[q]];
-		int m = 0;
-		while (m < n && lab[m] != l)
-			m++;
-		if (m == n) {
-			lab[n] = l;
-			wt[n++] = 0;
-		}
-		wt[m] += s->w[q];
-	}
-	if (!n) /* all weights zero cannot happen (they sum to 1) */
-		return d[s->o[0]];
-	int best = 0;
-	for (int m = 1; m < n; m++)
-		if (wt[m] > wt[best] + 1e-6f)
-			best = m;
-	return lab[best];
+	lin_at(&f->g, v, IMG_EDGE_CLAMP, &s);
+	return lin_eval(f->d + (int64_t)c * fgrid_nvox(&f->g), &s);
 }
 
 /* M = A*B restricted to 3x4 */
@@ -463,12 +346,12 @@ int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
 						d[2] = u->d[e + 2 * nvu];
 					} else {
 						double w[3], cu[3];
-						stencil_t su;
+						img_lin_t su;
 						aff_apply(dg->v2w, p, w);
 						aff_apply(u->g.w2v, w, cu);
-						stencil_clamp(&u->g, cu, &su);
+						lin_at(&u->g, cu, IMG_EDGE_CLAMP, &su);
 						for (int q = 0; q < 3; q++)
-							d[q] = stencil_eval(
+							d[q] = lin_eval(
 								u->d + q * nvu, &su);
 					}
 					double dv[3];
@@ -478,25 +361,18 @@ int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
 					c[2] += dv[2];
 				}
 				if (interp == FIELD_NEAREST) {
-					if (!inside_c(sg, c)) {
+					int64_t o;
+					if (!near_at(sg, c, &o)) {
 						for (int q = 0; q < nc; q++)
 							dst->d[e + q * nvd] = outside;
 						continue;
 					}
-					/* c >= -0.5: truncation of c + 0.5 is
-					 * rounding */
-					int a = (int)(c[0] + 0.5), b = (int)(c[1] + 0.5),
-					    cc = (int)(c[2] + 0.5);
-					a = a < 0 ? 0 : a >= sg->nx ? sg->nx - 1 : a;
-					b = b < 0 ? 0 : b >= sg->ny ? sg->ny - 1 : b;
-					cc = cc < 0 ? 0 : cc >= sg->nz ? sg->nz - 1 : cc;
-					int64_t o = ((int64_t)cc * sg->ny + b) * sg->nx + a;
 					for (int q = 0; q < nc; q++)
 						dst->d[e + q * nvd] = src->d[o + q * nvs];
 					continue;
 				}
-				stencil_t s;
-				if (!stencil_in(sg, c, &s)) {
+				img_lin_t s;
+				if (!lin_at(sg, c, IMG_EDGE_VOXEL, &s)) {
 					for (int q = 0; q < nc; q++)
 						dst->d[e + q * nvd] = outside;
 					continue;
@@ -504,8 +380,8 @@ int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
 				for (int q = 0; q < nc; q++)
 					dst->d[e + q * nvd] =
 						interp == FIELD_LABEL
-							? stencil_label(src->d + q * nvs, &s)
-							: stencil_eval(src->d + q * nvs, &s);
+							? img_lin_label_f32(src->d + q * nvs, &s)
+							: lin_eval(src->d + q * nvs, &s);
 			}
 		}
 	}
@@ -570,11 +446,11 @@ int fimg_compose(const fimg_t *outer, const fimg_t *inner, fimg_t *out,
 				c[0] += dv[0];
 				c[1] += dv[1];
 				c[2] += dv[2];
-				stencil_t s;
-				stencil_clamp(og, c, &s);
+				img_lin_t s;
+				lin_at(og, c, IMG_EDGE_CLAMP, &s);
 				for (int q = 0; q < 3; q++)
 					out->d[e + q * nv] = (float)(
-						d[q] + stencil_eval(outer->d + q * nvo, &s));
+						d[q] + lin_eval(outer->d + q * nvo, &s));
 			}
 	return 0;
 }
@@ -658,11 +534,11 @@ int fimg_invert(const fimg_t *u, fimg_t *out, int max_iter, double tol_mm,
 		int i = (int)(e % og->nx), j = (int)(e / og->nx % og->ny),
 		    k = (int)(e / ((int64_t)og->nx * og->ny));
 		double p[3] = { i, j, k }, c[3];
-		stencil_t s;
+		img_lin_t s;
 		aff_apply(M, p, c);
-		stencil_clamp(ug, c, &s);
+		lin_at(ug, c, IMG_EDGE_CLAMP, &s);
 		for (int q = 0; q < 3; q++)
-			out->d[e + q * nv] = -stencil_eval(u->d + q * nvu, &s);
+			out->d[e + q * nv] = -lin_eval(u->d + q * nvu, &s);
 	}
 
 
@@ -683,11 +559,11 @@ int fimg_invert(const fimg_t *u, fimg_t *out, int max_iter, double tol_mm,
 			c[0] += dv[0];
 			c[1] += dv[1];
 			c[2] += dv[2];
-			stencil_t s;
-			stencil_clamp(ug, c, &s);
+			img_lin_t s;
+			lin_at(ug, c, IMG_EDGE_CLAMP, &s);
 			double r2 = 0;
 			for (int q = 0; q < 3; q++) {
-				double uq = stencil_eval(u->d + q * nvu, &s);
+				double uq = lin_eval(u->d + q * nvu, &s);
 				double r = w[q] + uq;
 				r2 += r * r;
 				nxt.d[e + q * nv] = (float)(-uq);
@@ -1094,19 +970,12 @@ int field_from_points(const double *xyz, const double *vec, int64_t n,
 				int64_t e = ((int64_t)k * g->ny + j) * g->nx + i;
 				double c[3] = { (double)i / f, (double)j / f,
 						(double)k / f };
-				int a0, a1, b0, b1, c0, c1;
-				float ta, tb, tc;
-				ax_clamp(c[0], cn[0], &a0, &a1, &ta);
-				ax_clamp(c[1], cn[1], &b0, &b1, &tb);
-				ax_clamp(c[2], cn[2], &c0, &c1, &tc);
-				stencil_t s;
-				stencil_make(&cg, a0, a1, ta, b0, b1, tb, c0, c1, tc, &s);
-				for (int q = 0; q < 3; q++) {
-					double v = 0;
-					for (int t = 0; t < 8; t++)
-						v += s.w[t] * cv[3 * s.o[t] + q];
-					out->d[e + q * nv] = (float)v;
-				}
+				img_lin_t s;
+				double v[3];
+				img_lin_at(cn, c, IMG_EDGE_CLAMP, &s);
+				img_lin_f64n(cv, 3, &s, v);
+				for (int q = 0; q < 3; q++)
+					out->d[e + q * nv] = (float)v[q];
 				int64_t nn = ((int64_t)lround(c[2]) * cn[1] +
 					      lround(c[1])) * cn[0] + lround(c[0]);
 				if (!ok[nn])

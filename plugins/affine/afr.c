@@ -9,6 +9,8 @@
 #include <string.h>
 
 #include "afr.h"
+#include "armstg/volmath.h"
+#include "img/sample.h"
 
 void afr_identity(afr_xform_t *T)
 {
@@ -68,49 +70,23 @@ static inline double dbspl3(double u)
 }
 
 /*
- * Trilinear sample of world point y in image f (ITK's rule, as field.h: a
- * point is inside when every continuous index lies in [-0.5, n-0.5];
- * neighbours clamped to the edge).  Writes nc values; returns 0 outside.
+ * Trilinear sample of world point y in image f (lib/img's stencil with
+ * ITK's rule, as field.h: a point is inside when every continuous index
+ * lies in [-0.5, n-0.5]; neighbours clamped to the edge).  Writes nc
+ * values; returns 0 outside.
  */
 static inline int sample_lin(const fimg_t *f, const double y[3], float *out)
 {
 	const fgrid_t *g = &f->g;
-	const double *W = g->w2v;
-	double ci[3];
 	const int n[3] = { g->nx, g->ny, g->nz };
-	int i0[3], i1[3];
-	double w[3];
-	for (int a = 0; a < 3; a++) {
-		ci[a] = W[4 * a] * y[0] + W[4 * a + 1] * y[1] +
-			W[4 * a + 2] * y[2] + W[4 * a + 3];
-		if (!(ci[a] >= -0.5) || !(ci[a] <= n[a] - 0.5))
-			return 0;
-		double fl = floor(ci[a]);
-		w[a] = ci[a] - fl;
-		int lo = (int)fl;
-		i0[a] = lo < 0 ? 0 : lo > n[a] - 1 ? n[a] - 1 : lo;
-		i1[a] = lo + 1 > n[a] - 1 ? n[a] - 1 : lo + 1 < 0 ? 0 : lo + 1;
-	}
-	const int64_t nv = fgrid_nvox(g), sy = g->nx, sz = (int64_t)g->nx * g->ny;
-	const int64_t e[8] = {
-		i0[2] * sz + i0[1] * sy + i0[0], i0[2] * sz + i0[1] * sy + i1[0],
-		i0[2] * sz + i1[1] * sy + i0[0], i0[2] * sz + i1[1] * sy + i1[0],
-		i1[2] * sz + i0[1] * sy + i0[0], i1[2] * sz + i0[1] * sy + i1[0],
-		i1[2] * sz + i1[1] * sy + i0[0], i1[2] * sz + i1[1] * sy + i1[0],
-	};
-	const double wt[8] = {
-		(1 - w[0]) * (1 - w[1]) * (1 - w[2]), w[0] * (1 - w[1]) * (1 - w[2]),
-		(1 - w[0]) * w[1] * (1 - w[2]),       w[0] * w[1] * (1 - w[2]),
-		(1 - w[0]) * (1 - w[1]) * w[2],       w[0] * (1 - w[1]) * w[2],
-		(1 - w[0]) * w[1] * w[2],             w[0] * w[1] * w[2],
-	};
-	for (int c = 0; c < f->nc; c++) {
-		const float *d = f->d + c * nv;
-		double s = 0;
-		for (int q = 0; q < 8; q++)
-			s += wt[q] * d[e[q]];
-		out[c] = (float)s;
-	}
+	double ci[3];
+	img_lin_t s;
+	aff_apply(g->w2v, y, ci);
+	if (!img_lin_at(n, ci, IMG_EDGE_VOXEL, &s))
+		return 0;
+	const int64_t nv = fgrid_nvox(g);
+	for (int c = 0; c < f->nc; c++)
+		out[c] = (float)img_lin_f32(f->d + c * nv, &s);
 	return 1;
 }
 

@@ -75,6 +75,7 @@
 #include "armstg/volmath.h"
 #include "img/edt.h"
 #include "img/kdtree.h"
+#include "img/sample.h"
 
 enum { OP_SELECT, OP_PAINT, OP_SPHERE, OP_POINTS };
 enum { OUTLINE_POINTS, OUTLINE_BALLS };
@@ -604,14 +605,10 @@ static int process(armstg_stage_t *st)
 					double w[3], m[3];
 					vol_to_world(in, i, j, k, w);
 					aff_apply(inv, w, m);
-					long mi = lround(m[0]), mj = lround(m[1]),
-					     mk = lround(m[2]);
-					if (mi < 0 || mj < 0 || mk < 0 ||
-					    mi >= mask->nx || mj >= mask->ny ||
-					    mk >= mask->nz)
-						continue;
-					if (vol_get(mask, vol_idx(mask, (int)mi,
-						    (int)mj, (int)mk)) > 0) {
+					int inside;
+					double mv = img_vol_near(mask, 0, m, 0,
+								 &inside);
+					if (inside && mv > 0) {
 						d[vol_idx(in, i, j, k)] =
 							(int16_t)p->value;
 						painted++;

@@ -10,6 +10,7 @@
 #include "armstg/volmath.h"
 #include "ls_incl.h"
 #include "img/kdtree.h"
+#include "img/sample.h"
 #include "ls_weno.h"
 
 static inline void vol_to_world_A(const double A[16], double i, double j,
@@ -955,38 +956,21 @@ static int exact_layer(comp_ctx_t *cx, int k, double *f)
 	return 0;
 }
 
-/* trilinear interpolation of the world gradient of f at box position */
+/* trilinear interpolation of the world gradient of f at box position
+ * (lib/img's stencil, clamped to the box) */
 static void grad_at(const box_t *b, const double *f, const double pi[3],
 		    double gw[3])
 {
-	int i0[3];
-	double fr[3];
-	for (int c = 0; c < 3; c++) {
-		double x = pi[c];
-		if (x < 0)
-			x = 0;
-		if (x > b->n[c] - 1)
-			x = b->n[c] - 1;
-		i0[c] = (int)floor(x);
-		if (i0[c] >= b->n[c] - 1)
-			i0[c] = b->n[c] > 1 ? b->n[c] - 2 : 0;
-		fr[c] = x - i0[c];
-	}
+	img_lin_t s;
+	img_lin_at(b->n, pi, IMG_EDGE_CLAMP, &s);
 	gw[0] = gw[1] = gw[2] = 0;
-	for (int corner = 0; corner < 8; corner++) {
-		int q[3];
-		double wgt = 1;
-		for (int c = 0; c < 3; c++) {
-			int bit = (corner >> c) & 1;
-			q[c] = i0[c] + bit;
-			if (q[c] >= b->n[c])
-				q[c] = b->n[c] - 1;
-			wgt *= bit ? fr[c] : 1 - fr[c];
-		}
+	for (int q = 0; q < 8; q++) {
+		int ijk[3];
 		double g[3];
-		box_grad(b, f, q, g);
+		img_lin_corner(&s, q, ijk);
+		box_grad(b, f, ijk, g);
 		for (int c = 0; c < 3; c++)
-			gw[c] += wgt * g[c];
+			gw[c] += s.w[q] * g[c];
 	}
 }
 

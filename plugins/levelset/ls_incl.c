@@ -9,6 +9,7 @@
 
 #include "armstg/volmath.h"
 #include "img/kdtree.h"
+#include "img/sample.h"
 
 int ls_incl_field(const ls_incl_grid_t *g, double *v)
 {
@@ -112,42 +113,15 @@ typedef struct samp {
 	int nc;
 } samp_t;
 
-/* trilinear value of the nc-component grid f at world x (clamped to the
- * box) */
+/* trilinear value of the nc-component grid f at world x (lib/img's
+ * stencil, clamped to the box) */
 static void sample(const samp_t *S, const double x[3], double *out)
 {
-	const int *n = S->g->n;
-	double t[3];
-	int i0[3];
-	for (int a = 0; a < 3; a++) {
-		double q = S->inv[4 * a] * x[0] + S->inv[4 * a + 1] * x[1] +
-			   S->inv[4 * a + 2] * x[2] + S->inv[4 * a + 3];
-		if (q < 0)
-			q = 0;
-		if (q > n[a] - 1)
-			q = n[a] - 1;
-		i0[a] = (int)floor(q);
-		if (i0[a] > n[a] - 2)
-			i0[a] = n[a] - 2 < 0 ? 0 : n[a] - 2;
-		t[a] = q - i0[a];
-	}
-	for (int c = 0; c < S->nc; c++)
-		out[c] = 0;
-	for (int k = 0; k < 2; k++)
-		for (int j = 0; j < 2; j++)
-			for (int i = 0; i < 2; i++) {
-				int a = i0[0] + i, b = i0[1] + j, e = i0[2] + k;
-				if (a >= n[0] || b >= n[1] || e >= n[2])
-					continue;
-				double w = (i ? t[0] : 1 - t[0]) *
-					   (j ? t[1] : 1 - t[1]) *
-					   (k ? t[2] : 1 - t[2]);
-				const double *p =
-					S->f + (size_t)S->nc *
-						       (size_t)(((int64_t)e * n[1] + b) * n[0] + a);
-				for (int c = 0; c < S->nc; c++)
-					out[c] += w * p[c];
-			}
+	double q[3];
+	img_lin_t s;
+	aff_apply(S->inv, x, q);
+	img_lin_at(S->g->n, q, IMG_EDGE_CLAMP, &s);
+	img_lin_f64n(S->f, S->nc, &s, out);
 }
 
 /* world gradient of the 3-component field v at every voxel: gv[9 q + 3 c

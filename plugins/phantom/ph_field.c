@@ -3,48 +3,20 @@
 #include <math.h>
 #include <string.h>
 
+#include "img/sample.h"
 #include "ph.h"
 
 void ph_field_sample(const ph_grid_t *g, const double *u, const double p[3],
 		     double out[3])
 {
-	int i0[3];
-	double w[3];
-	for (int c = 0; c < 3; c++) {
-		double f = (p[c] - g->o[c]) / g->h;
-		int n = g->n[c];
-		if (!(f > 0))
-			f = 0;
-		if (f > n - 1)
-			f = n - 1;
-		int i = (int)f;
-		if (i > n - 2)
-			i = n - 2;
-		if (i < 0)
-			i = 0;
-		i0[c] = i;
-		w[c] = n > 1 ? f - i : 0;
-	}
-	int64_t nv = ph_nvox(g);
-	int64_t sx = 1, sy = g->n[0], sz = (int64_t)g->n[0] * g->n[1];
-	if (g->n[0] < 2)
-		sx = 0;
-	if (g->n[1] < 2)
-		sy = 0;
-	if (g->n[2] < 2)
-		sz = 0;
-	int64_t b = (int64_t)i0[0] + (int64_t)i0[1] * g->n[0] +
-		    (int64_t)i0[2] * g->n[0] * g->n[1];
-	for (int c = 0; c < 3; c++) {
-		const double *a = u + c * nv + b;
-		double c00 = a[0] * (1 - w[0]) + a[sx] * w[0];
-		double c10 = a[sy] * (1 - w[0]) + a[sy + sx] * w[0];
-		double c01 = a[sz] * (1 - w[0]) + a[sz + sx] * w[0];
-		double c11 = a[sz + sy] * (1 - w[0]) + a[sz + sy + sx] * w[0];
-		double c0 = c00 * (1 - w[1]) + c10 * w[1];
-		double c1 = c01 * (1 - w[1]) + c11 * w[1];
-		out[c] = c0 * (1 - w[2]) + c1 * w[2];
-	}
+	double f[3];
+	img_lin_t s;
+	for (int c = 0; c < 3; c++)
+		f[c] = (p[c] - g->o[c]) / g->h;
+	img_lin_at(g->n, f, IMG_EDGE_CLAMP, &s);
+	const int64_t nv = ph_nvox(g);
+	for (int c = 0; c < 3; c++)
+		out[c] = img_lin_f64(u + c * nv, &s);
 }
 
 /*

@@ -38,6 +38,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "img/sample.h"
 #include "ph.h"
 
 enum { PRESET_DEFAULT = 0, PRESET_BRATS1MM = 1 };
@@ -298,16 +299,11 @@ static inline void gworld(const ph_grid_t *G, int i, int j, int k,
 /* nearest atlas voxel label at world a (0 outside the grid) */
 static inline int atlas_nn(const gen_t *g, const double a[3])
 {
-	int64_t id[3];
-	for (int c = 0; c < 3; c++) {
-		double f = (a[c] - g->G.o[c]) / g->G.h;
-		if (!(f > -0.5) || !(f < g->G.n[c] - 0.5))
-			return 0;
-		id[c] = lround(f);
-		if (id[c] < 0 || id[c] >= g->G.n[c])
-			return 0;
-	}
-	return g->alab[(id[2] * g->G.n[1] + id[1]) * g->G.n[0] + id[0]];
+	double f[3];
+	int64_t o;
+	for (int c = 0; c < 3; c++)
+		f[c] = (a[c] - g->G.o[c]) / g->G.h;
+	return img_near_at(g->G.n, f, 0, &o) ? g->alab[o] : 0;
 }
 
 /* structure label of the atlas at world a: analytic, or the real atlas's
@@ -437,75 +433,36 @@ static void make_atlas(gen_t *g, vol_t *t1, vol_t *t2, vol_t *lab,
 			}
 }
 
-/* trilinear sample of the clean atlas images at world a (0 outside) */
+/* trilinear sample of the clean atlas images at world a (0 outside:
+ * lib/img's zero extension, fading over one voxel) */
 static void clean_sample(const gen_t *g, const double a[3],
 			 double out[PH_NMOD])
 {
 	const ph_grid_t *G = &g->G;
-	int i0[3];
-	double w[3];
-	for (int m = 0; m < PH_NMOD; m++)
-		out[m] = 0;
-	for (int c = 0; c < 3; c++) {
-		double f = (a[c] - G->o[c]) / G->h;
-		if (!(f > -1.0) || !(f < G->n[c]))
-			return;
-		double fl = floor(f);
-		i0[c] = (int)fl;
-		w[c] = f - fl;
-	}
-	for (int corner = 0; corner < 8; corner++) {
-		int id[3];
-		double wt = 1;
-		for (int c = 0; c < 3; c++) {
-			int hi = (corner >> c) & 1;
-			id[c] = i0[c] + hi;
-			wt *= hi ? w[c] : 1 - w[c];
-		}
-		if (wt == 0 || id[0] < 0 || id[1] < 0 || id[2] < 0 ||
-		    id[0] >= G->n[0] || id[1] >= G->n[1] || id[2] >= G->n[2])
-			continue;
-		int64_t e = ((int64_t)id[2] * G->n[1] + id[1]) * G->n[0] +
-			    id[0];
+	double f[3];
+	img_lin_t s;
+	for (int c = 0; c < 3; c++)
+		f[c] = (a[c] - G->o[c]) / G->h;
+	if (!img_lin_at(G->n, f, IMG_EDGE_ZERO, &s)) {
 		for (int m = 0; m < PH_NMOD; m++)
-			out[m] += wt * g->clean[m][e];
+			out[m] = 0;
+		return;
 	}
+	for (int m = 0; m < PH_NMOD; m++)
+		out[m] = img_lin_f32(g->clean[m], &s);
 }
 
-/* scalar trilinear sample of plane m of a coarse multi-plane array */
+/* scalar trilinear sample of plane m of a coarse multi-plane array
+ * (clamped to the grid) */
 static double coarse_sample1(const ph_grid_t *C, const float *a, int m,
 			     const double p[3])
 {
-	int i0[3];
-	double w[3];
-	for (int c = 0; c < 3; c++) {
-		double f = (p[c] - C->o[c]) / C->h;
-		if (!(f > 0))
-			f = 0;
-		if (f > C->n[c] - 1)
-			f = C->n[c] - 1;
-		int i = (int)f;
-		if (i > C->n[c] - 2)
-			i = C->n[c] - 2;
-		if (i < 0)
-			i = 0;
-		i0[c] = i;
-		w[c] = f - i;
-	}
-	const float *b = a + m * ph_nvox(C);
-	double v = 0;
-	for (int corner = 0; corner < 8; corner++) {
-		int id[3];
-		double wt = 1;
-		for (int c = 0; c < 3; c++) {
-			int hi = (corner >> c) & 1;
-			id[c] = i0[c] + hi < C->n[c] ? i0[c] + hi : i0[c];
-			wt *= hi ? w[c] : 1 - w[c];
-		}
-		v += wt * b[((int64_t)id[2] * C->n[1] + id[1]) * C->n[0] +
-			    id[0]];
-	}
-	return v;
+	double f[3];
+	img_lin_t s;
+	for (int c = 0; c < 3; c++)
+		f[c] = (p[c] - C->o[c]) / C->h;
+	img_lin_at(C->n, f, IMG_EDGE_CLAMP, &s);
+	return img_lin_f32(a + m * ph_nvox(C), &s);
 }
 
 /* ------------------------------------------------------------------ */

@@ -24,6 +24,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "img/sample.h"
 #include "smp_core.h"
 
 typedef struct priv {
@@ -208,16 +209,10 @@ static int smp_process(armstg_stage_t *st)
 				for (int i = 0; i < lab->nx; i++) {
 					double q[3] = { i, j, k }, t[3];
 					aff_apply(M, q, t);
-					int a = (int)lround(t[0]),
-					    b = (int)lround(t[1]),
-					    c = (int)lround(t[2]);
-					if (a < 0 || b < 0 || c < 0 ||
-					    a >= tum->nx || b >= tum->ny ||
-					    c >= tum->nz)
-						continue;
-					double x = vol_get(tum,
-						vol_idx(tum, a, b, c));
-					if (x > 0) {
+					int inside;
+					double x = img_vol_near(tum, 0, t, 0,
+								&inside);
+					if (inside && x > 0) {
 						tm[vol_idx(lab, i, j, k)] = 1;
 						cnt++;
 					}

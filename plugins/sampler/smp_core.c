@@ -10,6 +10,7 @@
 #include "armstg/volmath.h"
 #include "img/edt.h"
 #include "img/gauss.h"
+#include "img/sample.h"
 
 #define PI 3.14159265358979323846
 
@@ -127,18 +128,11 @@ typedef struct ctx {
 static inline int64_t vox_of(const ctx_t *c, const double x[3])
 {
 	double q[3];
+	const int n[3] = { c->in->nx, c->in->ny, c->in->nz };
+	int64_t o;
 	aff_apply(c->inv, x, q);
-	/* nearest voxel; floor(x + 0.5) inline (lround is a libm call) */
-	double fi = floor(q[0] + 0.5), fj = floor(q[1] + 0.5),
-	       fk = floor(q[2] + 0.5);
-	if (!(fi >= 0 && fj >= 0 && fk >= 0 && fi < c->in->nx &&
-	      fj < c->in->ny && fk < c->in->nz))
-		return -1;
-	int i = (int)fi, j = (int)fj, k = (int)fk;
-	if (i < 0 || j < 0 || k < 0 || i >= c->in->nx || j >= c->in->ny ||
-	    k >= c->in->nz)
-		return -1;
-	return ((int64_t)k * c->in->ny + j) * c->in->nx + i;
+	/* nearest voxel (lib/img, inline) */
+	return img_near_at(n, q, 0, &o) ? o : -1;
 }
 
 static inline int in_domain(const ctx_t *c, const double x[3])

@@ -1,0 +1,2 @@
+# phantom: the samplers of lib/img
+phantom_LIBS := img
