@@ -102,7 +102,7 @@ $(foreach l,$(ALL_LIBS),$(eval $(call LIB_template,$(l))))
 # ---- plugins ----
 define PLUGIN_template
 -include plugins/$(1)/plugin.mk
-$(1)_SRC := $$(wildcard plugins/$(1)/*.c) $$($(1)_EXTRA_SRC)
+$(1)_SRC := $$(wildcard plugins/$(1)/*.c)
 $(1)_CU  := $$(wildcard plugins/$(1)/*.cu)
 $(1)_OBJ := $$($(1)_SRC:%.c=$(BUILD)/obj/%.o) $$($(1)_CU:%.cu=$(BUILD)/obj/%.cu.o)
 $(1)_LIBA := $$(foreach l,$$($(1)_LIBS),$(BUILD)/lib/lib$$(l).a)

@@ -210,18 +210,18 @@ static int labels_on(mctx_t *c, int in, const vol_t *ref, int is_mask,
 	return 0;
 }
 
-static int64_t count_in(const int32_t *l, const mtx_lset_t *s, int64_t n)
+static int64_t count_in(const int32_t *l, const lset_t *s, int64_t n)
 {
 	int64_t m = 0;
 	for (int64_t e = 0; e < n; e++)
-		m += mtx_lset_has(s, l[e]);
+		m += lset_has(s, l[e]);
 	return m;
 }
 
 /* Dice and surface rows for A = atlas set, B = patient set */
 static int pair_rows(mctx_t *c, const char *structure, const int32_t *lp,
-		     const mtx_lset_t *sp_set, const int32_t *la,
-		     const mtx_lset_t *sa_set, const vol_t *ref, int64_t nb,
+		     const lset_t *sp_set, const int32_t *la,
+		     const lset_t *sa_set, const vol_t *ref, int64_t nb,
 		     int64_t na, int64_t nab, const mtx_box_t *box,
 		     int want_s)
 {
@@ -275,14 +275,14 @@ static int label_metrics(mctx_t *c)
 	int64_t *cnt = NULL;
 	int32_t *sel = NULL;
 	mtx_box_t *box = NULL;
-	mtx_lset_t want, vent_a, vent_p;
+	lset_t want, vent_a, vent_p;
 	int rc;
 
-	if ((rc = mtx_lset_parse(c->p->labels, "labels", &want, c->err,
+	if ((rc = lset_parse(c->p->labels, "labels", &want, c->err,
 				 sizeof c->err)) ||
-	    (rc = mtx_lset_parse(c->p->ventricles, "ventricles", &vent_a,
+	    (rc = lset_parse(c->p->ventricles, "ventricles", &vent_a,
 				 c->err, sizeof c->err)) ||
-	    (rc = mtx_lset_parse(c->p->patient_ventricles
+	    (rc = lset_parse(c->p->patient_ventricles
 					 ? c->p->patient_ventricles
 					 : c->p->ventricles,
 				 "patient_ventricles", &vent_p, c->err,
@@ -305,13 +305,13 @@ static int label_metrics(mctx_t *c)
 		vmax = b > vmax ? b : vmax;
 	}
 	int64_t range = (int64_t)vmax - vmin + 1;
-	if (!mtx_lset_empty(&want) && range > (1 << 22)) {
+	if (!lset_empty(&want) && range > (1 << 22)) {
 		rc = c->h->fail(st, ARMSTG_EINVAL,
 				"label values span %d..%d: too wide for "
 				"per-label metrics", vmin, vmax);
 		goto out;
 	}
-	if (mtx_lset_empty(&want))
+	if (lset_empty(&want))
 		range = 1;
 	cnt = calloc((size_t)range * 3, sizeof(int64_t)); /* patient, atlas,
 							     both */
@@ -320,7 +320,7 @@ static int label_metrics(mctx_t *c)
 		rc = c->h->fail(st, ARMSTG_ENOMEM, "out of memory");
 		goto out;
 	}
-	if (!mtx_lset_empty(&want))
+	if (!lset_empty(&want))
 		for (int64_t e = 0; e < n; e++) {
 			int64_t a = lp[e] - vmin, b = la[e] - vmin;
 			cnt[3 * a]++;
@@ -330,9 +330,9 @@ static int label_metrics(mctx_t *c)
 
 	/* the labels to report: present in either volume, and in `want` */
 	int nsel = 0;
-	for (int64_t r = 0; r < range && !mtx_lset_empty(&want); r++) {
+	for (int64_t r = 0; r < range && !lset_empty(&want); r++) {
 		int32_t L = (int32_t)(r + vmin);
-		if (mtx_lset_has(&want, L) && (cnt[3 * r] || cnt[3 * r + 1]))
+		if (lset_has(&want, L) && (cnt[3 * r] || cnt[3 * r + 1]))
 			sel[nsel++] = L;
 	}
 	if (want.all && !nsel) {
@@ -407,7 +407,7 @@ static int label_metrics(mctx_t *c)
 		int32_t L = sel[s];
 		int64_t r = L - vmin;
 		char name[48];
-		mtx_lset_t one = { .n = 1, .lo = { L }, .hi = { L } };
+		lset_t one = { .n = 1, .lo = { L }, .hi = { L } };
 		snprintf(name, sizeof name, "label_%d", L);
 		if (c->h->cancelled(st)) {
 			rc = c->h->fail(st, ARMSTG_ECANCELLED,
@@ -422,10 +422,10 @@ static int label_metrics(mctx_t *c)
 			goto out;
 	}
 
-	if (!mtx_lset_empty(&vent_a)) {
+	if (!lset_empty(&vent_a)) {
 		char sa[256], sp_[256];
-		mtx_lset_str(&vent_a, sa, sizeof sa);
-		mtx_lset_str(&vent_p, sp_, sizeof sp_);
+		lset_str(&vent_a, sa, sizeof sa);
+		lset_str(&vent_p, sp_, sizeof sp_);
 		int64_t na = count_in(la, &vent_a, n),
 			nb = count_in(lp, &vent_p, n), nab = 0;
 		if (!na) {
@@ -441,8 +441,8 @@ static int label_metrics(mctx_t *c)
 			goto out;
 		}
 		for (int64_t e = 0; e < n; e++)
-			nab += mtx_lset_has(&vent_a, la[e]) &&
-			       mtx_lset_has(&vent_p, lp[e]);
+			nab += lset_has(&vent_a, la[e]) &&
+			       lset_has(&vent_p, lp[e]);
 		rc = pair_rows(c, "ventricles", lp, &vent_p, la, &vent_a, ref,
 			       nb, na, nab, NULL, 1);
 		if (rc)
@@ -474,7 +474,7 @@ static int tumour_metrics(mctx_t *c)
 	if ((rc = labels_on(c, IN_TUM, ref, 1, &t)) ||
 	    (rc = labels_on(c, IN_ATUM, ref, 1, &a)))
 		goto out;
-	mtx_lset_t one = { .n = 1, .lo = { 1 }, .hi = { 1 } };
+	lset_t one = { .n = 1, .lo = { 1 }, .hi = { 1 } };
 	int64_t nt = count_in(t, &one, n), na = count_in(a, &one, n), nab = 0;
 	if (!nt) {
 		rc = c->h->fail(st, ARMSTG_EINVAL, "tumour mask is empty");

@@ -1,9 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Evaluation kernels of the metrics plugin (pure C, no host calls), also
- * used by the report plugin (plugins/report/plugin.mk pulls mtx_geom.c).
+ * Evaluation kernels of the metrics plugin (pure C, no host calls); label
+ * sets ("4,5", "201-414", "all") are lib/img's (img/lset.h).
  *
- *   label sets     "4,5", "201-414,491-556", "all", "none"
  *   grids          volumes brought onto a reference grid THROUGH WORLD
  *                  COORDINATES (nearest neighbour for labels and masks,
  *                  trilinear for displacement fields)
@@ -20,44 +19,7 @@
 #include <stdint.h>
 
 #include "armstg/msg.h"
-
-/* ---- label sets ---- */
-
-#define MTX_LSET_MAX 64
-
-typedef struct mtx_lset {
-	int n;                     /* number of [lo,hi] ranges */
-	int32_t lo[MTX_LSET_MAX];
-	int32_t hi[MTX_LSET_MAX];
-	int all;                   /* "all": every non-zero label */
-} mtx_lset_t;
-
-/*
- * Parse "4,5", "201-414, 491-556", "all" (every non-zero label) or
- * "none"/"" (empty set).  Items are separated by commas or blanks; a range is
- * "a-b" with a <= b.  Negative labels are written in parentheses-free form
- * only as single values ("-1"); what = parameter name for the message.
- */
-int mtx_lset_parse(const char *spec, const char *what, mtx_lset_t *ls,
-		   char *err, size_t errsize);
-
-static inline int mtx_lset_has(const mtx_lset_t *ls, int32_t v)
-{
-	if (ls->all)
-		return v != 0;
-	for (int i = 0; i < ls->n; i++)
-		if (v >= ls->lo[i] && v <= ls->hi[i])
-			return 1;
-	return 0;
-}
-
-static inline int mtx_lset_empty(const mtx_lset_t *ls)
-{
-	return !ls->all && ls->n == 0;
-}
-
-/* Text form of a set ("4,5", "201-414"), for messages and tables. */
-void mtx_lset_str(const mtx_lset_t *ls, char *buf, size_t size);
+#include "img/lset.h"
 
 /* ---- grids ---- */
 
@@ -99,12 +61,6 @@ int mtx_field_on(const vol_t *src, const vol_t *ref, const char *what,
 		 float *out, int *resampled, int64_t *n_outside, char *err,
 		 size_t errsize);
 
-/* Scalar volume sampled at a fractional voxel p of v: trilinear, NaN when
- * p lies outside [0,n-1] on an axis (beyond 1e-6 voxel). */
-double mtx_sample_linear(const vol_t *v, int comp, const double p[3]);
-/* Nearest-neighbour sample; sets *inside to 0 (and returns 0) outside. */
-double mtx_sample_nearest(const vol_t *v, int comp, const double p[3],
-			  int *inside);
 
 /* ---- surfaces (distances by lib/img's exact transform) ---- */
 
@@ -137,8 +93,8 @@ typedef struct mtx_surf {
  * A u B if the caller knows it, else NULL.  Returns 0, EINVAL when A or B is
  * empty (nothing written), ENOMEM.
  */
-int mtx_surface(const int32_t *la, const mtx_lset_t *sa, const int32_t *lb,
-		const mtx_lset_t *sb, const int n[3], const double sp[3],
+int mtx_surface(const int32_t *la, const lset_t *sa, const int32_t *lb,
+		const lset_t *sb, const int n[3], const double sp[3],
 		const mtx_box_t *box, int nthreads, mtx_surf_t *out);
 
 /*

@@ -71,13 +71,13 @@ double mtx_quantile(double *a, size_t n, double q)
 
 /* ---- surfaces ---- */
 
-static inline int in_a(const int32_t *l, const mtx_lset_t *s, int64_t v)
+static inline int in_a(const int32_t *l, const lset_t *s, int64_t v)
 {
-	return mtx_lset_has(s, l[v]);
+	return lset_has(s, l[v]);
 }
 
 /* boundary test against the FULL grid (box edges are not grid faces) */
-static int is_boundary(const int32_t *l, const mtx_lset_t *s, const int n[3],
+static int is_boundary(const int32_t *l, const lset_t *s, const int n[3],
 		       int i, int j, int k)
 {
 	int64_t nx = n[0], nxy = (int64_t)n[0] * n[1];
@@ -94,8 +94,8 @@ static int is_boundary(const int32_t *l, const mtx_lset_t *s, const int n[3],
 
 /* directed distances from boundary of (la,sa) to boundary of (lb,sb) inside
  * box; appends to dist; returns count or -1 on ENOMEM */
-static int64_t directed(const int32_t *la, const mtx_lset_t *sa,
-			const int32_t *lb, const mtx_lset_t *sb,
+static int64_t directed(const int32_t *la, const lset_t *sa,
+			const int32_t *lb, const lset_t *sb,
 			const int n[3], const double sp[3],
 			const mtx_box_t *b, int nthreads, double *dist)
 {
@@ -136,8 +136,8 @@ static int64_t directed(const int32_t *la, const mtx_lset_t *sa,
 	return m;
 }
 
-int mtx_surface(const int32_t *la, const mtx_lset_t *sa, const int32_t *lb,
-		const mtx_lset_t *sb, const int n[3], const double sp[3],
+int mtx_surface(const int32_t *la, const lset_t *sa, const int32_t *lb,
+		const lset_t *sb, const int n[3], const double sp[3],
 		const mtx_box_t *box, int nthreads, mtx_surf_t *out)
 {
 	mtx_box_t b;

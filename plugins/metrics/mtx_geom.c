@@ -1,10 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Label sets and moving volumes between grids through world coordinates.
- * See mtx.h.
+ * Moving volumes between grids through world coordinates.  See mtx.h.
  */
-#include <ctype.h>
-#include <errno.h>
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
@@ -13,6 +10,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "img/sample.h"
 #include "mtx.h"
 
 #define ERR(code, ...)                                                       \
@@ -21,107 +19,6 @@
 			snprintf(err, errsize, __VA_ARGS__);                 \
 		return (code);                                               \
 	} while (0)
-
-/* ---- label sets ---- */
-
-static int parse_i32(const char **s, int32_t *v)
-{
-	char *end;
-	errno = 0;
-	long x = strtol(*s, &end, 10);
-	if (end == *s || errno || x < INT32_MIN || x > INT32_MAX)
-		return -1;
-	*v = (int32_t)x;
-	*s = end;
-	return 0;
-}
-
-int mtx_lset_parse(const char *spec, const char *what, mtx_lset_t *ls,
-		   char *err, size_t errsize)
-{
-	memset(ls, 0, sizeof *ls);
-	if (!spec)
-		return 0;
-	const char *s = spec;
-	while (isspace((unsigned char)*s))
-		s++;
-	if (!*s || !strcmp(s, "none"))
-		return 0;
-	if (!strncmp(s, "all", 3)) {
-		const char *t = s + 3;
-		while (isspace((unsigned char)*t))
-			t++;
-		if (!*t) {
-			ls->all = 1;
-			return 0;
-		}
-	}
-	while (*s) {
-		while (isspace((unsigned char)*s) || *s == ',')
-			s++;
-		if (!*s)
-			break;
-		int32_t a, b;
-		const char *item = s;
-		if (parse_i32(&s, &a))
-			ERR(ARMSTG_EINVAL,
-			    "%s: '%s' is not a label list (expected e.g. "
-			    "\"4,5\", \"201-414\", \"all\" or \"none\"; stuck "
-			    "at \"%.20s\")", what, spec, item);
-		b = a;
-		if (*s == '-') {
-			s++;
-			if (parse_i32(&s, &b))
-				ERR(ARMSTG_EINVAL,
-				    "%s: bad range end in '%s' at \"%.20s\"",
-				    what, spec, item);
-			if (b < a)
-				ERR(ARMSTG_EINVAL,
-				    "%s: range %d-%d in '%s' is reversed",
-				    what, a, b, spec);
-		}
-		if (*s && *s != ',' && !isspace((unsigned char)*s))
-			ERR(ARMSTG_EINVAL,
-			    "%s: unexpected '%c' in label list '%s'", what, *s,
-			    spec);
-		if (ls->n >= MTX_LSET_MAX)
-			ERR(ARMSTG_EINVAL,
-			    "%s: more than %d items in label list", what,
-			    MTX_LSET_MAX);
-		ls->lo[ls->n] = a;
-		ls->hi[ls->n] = b;
-		ls->n++;
-	}
-	return 0;
-}
-
-void mtx_lset_str(const mtx_lset_t *ls, char *buf, size_t size)
-{
-	size_t k = 0;
-	if (!size)
-		return;
-	buf[0] = 0;
-	if (ls->all) {
-		snprintf(buf, size, "all");
-		return;
-	}
-	if (!ls->n) {
-		snprintf(buf, size, "none");
-		return;
-	}
-	for (int i = 0; i < ls->n && k < size; i++) {
-		int w;
-		if (ls->lo[i] == ls->hi[i])
-			w = snprintf(buf + k, size - k, "%s%d", i ? "," : "",
-				     ls->lo[i]);
-		else
-			w = snprintf(buf + k, size - k, "%s%d-%d",
-				     i ? "," : "", ls->lo[i], ls->hi[i]);
-		if (w < 0)
-			break;
-		k += (size_t)w;
-	}
-}
 
 /* ---- grids ---- */
 
@@ -161,78 +58,6 @@ int mtx_ref_to_src(const vol_t *ref, const vol_t *src, double C[16])
 	return 0;
 }
 
-static int nearest_index(double p, int n, int *idx)
-{
-	/* +1e-9: a world point that lies exactly half way rounds the same way
-	 * on every platform; points a hair outside the grid (affine round-off)
-	 * still count as inside. */
-	double r = floor(p + 0.5 + 1e-9);
-	if (r < 0 || r > n - 1)
-		return 0;
-	*idx = (int)r;
-	return 1;
-}
-
-double mtx_sample_nearest(const vol_t *v, int comp, const double p[3],
-			  int *inside)
-{
-	int i, j, k;
-	if (!nearest_index(p[0], v->nx, &i) ||
-	    !nearest_index(p[1], v->ny, &j) ||
-	    !nearest_index(p[2], v->nz, &k)) {
-		*inside = 0;
-		return 0;
-	}
-	*inside = 1;
-	return vol_get(v, (int64_t)comp * vol_nvox(v) + vol_idx(v, i, j, k));
-}
-
-/* lower corner and weight along one axis; 0 when p is outside [0,n-1] */
-static int lin_axis(double p, int n, int *i0, double *w)
-{
-	const double tol = 1e-6;
-	if (p < -tol || p > n - 1 + tol)
-		return 0;
-	if (n == 1) {
-		*i0 = 0;
-		*w = 0;
-		return 1;
-	}
-	if (p < 0)
-		p = 0;
-	if (p > n - 1)
-		p = n - 1;
-	int i = (int)floor(p);
-	if (i > n - 2)
-		i = n - 2;
-	*i0 = i;
-	*w = p - i;
-	return 1;
-}
-
-double mtx_sample_linear(const vol_t *v, int comp, const double p[3])
-{
-	int i0, j0, k0;
-	double wx, wy, wz;
-	if (!lin_axis(p[0], v->nx, &i0, &wx) ||
-	    !lin_axis(p[1], v->ny, &j0, &wy) ||
-	    !lin_axis(p[2], v->nz, &k0, &wz))
-		return NAN;
-	int64_t base = (int64_t)comp * vol_nvox(v);
-	int di = v->nx > 1, dj = v->ny > 1, dk = v->nz > 1;
-	double s = 0;
-	for (int c = 0; c < 8; c++) {
-		int a = c & 1, b = (c >> 1) & 1, d = (c >> 2) & 1;
-		double w = (a ? wx : 1 - wx) * (b ? wy : 1 - wy) *
-			   (d ? wz : 1 - wz);
-		if (w == 0)
-			continue;
-		s += w * vol_get(v, base + vol_idx(v, i0 + a * di,
-						   j0 + b * dj, k0 + d * dk));
-	}
-	return s;
-}
-
 int mtx_labels_on(const vol_t *src, const vol_t *ref, const char *what,
 		  int32_t *out, int *resampled, char *err, size_t errsize)
 {
@@ -270,7 +95,10 @@ int mtx_labels_on(const vol_t *src, const vol_t *ref, const char *what,
 				double q[3] = { i, j, k }, p[3];
 				int in;
 				aff_apply(C, q, p);
-				double x = mtx_sample_nearest(src, 0, p, &in);
+				/* +1e-9 voxel: a point exactly half way
+				 * rounds the same way on every platform, one
+				 * a hair outside (affine round-off) counts */
+				double x = img_vol_near(src, 0, p, 1e-9, &in);
 				out[vol_idx(ref, i, j, k)] =
 					(int32_t)lround(x);
 				inside += in;
@@ -323,8 +151,8 @@ int mtx_field_on(const vol_t *src, const vol_t *ref, const char *what,
 				int64_t v = vol_idx(ref, i, j, k);
 				aff_apply(C, q, p);
 				for (int c = 0; c < 3; c++)
-					out[c * nr + v] = (float)
-						mtx_sample_linear(src, c, p);
+					out[c * nr + v] = (float)img_vol_lin(
+						src, c, p, IMG_EDGE_CENTRE);
 				outside += isnan(out[v]);
 			}
 	if (outside == nr)

@@ -16,13 +16,14 @@
  * their true aspect ratio.
  */
 #include <math.h>
-#include <png.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "img/png.h"
+#include "img/sample.h"
 
 enum { AX_AXIAL = 0, AX_CORONAL = 1, AX_SAGITTAL = 2 };
 
@@ -171,56 +172,6 @@ static int axis_along(const vol_t *v, int w, int used)
 	return best;
 }
 
-typedef struct pngjmp {
-	jmp_buf jb;
-} pngjmp_t;
-
-static int write_png(const char *file, int W, int Hh, uint8_t *rgb,
-		     char *err, size_t errsize)
-{
-	FILE *f = fopen(file, "wb");
-	if (!f) {
-		snprintf(err, errsize, "cannot open %s for writing", file);
-		return ARMSTG_EIO;
-	}
-	png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL,
-						  NULL, NULL);
-	png_infop info = png ? png_create_info_struct(png) : NULL;
-	png_bytep *volatile rows = NULL;
-	if (!png || !info) {
-		png_destroy_write_struct(&png, &info);
-		fclose(f);
-		snprintf(err, errsize, "libpng: out of memory");
-		return ARMSTG_ENOMEM;
-	}
-	if (setjmp(png_jmpbuf(png))) {
-		png_destroy_write_struct(&png, &info);
-		free(rows);
-		fclose(f);
-		snprintf(err, errsize, "libpng failed writing %s", file);
-		return ARMSTG_EIO;
-	}
-	rows = malloc((size_t)Hh * sizeof *rows);
-	if (!rows)
-		png_error(png, "out of memory");
-	for (int y = 0; y < Hh; y++)
-		rows[y] = rgb + (size_t)y * W * 3;
-	png_init_io(png, f);
-	png_set_IHDR(png, info, (png_uint_32)W, (png_uint_32)Hh, 8,
-		     PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
-		     PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
-	png_write_info(png, info);
-	png_write_image(png, rows);
-	png_write_end(png, NULL);
-	png_destroy_write_struct(&png, &info);
-	free(rows);
-	if (fclose(f)) {
-		snprintf(err, errsize, "error closing %s", file);
-		return ARMSTG_EIO;
-	}
-	return 0;
-}
-
 static int png_process(armstg_stage_t *st)
 {
 	const armstg_host_t *H = st->host;
@@ -319,15 +270,11 @@ static int png_process(armstg_stage_t *st)
 				double w[3], f[3];
 				vol_to_world(v, id[0], id[1], id[2], w);
 				aff_apply(lbinv, w, f);
-				int li = (int)lround(f[0]), lj = (int)lround(f[1]),
-				    lk = (int)lround(f[2]);
-				if (li >= 0 && lj >= 0 && lk >= 0 &&
-				    li < lab->nx && lj < lab->ny && lk < lab->nz) {
-					double lv = vol_get(lab,
-						vol_idx(lab, li, lj, lk));
+				int inside;
+				double lv = img_vol_near(lab, 0, f, 0, &inside);
+				if (inside)
 					lbl[(size_t)y * W + x] =
 						isfinite(lv) ? (int)lround(lv) : 0;
-				}
 			}
 		}
 	if (lab)
@@ -353,7 +300,7 @@ static int png_process(armstg_stage_t *st)
 	rc = H->out_path(st, P->path, tmp, sizeof tmp);
 	if (rc)
 		goto out;
-	rc = write_png(tmp, W, Hh, rgb, err, sizeof err);
+	rc = img_png_write(tmp, rgb, W, Hh, NULL, NULL, NULL, err, sizeof err);
 	if (rc)
 		rc = H->fail(st, rc, "%s", err);
 out:

@@ -8,6 +8,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "img/sample.h"
 #include "render.h"
 
 void rp_world_box(const vol_t *v, double lo[3], double hi[3])
@@ -121,7 +122,7 @@ int rp_render_grey(const vol_t *img, const rp_view_t *vw, double lo,
 			double w[3], p[3];
 			rp_view_world(vw, u, v, w);
 			aff_apply(C, w, p);
-			double x = mtx_sample_linear(img, 0, p);
+			double x = img_vol_lin(img, 0, p, IMG_EDGE_CENTRE);
 			uint8_t g = 0;
 			if (isfinite(x)) {
 				double y = (x - lo) * scale;
@@ -134,7 +135,7 @@ int rp_render_grey(const vol_t *img, const rp_view_t *vw, double lo,
 	return 0;
 }
 
-int rp_slice_mask(const vol_t *lab, const mtx_lset_t *set,
+int rp_slice_mask(const vol_t *lab, const lset_t *set,
 		  const rp_view_t *vw, uint8_t *mask)
 {
 	double C[16];
@@ -146,11 +147,11 @@ int rp_slice_mask(const vol_t *lab, const mtx_lset_t *set,
 			int in;
 			rp_view_world(vw, u, v, w);
 			aff_apply(C, w, p);
-			double x = mtx_sample_nearest(lab, 0, p, &in);
+			double x = img_vol_near(lab, 0, p, 1e-9, &in);
 			int m = 0;
 			if (in && isfinite(x)) {
 				long l = lround(x);
-				m = set ? mtx_lset_has(set, (int32_t)l)
+				m = set ? lset_has(set, (int32_t)l)
 					: l != 0;
 			}
 			mask[(size_t)v * vw->w + u] = (uint8_t)m;

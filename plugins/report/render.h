@@ -27,7 +27,7 @@
 #include <stdint.h>
 
 #include "armstg/msg.h"
-#include "mtx.h"
+#include "img/lset.h"
 
 typedef struct rp_img {
 	int w, h;
@@ -83,7 +83,7 @@ int rp_render_grey(const vol_t *img, const rp_view_t *vw, double lo,
  * (through world coordinates) holds a value in set (values rounded; for
  * set == NULL: non-zero).  mask: w*h bytes.
  */
-int rp_slice_mask(const vol_t *lab, const mtx_lset_t *set,
+int rp_slice_mask(const vol_t *lab, const lset_t *set,
 		  const rp_view_t *vw, uint8_t *mask);
 
 /*
@@ -119,10 +119,5 @@ int64_t rp_window(const vol_t *img, double lo_q, double hi_q, double *lo,
  * is allocated (caller frees).  0 or ENOMEM.
  */
 int rp_plot_columns(const tab_t *t, rp_img_t *im, int *npanels);
-
-/* PNG (8-bit RGB) through libpng; description goes into a tEXt chunk.
- * 0 or negative code, message in err. */
-int rp_png_write(const char *path, const rp_img_t *im, const char *title,
-		 const char *description, char *err, size_t errsize);
 
 #endif

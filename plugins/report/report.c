@@ -38,7 +38,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
-#include "mtx.h"
+#include "img/png.h"
 #include "render.h"
 
 enum {
@@ -119,7 +119,7 @@ static const uint8_t COL_TXT[3] = { 255, 255, 255 };
 
 typedef struct overlay {
 	int in;                  /* input index */
-	const mtx_lset_t *set;   /* NULL: non-zero */
+	const lset_t *set;   /* NULL: non-zero */
 	const uint8_t *rgb;
 	const char *label;       /* legend text */
 	const char *css;         /* colour for the page */
@@ -348,7 +348,8 @@ static int render_view(slice_ctx_t *sc, int kind, char *rel, size_t relsize)
 		 kind == RP_SAGITTAL ? "anterior-left"
 		 : p->convention == 0 ? "radiological" : "neurological",
 		 sc->pix);
-	rc = rp_png_write(tmp, &im, VIEW_NAME[kind], desc, err, sizeof err);
+	rc = img_png_write(tmp, im.rgb, im.w, im.h, VIEW_NAME[kind], desc,
+			   "ARMSTG report", err, sizeof err);
 	if (rc)
 		rc = st->host->fail(st, rc, "%s", err);
 out:
@@ -379,8 +380,9 @@ static int write_plot(armstg_stage_t *st, int in, const char *name,
 		snprintf(desc, sizeof desc, "%d numeric columns of '%s' "
 			 "against the row number", np,
 			 st->plugin->inputs[in].name);
-		rc = rp_png_write(tmp, &im, st->plugin->inputs[in].name, desc,
-				  err, sizeof err);
+		rc = img_png_write(tmp, im.rgb, im.w, im.h,
+				   st->plugin->inputs[in].name, desc,
+				   "ARMSTG report", err, sizeof err);
 		if (rc)
 			rc = st->host->fail(st, rc, "%s", err);
 	}
@@ -569,7 +571,7 @@ static int report_process(armstg_stage_t *st)
 	report_priv_t *p = st->priv;
 	const vol_t *img = (const vol_t *)st->in[IN_IMAGE];
 	slice_ctx_t sc;
-	mtx_lset_t vent_a, vent_p;
+	lset_t vent_a, vent_p;
 	/* rels: 0-2 views, 3-4 plots ("" = none), 5 the page */
 	char err[512], rels[6][PATH_MAX];
 	static const char *const kinds[6] = { "axial", "coronal", "sagittal",
@@ -592,9 +594,9 @@ static int report_process(armstg_stage_t *st)
 	if (aff_invert(img->affine, inv))
 		return st->host->fail(st, ARMSTG_EINVAL,
 				      "image: singular affine");
-	if ((rc = mtx_lset_parse(p->ventricles, "ventricles", &vent_a, err,
+	if ((rc = lset_parse(p->ventricles, "ventricles", &vent_a, err,
 				 sizeof err)) ||
-	    (rc = mtx_lset_parse(p->patient_ventricles ? p->patient_ventricles
+	    (rc = lset_parse(p->patient_ventricles ? p->patient_ventricles
 						       : p->ventricles,
 				 "patient_ventricles", &vent_p, err,
 				 sizeof err)))
@@ -670,7 +672,7 @@ static int report_process(armstg_stage_t *st)
 					      sc.lo_w[2], sc.hi_w[2]);
 
 	/* overlays, drawn in this order (patient last, on top) */
-	if (st->in[IN_AL] && !mtx_lset_empty(&vent_a))
+	if (st->in[IN_AL] && !lset_empty(&vent_a))
 		sc.ov[sc.nov++] = (overlay_t){ IN_AL, &vent_a, COL_AV,
 					       "atlas ventricles",
 					       "rgb(255,220,0)" };
@@ -678,7 +680,7 @@ static int report_process(armstg_stage_t *st)
 		sc.ov[sc.nov++] = (overlay_t){ IN_ATUM, NULL, COL_AT,
 					       "atlas tumour",
 					       "rgb(60,255,60)" };
-	if (st->in[IN_PL] && !mtx_lset_empty(&vent_p))
+	if (st->in[IN_PL] && !lset_empty(&vent_p))
 		sc.ov[sc.nov++] = (overlay_t){ IN_PL, &vent_p, COL_PV,
 					       "patient ventricles",
 					       "rgb(0,220,255)" };
@@ -686,8 +688,8 @@ static int report_process(armstg_stage_t *st)
 		sc.ov[sc.nov++] = (overlay_t){ IN_TUM, NULL, COL_PT,
 					       "patient tumour",
 					       "rgb(255,40,40)" };
-	if ((st->in[IN_PL] || st->in[IN_AL]) && mtx_lset_empty(&vent_a) &&
-	    mtx_lset_empty(&vent_p))
+	if ((st->in[IN_PL] || st->in[IN_AL]) && lset_empty(&vent_a) &&
+	    lset_empty(&vent_p))
 		st->host->log(st, LOG_WARN,
 			      "labels connected but `ventricles` is unset: "
 			      "no ventricle contours");
