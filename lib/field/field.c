@@ -78,18 +78,13 @@ int fgrid_same(const fgrid_t *a, const fgrid_t *b, double tol)
 	return 1;
 }
 
-/* lib/img's stencil on grid g at continuous voxel index c */
+/* lib/img's float stencil on grid g at continuous voxel index c (the
+ * float path these loops always took) */
 static inline int lin_at(const fgrid_t *g, const double c[3], int edge,
-			 img_lin_t *s)
+			 img_linf_t *s)
 {
 	const int n[3] = { g->nx, g->ny, g->nz };
-	return img_lin_at(n, c, edge, s);
-}
-
-/* trilinear value of one float plane, as float */
-static inline float lin_eval(const float *d, const img_lin_t *s)
-{
-	return (float)img_lin_f32(d, s);
+	return img_linf_at(n, c, edge, s);
 }
 
 /* nearest voxel (ITK's extent rule, no tolerance); 0 outside */
@@ -300,10 +295,10 @@ int field_vol_all_zero(const vol_t *v)
 float fimg_sample_clamp(const fimg_t *f, int c, const double w[3])
 {
 	double v[3];
-	img_lin_t s;
+	img_linf_t s;
 	aff_apply(f->g.w2v, w, v);
 	lin_at(&f->g, v, IMG_EDGE_CLAMP, &s);
-	return lin_eval(f->d + (int64_t)c * fgrid_nvox(&f->g), &s);
+	return img_linf_f32(f->d + (int64_t)c * fgrid_nvox(&f->g), &s);
 }
 
 /* M = A*B restricted to 3x4 */
@@ -346,12 +341,12 @@ int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
 						d[2] = u->d[e + 2 * nvu];
 					} else {
 						double w[3], cu[3];
-						img_lin_t su;
+						img_linf_t su;
 						aff_apply(dg->v2w, p, w);
 						aff_apply(u->g.w2v, w, cu);
 						lin_at(&u->g, cu, IMG_EDGE_CLAMP, &su);
 						for (int q = 0; q < 3; q++)
-							d[q] = lin_eval(
+							d[q] = img_linf_f32(
 								u->d + q * nvu, &su);
 					}
 					double dv[3];
@@ -371,7 +366,7 @@ int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
 						dst->d[e + q * nvd] = src->d[o + q * nvs];
 					continue;
 				}
-				img_lin_t s;
+				img_linf_t s;
 				if (!lin_at(sg, c, IMG_EDGE_VOXEL, &s)) {
 					for (int q = 0; q < nc; q++)
 						dst->d[e + q * nvd] = outside;
@@ -380,8 +375,8 @@ int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
 				for (int q = 0; q < nc; q++)
 					dst->d[e + q * nvd] =
 						interp == FIELD_LABEL
-							? img_lin_label_f32(src->d + q * nvs, &s)
-							: lin_eval(src->d + q * nvs, &s);
+							? img_linf_label_f32(src->d + q * nvs, &s)
+							: img_linf_f32(src->d + q * nvs, &s);
 			}
 		}
 	}
@@ -400,8 +395,8 @@ int fimg_smooth(fimg_t *f, double sigma_mm, int nthreads)
 		return 0;
 	const int64_t nv = fgrid_nvox(&f->g);
 	const int dims[3] = { f->g.nx, f->g.ny, f->g.nz };
-	/* lib/img's discrete Gaussian; below 0.05 voxel an axis is left
-	 * alone */
+	/* lib/img's discrete Gaussian, float kernel and sums (the hot path
+	 * of demons); below 0.05 voxel an axis is left alone */
 	double sv[3];
 	for (int a = 0; a < 3; a++) {
 		sv[a] = sigma_mm / f->g.sp[a];
@@ -410,7 +405,8 @@ int fimg_smooth(fimg_t *f, double sigma_mm, int nthreads)
 	}
 	for (int c = 0; c < f->nc; c++) {
 		int rc = img_gauss_smooth(f->d + c * nv, dims, sv,
-					  IMG_GAUSS_DISCRETE, NT(nthreads));
+					  IMG_GAUSS_DISCRETE, IMG_GAUSS_SUM_F32,
+					  NT(nthreads));
 		if (rc)
 			return rc;
 	}
@@ -446,11 +442,11 @@ int fimg_compose(const fimg_t *outer, const fimg_t *inner, fimg_t *out,
 				c[0] += dv[0];
 				c[1] += dv[1];
 				c[2] += dv[2];
-				img_lin_t s;
+				img_linf_t s;
 				lin_at(og, c, IMG_EDGE_CLAMP, &s);
 				for (int q = 0; q < 3; q++)
 					out->d[e + q * nv] = (float)(
-						d[q] + lin_eval(outer->d + q * nvo, &s));
+						d[q] + img_linf_f32(outer->d + q * nvo, &s));
 			}
 	return 0;
 }
@@ -534,11 +530,11 @@ int fimg_invert(const fimg_t *u, fimg_t *out, int max_iter, double tol_mm,
 		int i = (int)(e % og->nx), j = (int)(e / og->nx % og->ny),
 		    k = (int)(e / ((int64_t)og->nx * og->ny));
 		double p[3] = { i, j, k }, c[3];
-		img_lin_t s;
+		img_linf_t s;
 		aff_apply(M, p, c);
 		lin_at(ug, c, IMG_EDGE_CLAMP, &s);
 		for (int q = 0; q < 3; q++)
-			out->d[e + q * nv] = -lin_eval(u->d + q * nvu, &s);
+			out->d[e + q * nv] = -img_linf_f32(u->d + q * nvu, &s);
 	}
 
 
@@ -559,11 +555,11 @@ int fimg_invert(const fimg_t *u, fimg_t *out, int max_iter, double tol_mm,
 			c[0] += dv[0];
 			c[1] += dv[1];
 			c[2] += dv[2];
-			img_lin_t s;
+			img_linf_t s;
 			lin_at(ug, c, IMG_EDGE_CLAMP, &s);
 			double r2 = 0;
 			for (int q = 0; q < 3; q++) {
-				double uq = lin_eval(u->d + q * nvu, &s);
+				double uq = img_linf_f32(u->d + q * nvu, &s);
 				double r = w[q] + uq;
 				r2 += r * r;
 				nxt.d[e + q * nv] = (float)(-uq);
@@ -970,12 +966,15 @@ int field_from_points(const double *xyz, const double *vec, int64_t n,
 				int64_t e = ((int64_t)k * g->ny + j) * g->nx + i;
 				double c[3] = { (double)i / f, (double)j / f,
 						(double)k / f };
-				img_lin_t s;
-				double v[3];
-				img_lin_at(cn, c, IMG_EDGE_CLAMP, &s);
-				img_lin_f64n(cv, 3, &s, v);
-				for (int q = 0; q < 3; q++)
-					out->d[e + q * nv] = (float)v[q];
+				/* float weights, double sums (as measured) */
+				img_linf_t s;
+				img_linf_at(cn, c, IMG_EDGE_CLAMP, &s);
+				for (int q = 0; q < 3; q++) {
+					double v = 0;
+					for (int t = 0; t < 8; t++)
+						v += s.w[t] * cv[3 * s.o[t] + q];
+					out->d[e + q * nv] = (float)v;
+				}
 				int64_t nn = ((int64_t)lround(c[2]) * cn[1] +
 					      lround(c[1])) * cn[0] + lround(c[0]);
 				if (!ok[nn])

@@ -69,108 +69,126 @@ static inline int clampi(int a, int lo, int hi)
 	return a < lo ? lo : a > hi ? hi : a;
 }
 
-/* along i: each row through a padded copy */
-static int pass_x(float *d, const int n[3], const double *ker, int r,
-		  int threads)
-{
-	const int nx = n[0];
-	const int64_t nrows = (int64_t)n[1] * n[2];
-	int fail = 0;
-#pragma omp parallel num_threads(threads)
-	{
-		double *buf = malloc(sizeof(double) * (size_t)(nx + 2 * r));
-		if (!buf) {
-#pragma omp atomic write
-			fail = 1;
-		}
-#pragma omp for schedule(static)
-		for (int64_t row = 0; row < nrows; row++) {
-			if (!buf)
-				continue;
-			float *p = d + row * nx;
-			for (int i = -r; i < nx + r; i++)
-				buf[i + r] = p[clampi(i, 0, nx - 1)];
-			for (int i = 0; i < nx; i++) {
-				double s = 0;
-				for (int t = 0; t <= 2 * r; t++)
-					s += ker[t] * buf[i + t];
-				p[i] = (float)s;
-			}
-		}
-		free(buf);
-	}
-	return fail;
+/*
+ * The two passes, generated for sums in T (double, or float for the float
+ * path), kernel ker in T:
+ *  pass_x_T     along i: each row through a padded copy;
+ *  pass_rows_T  along j (axis 1) or k (axis 2): whole rows of nx voxels at
+ *               a time (the inner loop runs along i, contiguous).  For each
+ *               plane (k fixed for axis 1, j fixed for axis 2) the
+ *               m = n[axis] rows are copied to buf, then each output row is
+ *               the kernel-weighted sum of the clamped input rows.
+ * Each returns nonzero when out of memory.
+ */
+#define GAUSS_PASSES(T)                                                      \
+static int pass_x_##T(float *d, const int n[3], const T *ker, int r,        \
+		      int threads)                                          \
+{                                                                           \
+	const int nx = n[0];                                                \
+	const int64_t nrows = (int64_t)n[1] * n[2];                         \
+	int fail = 0;                                                       \
+	_Pragma("omp parallel num_threads(threads)")                        \
+	{                                                                   \
+		T *buf = malloc(sizeof(T) * (size_t)(nx + 2 * r));          \
+		if (!buf) {                                                 \
+			_Pragma("omp atomic write")                         \
+			fail = 1;                                           \
+		}                                                           \
+		_Pragma("omp for schedule(static)")                         \
+		for (int64_t row = 0; row < nrows; row++) {                 \
+			if (!buf)                                           \
+				continue;                                   \
+			float *p = d + row * nx;                            \
+			for (int i = -r; i < nx + r; i++)                   \
+				buf[i + r] = p[clampi(i, 0, nx - 1)];       \
+			for (int i = 0; i < nx; i++) {                      \
+				T s = 0;                                    \
+				for (int t = 0; t <= 2 * r; t++)            \
+					s += ker[t] * buf[i + t];           \
+				p[i] = (float)s;                            \
+			}                                                   \
+		}                                                           \
+		free(buf);                                                  \
+	}                                                                   \
+	return fail;                                                        \
+}                                                                           \
+                                                                            \
+static int pass_rows_##T(float *d, const int n[3], int axis, const T *ker,  \
+			 int r, int threads)                                \
+{                                                                           \
+	const int nx = n[0], m = n[axis];                                   \
+	const int nplanes = axis == 1 ? n[2] : n[1];                        \
+	const int64_t nxy = (int64_t)n[0] * n[1];                           \
+	/* row q of plane l starts at d + base(l) + q * step */             \
+	const int64_t step = axis == 1 ? nx : nxy;                          \
+	int fail = 0;                                                       \
+	_Pragma("omp parallel num_threads(threads)")                        \
+	{                                                                   \
+		float *buf = malloc(sizeof(float) * (size_t)nx * m);        \
+		T *acc = malloc(sizeof(T) * (size_t)nx);                    \
+		const int ok = buf && acc;                                  \
+		if (!ok) {                                                  \
+			_Pragma("omp atomic write")                         \
+			fail = 1;                                           \
+		}                                                           \
+		_Pragma("omp for schedule(static)")                         \
+		for (int l = 0; l < nplanes; l++) {                         \
+			if (!ok)                                            \
+				continue;                                   \
+			float *base = d + (axis == 1 ? (int64_t)l * nxy     \
+						     : (int64_t)l * nx);    \
+			for (int q = 0; q < m; q++)                         \
+				memcpy(buf + (int64_t)q * nx,               \
+				       base + q * step, sizeof(float) * nx);\
+			for (int q = 0; q < m; q++) {                       \
+				for (int i = 0; i < nx; i++)                \
+					acc[i] = 0;                         \
+				for (int t = -r; t <= r; t++) {             \
+					const float *s = buf + (int64_t)    \
+						clampi(q + t, 0, m - 1) * nx;\
+					const T w = ker[t + r];             \
+					for (int i = 0; i < nx; i++)        \
+						acc[i] += w * s[i];         \
+				}                                           \
+				float *o = base + q * step;                 \
+				for (int i = 0; i < nx; i++)                \
+					o[i] = (float)acc[i];               \
+			}                                                   \
+		}                                                           \
+		free(buf);                                                  \
+		free(acc);                                                  \
+	}                                                                   \
+	return fail;                                                        \
 }
 
-/*
- * Along j (axis 1) or k (axis 2): whole rows of nx voxels at a time (the
- * inner loop runs along i, contiguous).  For each plane (k fixed for axis
- * 1, j fixed for axis 2) the m = n[axis] rows are copied to buf, then each
- * output row is the kernel-weighted sum of the clamped input rows.
- */
-static int pass_rows(float *d, const int n[3], int axis, const double *ker,
-		     int r, int threads)
-{
-	const int nx = n[0], m = n[axis];
-	const int nplanes = axis == 1 ? n[2] : n[1];
-	const int64_t nxy = (int64_t)n[0] * n[1];
-	/* row q of plane l starts at d + base(l) + q * step */
-	const int64_t step = axis == 1 ? nx : nxy;
-	int fail = 0;
-#pragma omp parallel num_threads(threads)
-	{
-		float *buf = malloc(sizeof(float) * (size_t)nx * m);
-		double *acc = malloc(sizeof(double) * (size_t)nx);
-		const int ok = buf && acc;
-		if (!ok) {
-#pragma omp atomic write
-			fail = 1;
-		}
-#pragma omp for schedule(static)
-		for (int l = 0; l < nplanes; l++) {
-			if (!ok)
-				continue;
-			float *base = d + (axis == 1 ? (int64_t)l * nxy
-						     : (int64_t)l * nx);
-			for (int q = 0; q < m; q++)
-				memcpy(buf + (int64_t)q * nx, base + q * step,
-				       sizeof(float) * nx);
-			for (int q = 0; q < m; q++) {
-				for (int i = 0; i < nx; i++)
-					acc[i] = 0;
-				for (int t = -r; t <= r; t++) {
-					const float *s =
-						buf + (int64_t)clampi(q + t, 0, m - 1) * nx;
-					const double w = ker[t + r];
-					for (int i = 0; i < nx; i++)
-						acc[i] += w * s[i];
-				}
-				float *o = base + q * step;
-				for (int i = 0; i < nx; i++)
-					o[i] = (float)acc[i];
-			}
-		}
-		free(buf);
-		free(acc);
-	}
-	return fail;
-}
+GAUSS_PASSES(double)
+GAUSS_PASSES(float)
 
 int img_gauss_smooth(float *d, const int n[3], const double sigma_vox[3],
-		     int kind, int threads)
+		     int kind, int sums, int threads)
 {
 	if (threads < 1)
 		threads = 1;
 	for (int a = 0; a < 3; a++) {
 		if (!(sigma_vox[a] > 0) || n[a] < 2)
 			continue;
-		int r;
+		int r, fail = 1;
 		double *ker = img_gauss_kernel(sigma_vox[a], kind, &r);
-		if (!ker)
-			return ARMSTG_ENOMEM;
-		int fail = a == 0 ? pass_x(d, n, ker, r, threads)
-				  : pass_rows(d, n, a, ker, r, threads);
+		float *kf = ker && sums == IMG_GAUSS_SUM_F32
+				    ? malloc(sizeof(float) * (size_t)(2 * r + 1))
+				    : NULL;
+		if (kf) {
+			for (int t = 0; t <= 2 * r; t++)
+				kf[t] = (float)ker[t];
+			fail = a == 0 ? pass_x_float(d, n, kf, r, threads)
+				      : pass_rows_float(d, n, a, kf, r, threads);
+		} else if (ker && sums != IMG_GAUSS_SUM_F32) {
+			fail = a == 0 ? pass_x_double(d, n, ker, r, threads)
+				      : pass_rows_double(d, n, a, ker, r,
+							 threads);
+		}
 		free(ker);
+		free(kf);
 		if (fail)
 			return ARMSTG_ENOMEM;
 	}

@@ -13,8 +13,10 @@
  *                       of only 0.23; radius ceil(3 sigma), at least 2.
  *   IMG_GAUSS_SAMPLED   exp(-n^2 / 2 sigma^2) at the integers, radius
  *                       ceil(3 sigma).
- * Borders are replicated (the nearest voxel's value).  Sums run in doubles,
- * over the kernel from -r to r.
+ * Borders are replicated (the nearest voxel's value).  Sums run over the
+ * kernel from -r to r, in doubles (IMG_GAUSS_SUM_F64) or, on the float
+ * hot path of lib/field (demons and warp smooth fields at every
+ * iteration), kernel and sums in float (IMG_GAUSS_SUM_F32).
  */
 #ifndef IMG_GAUSS_H
 #define IMG_GAUSS_H
@@ -26,6 +28,11 @@ enum img_gauss_kind {
 	IMG_GAUSS_SAMPLED = 1,
 };
 
+enum img_gauss_sums {
+	IMG_GAUSS_SUM_F64 = 0,
+	IMG_GAUSS_SUM_F32 = 1,
+};
+
 /*
  * Kernel of standard deviation sigma_vox (> 0, voxels): 2 * *radius + 1
  * weights, k[r + n] for n = -r..r; free() it.  NULL when out of memory.
@@ -35,10 +42,10 @@ double *img_gauss_kernel(double sigma_vox, int kind, int *radius);
 /*
  * Smooth d (n[0] x n[1] x n[2] floats, x fastest) in place along each axis
  * a with sigma_vox[a] voxels; an axis with sigma_vox[a] <= 0 or a single
- * voxel is left alone.  threads: OpenMP threads (< 1: 1).  0 or
- * ARMSTG_ENOMEM.
+ * voxel is left alone.  kind: img_gauss_kind; sums: img_gauss_sums.
+ * threads: OpenMP threads (< 1: 1).  0 or ARMSTG_ENOMEM.
  */
 int img_gauss_smooth(float *d, const int n[3], const double sigma_vox[3],
-		     int kind, int threads);
+		     int kind, int sums, int threads);
 
 #endif

@@ -169,12 +169,58 @@ static inline void img_lin_f64n(const double *d, int nc, const img_lin_t *s,
 	}
 }
 
-/* Per-label linear (labels): the label of largest summed weight among the
- * corners (ties within 1e-6 to the first seen). */
-static inline float img_lin_label_f32(const float *d, const img_lin_t *s)
+/*
+ * The same stencil with float weights, for float images on hot paths
+ * (lib/field, hence demons and warp): t rounded to float, per-axis weights
+ * 1 - t and t, their products and the sum over the corners in float.  It
+ * differs from the double stencil by float rounding only, and keeps those
+ * paths' figures as they were measured.
+ */
+typedef struct img_linf {
+	int64_t o[8];
+	float w[8];
+} img_linf_t;
+
+static inline int img_linf_at(const int n[3], const double c[3], int edge,
+			      img_linf_t *s)
 {
-	float lab[8];
-	double wt[8];
+	int i[3][2];
+	float w[3][2];
+	for (int a = 0; a < 3; a++) {
+		double wd[2];
+		if (!img_lin_axis(c[a], n[a], edge, i[a], wd))
+			return 0;
+		if (wd[0] + wd[1] == 1) {
+			w[a][1] = (float)wd[1];
+			w[a][0] = 1 - w[a][1];
+		} else { /* zero extension beyond a face */
+			w[a][0] = (float)wd[0];
+			w[a][1] = (float)wd[1];
+		}
+	}
+	const int64_t nx = n[0], nxy = (int64_t)n[0] * n[1];
+	for (int q = 0; q < 8; q++) {
+		int bi = q & 1, bj = (q >> 1) & 1, bk = (q >> 2) & 1;
+		s->o[q] = (int64_t)i[2][bk] * nxy + (int64_t)i[1][bj] * nx +
+			  i[0][bi];
+		s->w[q] = w[0][bi] * w[1][bj] * w[2][bk];
+	}
+	return 1;
+}
+
+static inline float img_linf_f32(const float *d, const img_linf_t *s)
+{
+	float v = 0;
+	for (int q = 0; q < 8; q++)
+		v += s->w[q] * d[s->o[q]];
+	return v;
+}
+
+/* Per-label linear (labels), on the float stencil: the label of largest
+ * summed weight among the corners (ties within 1e-6 to the first seen). */
+static inline float img_linf_label_f32(const float *d, const img_linf_t *s)
+{
+	float lab[8], wt[8];
 	int n = 0;
 	for (int q = 0; q < 8; q++) {
 		if (s->w[q] <= 0)
@@ -189,11 +235,11 @@ static inline float img_lin_label_f32(const float *d, const img_lin_t *s)
 		}
 		wt[m] += s->w[q];
 	}
-	if (!n) /* cannot happen inside the grid (weights sum to 1) */
+	if (!n)
 		return d[s->o[0]];
 	int best = 0;
 	for (int m = 1; m < n; m++)
-		if (wt[m] > wt[best] + 1e-6)
+		if (wt[m] > wt[best] + 1e-6f)
 			best = m;
 	return lab[best];
 }

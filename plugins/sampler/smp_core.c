@@ -594,7 +594,8 @@ static int run_adaptive(ctx_t *c, int64_t npre)
 		if (sv[a] < 0.1)
 			sv[a] = 0;
 	}
-	if (img_gauss_smooth(sm, n, sv, IMG_GAUSS_SAMPLED, p->threads))
+	if (img_gauss_smooth(sm, n, sv, IMG_GAUSS_SAMPLED,
+			     IMG_GAUSS_SUM_F64, p->threads))
 		goto out;
 	/* feature: largest |second directional derivative| (Hessian of the
 	 * smoothed image by central differences, per mm^2) */

@@ -183,13 +183,13 @@ static void test_label(void **state)
 	const int n[3] = { 2, 2, 2 };
 	/* label 7 on 3 corners of the i = 0 face, 4 on the rest */
 	const float d[8] = { 7, 4, 7, 4, 7, 4, 4, 4 };
-	img_lin_t s;
+	img_linf_t s;
 	double c[3] = { 0.2, 0.5, 0.5 }; /* 7 weighs 0.8 * 0.75 = 0.6 */
-	assert_int_equal(img_lin_at(n, c, IMG_EDGE_VOXEL, &s), 1);
-	assert_true(img_lin_label_f32(d, &s) == 7);
+	assert_int_equal(img_linf_at(n, c, IMG_EDGE_VOXEL, &s), 1);
+	assert_true(img_linf_label_f32(d, &s) == 7);
 	c[0] = 0.4; /* 7 weighs 0.45 */
-	assert_int_equal(img_lin_at(n, c, IMG_EDGE_VOXEL, &s), 1);
-	assert_true(img_lin_label_f32(d, &s) == 4);
+	assert_int_equal(img_linf_at(n, c, IMG_EDGE_VOXEL, &s), 1);
+	assert_true(img_linf_label_f32(d, &s) == 4);
 }
 
 /* nearest: extent, half-way ties round up, tolerance */
