@@ -14,12 +14,16 @@
  *   n     (c_a - t) / |c_a - t|: the direction the tumour pushes them
  *   P     the patient's ventricles: voxels within `search_mm` of the atlas
  *         ventricles, outside `exclude` (tumour + edema), dark in FLAIR
- *         (< median - k_flair sigma) and dark in T1 (< median - k_t1 sigma;
- *         each image that is connected), median and sigma (1.4826 MAD) over
- *         the brain outside `exclude` (`brain`, else the atlas ventricles'
- *         neighbourhood of 3 search_mm), 26-connected to such a voxel inside
- *         the atlas ventricles (sulci and cisterns that do not touch them are
- *         left out)
+ *         and dark in T1 (each image that is connected): below
+ *         csf + level (tissue - csf), csf = the image's 25th percentile
+ *         inside the atlas ventricles, tissue = its median over the brain
+ *         outside `exclude` (`brain`, else the atlas ventricles'
+ *         neighbourhood of 3 search_mm); the levels come from the case
+ *         itself, so z-scored, integer and piecewise-constant (phantom)
+ *         images need nothing else (a median - k MAD rule found nothing on
+ *         the real-anatomy phantom, whose FLAIR is two-valued in the
+ *         tissue); 26-connected to such a voxel inside the atlas ventricles
+ *         (sulci and cisterns that do not touch them are left out)
  *   shift patient  = (centroid(P) - c_a) . n   (mm; > 0: away from the tumour)
  *   shift grown    = (centroid(G) - c_a) . n   G = input `grown` (the atlas
  *                    ventricles after the growth), when connected
@@ -56,7 +60,7 @@
 #include "armstg/volmath.h"
 
 typedef struct {
-	double search_mm, k_flair, k_t1;
+	double search_mm, level;
 } priv_t;
 
 #define P(f) offsetof(priv_t, f)
@@ -65,10 +69,10 @@ static const armstg_param_t params[] = {
 	{ "search_mm", PT_DOUBLE, "10", 0, 100, "mm",
 	  "the patient's ventricles are looked for this far from the atlas's",
 	  NULL, P(search_mm), 0 },
-	{ "k_flair", PT_DOUBLE, "2", 0, 20, "sigma",
-	  "CSF: FLAIR below median - k_flair sigma", NULL, P(k_flair), 0 },
-	{ "k_t1", PT_DOUBLE, "1.5", 0, 20, "sigma",
-	  "CSF: T1 below median - k_t1 sigma", NULL, P(k_t1), 0 },
+	{ "level", PT_DOUBLE, "0.5", 0, 1, "",
+	  "CSF: below csf + level (tissue - csf) in each image (csf: 25th "
+	  "percentile in the atlas ventricles, tissue: brain median)", NULL,
+	  P(level), 0 },
 };
 
 enum { IN_VENT, IN_TUM, IN_T1, IN_FLAIR, IN_GROWN, IN_EXCL, IN_BRAIN,
@@ -136,23 +140,25 @@ static int cmp_d(const void *a, const void *b)
 	return (x > y) - (x < y);
 }
 
-/* median and 1.4826 MAD of img over sel (n values) */
-static int robust(const vol_t *img, const uint8_t *sel, int64_t n,
-		  double *med, double *sig)
+/* the q-quantile (0..1) of img over the voxels where sel[e] == want; -1
+ * out of memory, 1 none selected */
+static int quantile(const vol_t *img, const uint8_t *sel, uint8_t want,
+		    double q, double *out)
 {
 	int64_t nv = vol_nvox(img), m = 0;
-	double *x = malloc((size_t)(n ? n : 1) * sizeof *x);
+	for (int64_t e = 0; e < nv; e++)
+		m += sel[e] == want;
+	if (!m)
+		return 1;
+	double *x = malloc((size_t)m * sizeof *x);
 	if (!x)
 		return -1;
+	m = 0;
 	for (int64_t e = 0; e < nv; e++)
-		if (sel[e])
+		if (sel[e] == want)
 			x[m++] = vol_get(img, e);
 	qsort(x, (size_t)m, sizeof *x, cmp_d);
-	*med = x[m / 2];
-	for (int64_t i = 0; i < m; i++)
-		x[i] = fabs(x[i] - *med);
-	qsort(x, (size_t)m, sizeof *x, cmp_d);
-	*sig = 1.4826 * x[m / 2];
+	*out = x[(int64_t)(q * (double)(m - 1) + 0.5)];
 	free(x);
 	return 0;
 }
@@ -343,18 +349,38 @@ static int process(armstg_stage_t *st)
 				     "the excluded region)", (long long)ns);
 			goto out;
 		}
-		double mt = 0, stt = 0, mf = 0, sf = 0;
-		if ((t1 && robust(t1, sel, ns, &mt, &stt)) ||
-		    (fl && robust(fl, sel, ns, &mf, &sf))) {
-			rc = h->fail(st, ARMSTG_ENOMEM, "out of memory");
-			goto out;
+		/* sel: 1 brain (statistics), 2 atlas ventricle (CSF level) */
+		for (int64_t e = 0; e < nv; e++)
+			if (vol_get(vent, e) > 0 && !(ex && vol_get(ex, e) > 0))
+				sel[e] = 2;
+		double th[2] = { 0, 0 };
+		const vol_t *im[2] = { t1, fl };
+		for (int a = 0; a < 2; a++) {
+			double csf = 0, tis = 0;
+			int q1 = im[a] ? quantile(im[a], sel, 2, 0.25, &csf) : 0;
+			int q2 = im[a] ? quantile(im[a], sel, 1, 0.5, &tis) : 0;
+			if (q1 < 0 || q2 < 0) {
+				rc = h->fail(st, ARMSTG_ENOMEM, "out of memory");
+				goto out;
+			}
+			if (q1 > 0) {
+				rc = h->fail(st, ARMSTG_EINVAL, "the atlas "
+					     "ventricles lie wholly in the "
+					     "excluded region: no CSF level");
+				goto out;
+			}
+			th[a] = csf + p->level * (tis - csf);
+			if (im[a])
+				h->log(st, LOG_INFO, "%s: CSF level %.4g, tissue "
+				       "%.4g, threshold %.4g", a ? "flair" : "t1",
+				       csf, tis, th[a]);
 		}
 		for (int64_t e = 0; e < nv; e++) {
 			int d = cand[e] && !(ex && vol_get(ex, e) > 0);
 			if (d && t1)
-				d = vol_get(t1, e) < mt - p->k_t1 * stt;
+				d = vol_get(t1, e) < th[0];
 			if (d && fl)
-				d = vol_get(fl, e) < mf - p->k_flair * sf;
+				d = vol_get(fl, e) < th[1];
 			cand[e] = (uint8_t)d;
 		}
 		/* keep what is 26-connected to a candidate inside the atlas

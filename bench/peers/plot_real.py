@@ -1,0 +1,92 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: MIT
+"""The table and the figure of bench/peers/real.py's rows (real.tsv):
+a markdown table on stdout (ventricle MSD / tumour Dice / min det J / wall
+per case and method) and one PNG: ventricle MSD per real case and the
+displacement error near the tumour per phantom, one bar per method.
+
+    python3 bench/peers/plot_real.py OUT/real.tsv [more.tsv...] --png FIG.png
+"""
+import argparse
+import csv
+import math
+
+ORDER = ["armstg", "armstg_auto", "sphere", "direct", "direct_lncc",
+         "affine_lncc", "ants_syn", "elastix", "greedy", "sitk_demons"]
+
+
+def load(paths):
+    rows = {}
+    for p in paths:
+        with open(p) as f:
+            for r in csv.DictReader(f, delimiter="\t"):
+                rows[(r["case"], r["method"])] = r
+    return rows
+
+
+def num(r, k):
+    try:
+        v = float(r[k])
+    except (KeyError, ValueError):
+        return math.nan
+    return v
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("tsv", nargs="+")
+    ap.add_argument("--png")
+    a = ap.parse_args()
+    rows = load(a.tsv)
+    cases = []
+    for c, _ in rows:
+        if c not in cases:
+            cases.append(c)
+    methods = [m for m in ORDER if any(k[1] == m for k in rows)]
+    methods += sorted({k[1] for k in rows} - set(methods))
+    print("| case | " + " | ".join(methods) + " |")
+    print("|---|" + "---|" * len(methods))
+    for c in cases:
+        ph = c.startswith("phantom")
+        cells = []
+        for m in methods:
+            r = rows.get((c, m))
+            if not r:
+                cells.append("")
+                continue
+            main_ = num(r, "err_band_mm") if ph else num(r, "vent_msd_mm")
+            s = "%.2f" % main_
+            td = num(r, "tumour_dice")
+            if not math.isnan(td):
+                s += " / D %.2f" % td
+            s += " / J %.2f / %.0f s" % (num(r, "jac_min"), num(r, "wall_s"))
+            cells.append(s)
+        print("| %s | %s |" % (c, " | ".join(cells)))
+    if not a.png:
+        return
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    fig, ax = plt.subplots(1, 2, figsize=(14, 4.8),
+                           gridspec_kw=dict(width_ratios=[5, 3]))
+    for k, (sel, key, title) in enumerate((
+            ([c for c in cases if not c.startswith("phantom")], "vent_msd_mm",
+             "real cases: ventricle mean surface distance (mm)"),
+            ([c for c in cases if c.startswith("phantom")], "err_band_mm",
+             "real-anatomy phantoms: error within 15 mm of the tumour (mm)"))):
+        w = 0.8 / max(len(methods), 1)
+        for i, m in enumerate(methods):
+            y = [num(rows[(c, m)], key) if (c, m) in rows else np.nan for c in sel]
+            ax[k].bar(np.arange(len(sel)) + i * w - 0.4 + w / 2, y, w, label=m)
+        ax[k].set_xticks(range(len(sel)))
+        ax[k].set_xticklabels(sel, rotation=15)
+        ax[k].set_title(title, fontsize=10)
+        ax[k].grid(axis="y", alpha=0.3)
+    ax[0].legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(a.png, dpi=80)
+
+
+if __name__ == "__main__":
+    main()
