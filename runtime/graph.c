@@ -1719,6 +1719,110 @@ static int write_run_table(graph_t *g, const run_opts_t *o, double total,
 	return 0;
 }
 
+/* ------------------------------------------------------------------ */
+/* the resolved graph as a table (host->run_graph, plugin.h 1.2)       */
+
+static int gt_row(tab_t *t, const char *stage, const char *plugin,
+		  const char *kind, const char *key, const char *value,
+		  const char *unit, const char *source)
+{
+	int64_t r = tab_add_row(t);
+	if (r < 0)
+		return -1;
+	const char *col[7] = { "stage", "plugin", "kind", "key", "value",
+			       "unit", "source" };
+	const char *val[7] = { stage, plugin, kind, key, value, unit, source };
+	for (int c = 0; c < 7; c++)
+		if (tab_set_str(t, r, col[c], val[c] ? val[c] : ""))
+			return -1;
+	return 0;
+}
+
+static const char *kv_source(const g_kv_t *kv, char *buf, size_t n)
+{
+	if (kv->line > 0)
+		snprintf(buf, n, "line %d", kv->line);
+	else
+		snprintf(buf, n, "--set");
+	return buf;
+}
+
+/* Every stage with its plugin, connections and every parameter's value and
+ * origin; the graph file; [tune] and, once a search ran, its candidates.
+ * Frozen; NULL on out-of-memory. */
+static tab_t *graph_table(graph_t *g)
+{
+	const g_tune_t *t = &g->tune;
+	tab_t *tab = tab_new();
+	char src[32], val[64];
+	int bad = !tab;
+	bad = bad || gt_row(tab, "", "", "graph", "file", g->file, "", "") ||
+	      gt_row(tab, "", "", "graph", "name", g->name, "", "");
+	for (int k = 0; !bad && t->present && k < t->nkv; k++)
+		bad = gt_row(tab, "tune", "", "tune", t->kv[k].key,
+			     t->kv[k].val, "", kv_source(&t->kv[k], src,
+							 sizeof src));
+	for (int k = 0; !bad && t->best >= 0 && k < t->nrows; k++) {
+		const tune_row_t *row = &t->rows[k];
+		char sc[2100];
+		if (row->ok)
+			snprintf(sc, sizeof sc, "%.6g", row->score);
+		else
+			snprintf(sc, sizeof sc, "failed: %s", row->err);
+		bad = gt_row(tab, "tune", "", "candidate", t->values[k], sc, "",
+			     k == t->best ? "chosen" : "");
+	}
+	for (int i = 0; !bad && i < g->nstages; i++) {
+		g_stage_t *s = &g->stages[i];
+		const armstg_plugin_t *d = s->plug.desc;
+		g_kv_t *pk = find_kv(s, "plugin");
+		char pv[160];
+		snprintf(pv, sizeof pv, "%s %s", d->name, d->version);
+		bad = gt_row(tab, s->name, d->name, "plugin", "plugin", pv, "",
+			     kv_source(pk, src, sizeof src));
+		g_kv_t *nk = find_kv(s, "node");
+		if (!bad && nk)
+			bad = gt_row(tab, s->name, d->name, "node", "node",
+				     nk->val, "", kv_source(nk, src,
+							    sizeof src));
+		for (int ip = 0; !bad && ip < d->n_inputs; ip++) {
+			g_kv_t *kv = find_kv(s, d->inputs[ip].name);
+			if (s->src[ip] < 0 || !kv)
+				continue;
+			bad = gt_row(tab, s->name, d->name, "input", kv->key,
+				     kv->val, "", kv_source(kv, src,
+							    sizeof src));
+		}
+		for (int ip = 0; !bad && ip < d->n_params; ip++) {
+			const armstg_param_t *p = &d->params[ip];
+			const char *v = stage_param_text(s->st, ip);
+			g_kv_t *kv = find_kv(s, p->name);
+			const char *how = "default";
+			if (t->best >= 0 && t->nrows && s == &g->stages[t->stage]
+			    && !strcmp(t->key, p->name))
+				how = "tune";
+			else if (kv && stage_param_isset(s->st, ip))
+				how = kv_source(kv, src, sizeof src);
+			if (v && p->type == PT_DOUBLE) {
+				/* as the plugin reads it: "6" and "6.0" alike */
+				snprintf(val, sizeof val, "%.15g",
+					 *(const double *)(const void *)(
+						 (const char *)stage_pub(s->st)
+							 ->priv + p->offset));
+				v = val;
+			}
+			bad = gt_row(tab, s->name, d->name, "param", p->name, v,
+				     p->unit, how);
+		}
+	}
+	if (bad) {
+		msg_unref(tab ? &tab->base : NULL);
+		return NULL;
+	}
+	msg_freeze(&tab->base);
+	return tab;
+}
+
 /* tune.tsv: one row per candidate tried (value, score, wall_s, status,
  * chosen, error), written to path (a temporary name). */
 static int write_tune_table(graph_t *g, const char *path)
@@ -1771,6 +1875,14 @@ static int run_pass(graph_t *g, const run_opts_t *o, char *err,
 		nthreads_total = 1;
 #endif
 	int per = nthreads_total / o->jobs;
+	tab_t *gt = graph_table(g);
+	if (!gt) {
+		snprintf(err, errsize, "out of memory");
+		return ARMSTG_ENOMEM;
+	}
+	for (int i = 0; i < g->nstages; i++)
+		stage_set_run_graph(g->stages[i].st, &gt->base);
+	msg_unref(&gt->base);
 	for (int i = 0; i < g->nstages; i++) {
 		g_stage_t *s = &g->stages[i];
 		s->consumers_left = 0;
@@ -1941,6 +2053,7 @@ static int tune_run(graph_t *g, const run_opts_t *o, char *err,
 	char *down = calloc(n, 1), *fin = calloc(n, 1), *cand = calloc(n, 1);
 	int rc = 0, any = 0, nshared = 0, nper = 0, nok = 0, best = -1;
 	t->rows = calloc((size_t)t->nvalues, sizeof *t->rows);
+	t->best = -1; /* no search finished yet */
 	if (!memo || !down || !fin || !cand || !t->rows) {
 		snprintf(err, errsize, "[tune] out of memory");
 		rc = ARMSTG_ENOMEM;

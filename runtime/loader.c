@@ -182,6 +182,7 @@ static const char *basename_noext(const char *path, char *buf, size_t n)
 static const size_t desc_size_of_minor[] = {
 	ARMSTG_PLUGIN_SIZE_1_0,
 	ARMSTG_PLUGIN_SIZE_1_1,
+	ARMSTG_PLUGIN_SIZE_1_2,
 };
 
 /*

@@ -102,6 +102,14 @@ int stage_set_param(rt_stage_t *s, const char *key, const char *value,
 		    char *err, size_t errsize);
 /* apply defaults for unset params; error if a required one is missing */
 int stage_finish_params(rt_stage_t *s, char *err, size_t errsize);
+/* parameter i's value as text (as set, or its default once
+ * stage_finish_params ran; NULL: an optional string left unset), and
+ * whether the graph set it */
+const char *stage_param_text(const rt_stage_t *s, int i);
+int stage_param_isset(const rt_stage_t *s, int i);
+/* the table host->run_graph returns to this stage (a reference is kept;
+ * NULL: none) */
+void stage_set_run_graph(rt_stage_t *s, const msg_t *m);
 int stage_init(rt_stage_t *s);
 /* inputs: n_inputs messages (NULL for unconnected optional ones).  On
  * success the outputs are frozen and held by the stage. */

@@ -30,7 +30,9 @@ struct rt_stage {
 	armstg_stage_t pub;           /* first: plugins see this */
 	const armstg_plugin_t *desc;
 	char name[128];
-	char **strval;                /* per param: owned string (STRING) */
+	char **strval;                /* per param: the value's text as set
+				         (owned; for STRING also what priv
+				         points to) */
 	unsigned char *isset;         /* per param */
 	int inited;                   /* 1 after a successful init */
 	int init_called;
@@ -45,6 +47,7 @@ struct rt_stage {
 	int nmade;
 	double last_progress;         /* monotonic seconds */
 	double last_fraction;
+	msg_t *run_graph;             /* host->run_graph's table (a ref) */
 };
 
 static double now_s(void)
@@ -312,6 +315,12 @@ static int h_threads(armstg_stage_t *st)
 	return of(st)->threads > 0 ? of(st)->threads : 1;
 }
 
+static const tab_t *h_run_graph(armstg_stage_t *st)
+{
+	msg_t *m = of(st)->run_graph;
+	return m ? (const tab_t *)m : NULL;
+}
+
 static const armstg_host_t host_table = {
 	.size = sizeof(armstg_host_t),
 	.abi_major = ARMSTG_ABI_MAJOR,
@@ -342,6 +351,7 @@ static const armstg_host_t host_table = {
 	.tab_read = h_tab_read,
 	.tab_write = h_tab_write,
 	.threads = h_threads,
+	.run_graph = h_run_graph,
 };
 
 const armstg_host_t *rt_host(void)
@@ -631,20 +641,36 @@ int stage_set_param(rt_stage_t *s, const char *key, const char *value,
 		if (rc)
 			return rc;
 	}
-	if (p->type == PT_STRING) {
-		char *dup = strdup(value);
-		if (!dup)
-			return ARMSTG_ENOMEM;
-		free(s->strval[i]);
-		s->strval[i] = dup;
-		*(const char **)dst = dup;
-	} else {
+	if (p->type != PT_STRING) {
 		int rc = parse_value(p, value, dst, err, errsize);
 		if (rc)
 			return rc;
 	}
+	char *dup = strdup(value);
+	if (!dup)
+		return ARMSTG_ENOMEM;
+	free(s->strval[i]);
+	s->strval[i] = dup;
+	if (p->type == PT_STRING)
+		*(const char **)dst = dup;
 	s->isset[i] = 1;
 	return 0;
+}
+
+const char *stage_param_text(const rt_stage_t *s, int i)
+{
+	return i >= 0 && i < s->desc->n_params ? s->strval[i] : NULL;
+}
+
+int stage_param_isset(const rt_stage_t *s, int i)
+{
+	return i >= 0 && i < s->desc->n_params && s->isset[i];
+}
+
+void stage_set_run_graph(rt_stage_t *s, const msg_t *m)
+{
+	msg_unref(s->run_graph);
+	s->run_graph = m ? msg_ref(m) : NULL;
 }
 
 int stage_finish_params(rt_stage_t *s, char *err, size_t errsize)
@@ -874,6 +900,7 @@ void stage_free(rt_stage_t *s)
 		free(s->strval[i]);
 	free(s->strval);
 	free(s->isset);
+	msg_unref(s->run_graph);
 	free(s->pub.priv);
 	free(s);
 }

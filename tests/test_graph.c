@@ -692,6 +692,89 @@ static void test_elf_check(void **state)
 	tu_cleanup(dir);
 }
 
+/* the row of the run graph table (host->run_graph) for stage/kind/key;
+ * -1 when absent */
+static int64_t gt_find(const tab_t *t, const char *stage, const char *kind,
+		       const char *key)
+{
+	const tab_col_t *cs = tab_col(t, "stage"), *ck = tab_col(t, "kind"),
+			*cy = tab_col(t, "key");
+	assert_non_null(cs);
+	assert_non_null(ck);
+	assert_non_null(cy);
+	for (int64_t r = 0; r < t->nrows; r++)
+		if (!strcmp(cs->str[r] ? cs->str[r] : "", stage) &&
+		    !strcmp(ck->str[r], kind) && !strcmp(cy->str[r], key))
+			return r;
+	return -1;
+}
+
+static void gt_expect(const tab_t *t, const char *stage, const char *kind,
+		      const char *key, const char *value, const char *unit,
+		      const char *source)
+{
+	int64_t r = gt_find(t, stage, kind, key);
+	if (r < 0)
+		fail_msg("no row %s/%s/%s in the run graph", stage, kind, key);
+	const char *v = tab_col(t, "value")->str[r];
+	const char *u = tab_col(t, "unit")->str[r];
+	const char *s = tab_col(t, "source")->str[r];
+	if (strcmp(v ? v : "", value) || strcmp(u ? u : "", unit) ||
+	    strcmp(s ? s : "", source))
+		fail_msg("%s/%s/%s: value '%s' unit '%s' source '%s', want "
+			 "'%s' '%s' '%s'", stage, kind, key, v, u, s, value,
+			 unit, source);
+}
+
+/* host->run_graph (ABI 1.2): what a stage is told about the run, written
+ * by tp_graph: every parameter with its value, unit and origin (default,
+ * line of the file, --set), the plugins and the connections */
+static void test_run_graph_table(void **state)
+{
+	(void)state;
+	char gp[256], err[4096], out[] = "/tmp/armstg-out-XXXXXX", f[1200];
+	assert_non_null(mkdtemp(out));
+	const char *text =
+		"[graph]\nname = gt\n"                          /* 1-2 */
+		"[stage gen]\nplugin = tp_gen\nn = 3\n"         /* 3-5 */
+		"value = 2\n"                                   /* 6 */
+		"[stage info]\nplugin = tp_graph\n"             /* 7-8 */
+		"volume = gen.volume\npath = graph.tsv\n"       /* 9-10 */
+		"mode = b\ngain = 1\n";                         /* 11-12 */
+	const char *sets[] = { "info.gain=2.25", "gen.label=x y" };
+	graph_t *g = graph_load(write_tmp(text, gp, sizeof gp), sets, 2, err,
+				sizeof err);
+	if (!g)
+		fail_msg("%s", err);
+	run_opts_t o = { .outdir = out, .jobs = 1, .quiet = 1 };
+	if (graph_run(g, &o, err, sizeof err))
+		fail_msg("%s", err);
+	graph_free(g);
+	snprintf(f, sizeof f, "%s/graph.tsv", out);
+	tab_t *t = NULL;
+	if (tab_read_file(f, &t, err, sizeof err))
+		fail_msg("%s", err);
+	gt_expect(t, "", "graph", "file", gp, "", "");
+	gt_expect(t, "", "graph", "name", "gt", "", "");
+	gt_expect(t, "gen", "plugin", "plugin", "tp_gen 1", "", "line 4");
+	gt_expect(t, "gen", "param", "n", "3", "voxels", "line 5");
+	gt_expect(t, "gen", "param", "value", "2", "", "line 6");
+	gt_expect(t, "gen", "param", "mode", "a", "", "default");
+	gt_expect(t, "gen", "param", "flag", "false", "", "default");
+	gt_expect(t, "gen", "param", "label", "x y", "", "--set");
+	gt_expect(t, "gen", "param", "fail_init", "false", "", "default");
+	gt_expect(t, "info", "plugin", "plugin", "tp_graph 1", "", "line 8");
+	gt_expect(t, "info", "input", "volume", "gen.volume", "", "line 9");
+	gt_expect(t, "info", "param", "path", "graph.tsv", "", "line 10");
+	gt_expect(t, "info", "param", "gain", "2.25", "mm", "--set");
+	gt_expect(t, "info", "param", "mode", "b", "", "line 11");
+	/* nothing else: 2 graph rows, 2 plugins, 1 input, 6 + 3 params */
+	assert_int_equal(t->nrows, 2 + 2 + 1 + 6 + 3);
+	msg_unref(&t->base);
+	unlink(gp);
+	tu_cleanup(out);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -708,6 +791,7 @@ int main(void)
 		cmocka_unit_test(test_outputs_checked_before_running),
 		cmocka_unit_test(test_exit_codes),
 		cmocka_unit_test(test_elf_check),
+		cmocka_unit_test(test_run_graph_table),
 	};
 	return cmocka_run_group_tests(tests, setup, NULL);
 }

@@ -359,6 +359,82 @@ static void test_no_tumour_fails_cleanly(void **state)
 	tu_cleanup(out);
 }
 
+/*
+ * The report page of the reduced demo, as a person reads it: the run graph
+ * shows the --set overrides (header and the stage's table, highlighted) and
+ * the [tune] candidates with the value chosen; the charts carry axis labels
+ * with units; the growth chart's last point is the last row of growth.tsv
+ * (the same table, saved by the graph); the checkerboard exists.
+ */
+static void test_report_page(void **state)
+{
+	(void)state;
+	need_runs();
+	char p[1200], err[512];
+	snprintf(p, sizeof p, "%s/report/index.html", out_armstg);
+	FILE *f = fopen(p, "rb");
+	assert_non_null(f);
+	static char html[4 << 20];
+	size_t n = fread(html, 1, sizeof html - 1, f);
+	fclose(f);
+	html[n] = 0;
+	assert_true(n > 1000 && n < sizeof html - 1);
+	/* the overrides: in the header and in the phantom stage's table */
+	assert_non_null(strstr(html, "; overrides: <code>"));
+	assert_non_null(strstr(html, "<code>tune.values=4.5, 6</code>"));
+	assert_non_null(strstr(html, "<code>phantom.spacing=3</code>"));
+	assert_non_null(strstr(html, "<code>grow.push_mm=")); /* [tune]'s */
+	assert_non_null(strstr(html, "<tr class=\"ovr\"><td>nx</td><td>64"
+				     "</td><td>voxels</td><td>--set</td></tr>"));
+	assert_non_null(strstr(html, "<tr class=\"ovr\"><td>values</td><td>"
+				     "4.5, 6</td><td>--set</td></tr>"));
+	/* [tune]: two candidates, one chosen, and the growth ran with it */
+	const char *ch = strstr(html, "<tr class=\"chosen\"><td class=\"num\">");
+	assert_non_null(ch);
+	double chosen = atof(ch + strlen("<tr class=\"chosen\"><td "
+					 "class=\"num\">"));
+	assert_true(chosen == 4.5 || chosen == 6);
+	char want[256];
+	snprintf(want, sizeof want, "<tr class=\"ovr\"><td>push_mm</td><td>"
+		 "%g</td><td>mm</td><td>tune</td></tr>", chosen);
+	assert_non_null(strstr(html, want));
+	/* charts with their axes */
+	assert_non_null(strstr(html, "<svg class=\"chart\" id=\"reg_mse\""));
+	assert_non_null(strstr(html, ">iteration (all levels in sequence, "
+				     "coarse to fine)</text>"));
+	assert_non_null(strstr(html, ">update (mm)</text>"));
+	assert_non_null(strstr(html, "<svg class=\"chart\" id=\"growth_err\""));
+	assert_non_null(strstr(html, ">error estimate (mm)</text>"));
+	/* the growth chart ends where growth.tsv ends */
+	snprintf(p, sizeof p, "%s/growth.tsv", out_armstg);
+	tab_t *t = NULL;
+	if (tab_read_file(p, &t, err, sizeof err))
+		fail_msg("%s", err);
+	const tab_col_t *e = tab_col(t, "err_est_mm"), *s = tab_col(t, "step");
+	assert_non_null(e);
+	assert_non_null(s);
+	snprintf(want, sizeof want, "Last: estimated error %.4g mm at step %g",
+		 e->num[t->nrows - 1], s->num[t->nrows - 1]);
+	if (!strstr(html, want))
+		fail_msg("no '%s' on the page", want);
+	msg_unref(&t->base);
+	/* the graph drawn: one box per stage card, each linking to it; the
+	 * phantom (with --set parameters) highlighted */
+	int nbox = 0, ncard = 0;
+	for (const char *q = strstr(html, "<a href=\"#stage-"); q;
+	     q = strstr(q + 1, "<a href=\"#stage-"))
+		nbox++;
+	for (const char *q = strstr(html, "<div class=\"card\" id=\"stage-");
+	     q; q = strstr(q + 1, "<div class=\"card\" id=\"stage-"))
+		ncard++;
+	assert_true(nbox > 30);
+	assert_int_equal(nbox, ncard);
+	assert_non_null(strstr(html, "<a href=\"#stage-phantom\"><rect "
+				     "class=\"over\""));
+	snprintf(p, sizeof p, "%s/report/checker_axial.png", out_armstg);
+	assert_true(tu_exists(p));
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -366,6 +442,7 @@ int main(void)
 		cmocka_unit_test(test_warp_field),
 		cmocka_unit_test(test_nodes),
 		cmocka_unit_test(test_accuracy),
+		cmocka_unit_test(test_report_page),
 		cmocka_unit_test(test_no_tumour_fails_cleanly),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);

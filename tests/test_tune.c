@@ -677,6 +677,78 @@ static void test_interrupt(void **state)
 	done(&r);
 }
 
+/* host->run_graph after a search: the tuned parameter's value is the one
+ * chosen, with source "tune"; every candidate with its score, the chosen
+ * one marked; the [tune] keys with their lines */
+static void test_run_graph_after_tune(void **state)
+{
+	(void)state;
+	char gp[300], err[4096], f[600];
+	snprintf(gp, sizeof gp, "/tmp/armstg-tune-gt-%d.ini", (int)getpid());
+	FILE *fp = fopen(gp, "w");
+	assert_non_null(fp);
+	fputs(tune_graph, fp);
+	fputs("[stage info]\nplugin = tp_graph\nvolume = sim.volume\n"
+	      "path = graph.tsv\n", fp);
+	fclose(fp);
+	trun_t r;
+	new_dirs(&r);
+	graph_t *g = graph_load(gp, NULL, 0, r.err, sizeof r.err);
+	if (!g)
+		fail_msg("%s", r.err);
+	run_opts_t o = { .outdir = r.out, .jobs = 1, .quiet = 1 };
+	if (graph_run(g, &o, r.err, sizeof r.err))
+		fail_msg("%s", r.err);
+	graph_free(g);
+	snprintf(f, sizeof f, "%s/graph.tsv", r.out);
+	tab_t *t = NULL;
+	if (tab_read_file(f, &t, err, sizeof err))
+		fail_msg("%s", err);
+	const tab_col_t *cs = tab_col(t, "stage"), *ck = tab_col(t, "kind"),
+			*cy = tab_col(t, "key"), *cv = tab_col(t, "value"),
+			*co = tab_col(t, "source");
+	assert_non_null(cs);
+	assert_non_null(co);
+	int ncand = 0, seen_offset = 0, seen_param = 0;
+	for (int64_t i = 0; i < t->nrows; i++) {
+		const char *st = cs->str[i] ? cs->str[i] : "";
+		const char *src = co->str[i] ? co->str[i] : "";
+		if (!strcmp(ck->str[i], "candidate")) {
+			/* score sq = (x - 3.2)^2 of candidate x */
+			double x = atof(cy->str[i]);
+			assert_float_equal(atof(cv->str[i]),
+					   (x - 3.2) * (x - 3.2), 1e-9);
+			assert_string_equal(src, x == 3 ? "chosen" : "");
+			ncand++;
+		}
+		if (!strcmp(st, "sim") && !strcmp(ck->str[i], "param") &&
+		    !strcmp(cy->str[i], "offset")) {
+			assert_string_equal(cv->str[i], "3");
+			assert_string_equal(src, "tune");
+			seen_offset = 1;
+		}
+		if (!strcmp(ck->str[i], "tune") && !strcmp(cy->str[i], "param")) {
+			assert_string_equal(st, "tune");
+			assert_string_equal(cv->str[i], "sim.offset");
+			char want[32];
+			int line = 1;
+			for (const char *c = tune_graph;
+			     c < strstr(tune_graph, "param = sim.offset"); c++)
+				line += *c == '\n';
+			snprintf(want, sizeof want, "line %d", line);
+			assert_string_equal(src, want);
+			seen_param = 1;
+		}
+	}
+	assert_int_equal(ncand, 5);
+	assert_true(seen_offset);
+	assert_true(seen_param);
+	msg_unref(&t->base);
+	unlink(gp);
+	tu_cleanup(r.out);
+	tu_cleanup(r.cnt);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -691,6 +763,7 @@ int main(void)
 		cmocka_unit_test(test_set_rules),
 		cmocka_unit_test(test_targets),
 		cmocka_unit_test(test_interrupt),
+		cmocka_unit_test(test_run_graph_after_tune),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }

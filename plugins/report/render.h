@@ -97,11 +97,6 @@ int64_t rp_draw_contour(rp_img_t *im, const uint8_t *mask, const uint8_t rgb[3],
 
 void rp_fill_rect(rp_img_t *im, int x, int y, int w, int h,
 		  const uint8_t rgb[3]);
-int rp_text_width(const char *s, int scale);
-/* shadow: draw a black outline first so the text reads on any
- * background */
-void rp_draw_text(rp_img_t *im, int x, int y, const char *s, int scale,
-		  const uint8_t rgb[3], int shadow);
 
 /*
  * Robust display window of a scalar volume: the lo_q and hi_q quantiles of
@@ -111,13 +106,5 @@ void rp_draw_text(rp_img_t *im, int x, int y, const char *s, int scale,
 int64_t rp_window(const vol_t *img, double lo_q, double hi_q, double *lo,
 		  double *hi);
 
-/*
- * Stacked line charts of the numeric columns of t (plot.c): x = row number,
- * or a numeric column named step/iter/iteration; log10 y for positive
- * columns spanning more than two decades.  *npanels = 0 (and nothing
- * allocated) when t has fewer than 2 rows or no plottable column; else im
- * is allocated (caller frees).  0 or ENOMEM.
- */
-int rp_plot_columns(const tab_t *t, rp_img_t *im, int *npanels);
 
 #endif

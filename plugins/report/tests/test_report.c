@@ -1,16 +1,21 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * report plugin: PNGs re-read with libpng (size, overlay colour at a known
- * pixel), orientation for LAS/LPS/RAS storage, the HTML page, bad inputs
- * (clear errors, nothing left on disk).
+ * pixel), orientation for LAS/LPS/RAS storage, the checkerboard square by
+ * square, the HTML page, the convergence charts read back through their
+ * axes (every plotted point against its table value), bad inputs (clear
+ * errors, nothing left on disk).  The page's run-graph section (parameters
+ * and --set overrides) is checked on a whole run by tests/test_pipeline.c.
  */
 #include <ftw.h>
+#include <math.h>
 #include <png.h>
 #include <stdlib.h>
 
 #include "testutil.h"
+#include "../report.h"
 
-enum { IMG, PL, AL, TUM, ATUM, MET, STATS, STATS2, RUN, NIN };
+enum { IMG, PL, AL, TUM, ATUM, AIMG, MET, GROWTH, GROWIT, REG, NIN };
 
 /* ---- helpers ---- */
 
@@ -349,7 +354,7 @@ static void test_html(void **state)
 	tab_t *s = tab_new();
 	r = tab_add_row(s);
 	tab_set_num(s, r, "residual", 3.5e-7);
-	in[STATS] = &s->base;
+	in[GROWTH] = &s->base;
 	const char *params[] = { "prefix=h/page", "title=Case <7>", NULL };
 	if (run(params, in, NULL, err, sizeof err))
 		fail_msg("report failed: %s", err);
@@ -362,7 +367,14 @@ static void test_html(void **state)
 	assert_non_null(strstr(html, "tumour&lt;&amp;&gt;"));
 	assert_non_null(strstr(html, "<title>Case &lt;7&gt;</title>"));
 	assert_non_null(strstr(html, "radiological"));
-	assert_non_null(strstr(html, "src=\"axial.png\""));
+	assert_non_null(strstr(html, "href=\"axial.png\""));
+	/* the views' letters are text in the page, not pixels: the axial
+	 * view of an LPS image, radiological, has R on the left, A on top */
+	assert_non_null(strstr(html, "<text class=\"edge\" x=\"6\" "
+				     "y=\"40.0\">R</text>"));
+	/* outside a graph: the report's own parameters, no run graph */
+	assert_non_null(strstr(html, "Not run from a graph"));
+	assert_non_null(strstr(html, "<td>prefix</td><td>h/page</td>"));
 	/* default slice point: the tumour centroid (-6, 6, 0) */
 	assert_non_null(strstr(html, "(-6.00, 6.00, 0.00) mm"));
 	assert_non_null(strstr(html, "tumour centroid"));
@@ -378,48 +390,284 @@ static void test_html(void **state)
 	unref_all(in);
 }
 
+/* ---- reading a chart back (svgplot.h says what may be relied on) ---- */
+
+typedef struct tick {
+	double px, v; /* pixel position, value */
+} tick_t;
+
+/* the <svg class="chart" id="ID"> element of the page (malloc'd) */
+static char *chart_svg(const char *html, const char *id)
+{
+	char head[128];
+	snprintf(head, sizeof head, "<svg class=\"chart\" id=\"%s\"", id);
+	const char *a = strstr(html, head);
+	if (!a)
+		return NULL;
+	const char *b = strstr(a, "</svg>");
+	assert_non_null(b);
+	return strndup(a, (size_t)(b - a) + 6);
+}
+
+/* tick labels of class cls ("xt" or "yt"): position and value (a log
+ * label is 10<tspan ...>E</tspan>) */
+static int read_ticks(const char *svg, const char *cls, tick_t *t, int max)
+{
+	char head[64];
+	int n = 0;
+	snprintf(head, sizeof head, "<text class=\"%s\" x=\"", cls);
+	for (const char *p = strstr(svg, head); p && n < max;
+	     p = strstr(p + 1, head)) {
+		double x, y;
+		int used = 0;
+		char fmt[80];
+		snprintf(fmt, sizeof fmt, "<text class=\"%s\" x=\"%%lf\" "
+			 "y=\"%%lf\">%%n", cls);
+		assert_int_equal(sscanf(p, fmt, &x, &y, &used), 2);
+		assert_true(used > 0);
+		const char *lab = p + used;
+		if (!strncmp(lab, "10<tspan", 8)) {
+			const char *e = strchr(lab, '>');
+			t[n].v = pow(10, atof(e + 1));
+		} else {
+			t[n].v = atof(lab);
+		}
+		t[n].px = cls[0] == 'x' ? x : y;
+		n++;
+	}
+	return n;
+}
+
+/* value at pixel position px through the first and last ticks */
+static double from_px(const tick_t *t, int n, int logscale, double px)
+{
+	double f = (px - t[0].px) / (t[n - 1].px - t[0].px);
+	if (logscale)
+		return pow(10, log10(t[0].v) +
+				       f * (log10(t[n - 1].v) - log10(t[0].v)));
+	return t[0].v + f * (t[n - 1].v - t[0].v);
+}
+
+/* every point of the polylines of column col, in order; returns count and
+ * the number of polylines (segments) */
+static int read_series(const char *svg, const char *col, double *px,
+		       double *py, int max, int *nseg)
+{
+	char head[128];
+	int n = 0;
+	*nseg = 0;
+	snprintf(head, sizeof head, "<polyline class=\"series\" "
+		 "data-col=\"%s\" points=\"", col);
+	for (const char *p = strstr(svg, head); p; p = strstr(p + 1, head)) {
+		(*nseg)++;
+		const char *q = p + strlen(head);
+		while (*q != '"' && n < max) {
+			char *end;
+			px[n] = strtod(q, &end);
+			assert_true(*end == ',');
+			py[n] = strtod(end + 1, &end);
+			n++;
+			q = end;
+			while (*q == ' ')
+				q++;
+		}
+	}
+	return n;
+}
+
+/* the chart's points, read back through its ticks, against the table:
+ * x within 0.01 (integer steps/iterations), y within tol (relative on a
+ * log axis, of the axis span on a linear one) */
+static void check_series(const char *svg, const char *col, const double *x,
+			 const double *y, int n, int want_seg, int logy,
+			 double tol)
+{
+	tick_t xt[32], yt[32];
+	double px[256], py[256];
+	int nxt = read_ticks(svg, "xt", xt, 32);
+	int nyt = read_ticks(svg, "yt", yt, 32);
+	int nseg;
+	assert_true(nxt >= 2 && nyt >= 2);
+	assert_int_equal(read_series(svg, col, px, py, 256, &nseg), n);
+	assert_int_equal(nseg, want_seg);
+	double span = fabs(yt[nyt - 1].v - yt[0].v);
+	for (int i = 0; i < n; i++) {
+		double xv = from_px(xt, nxt, 0, px[i]);
+		double yv = from_px(yt, nyt, logy, py[i]);
+		double err = logy ? fabs(yv / y[i] - 1) : fabs(yv - y[i]) / span;
+		if (fabs(xv - x[i]) > 0.01 || err > tol)
+			fail_msg("%s point %d: read (%g, %g), table (%g, %g)",
+				 col, i, xv, yv, x[i], y[i]);
+	}
+}
+
 /*
- * Convergence plot of a stats table: columns step (x), residual 10^(-k/5)
- * (log axis: spans 6 decades), energy (linear).  Panels of 480x110 stacked:
- * 480x220.  Frame of panel p: x 8..472, y 110p+16..110p+102; points inset by
- * 2 px: the first residual (the largest) at (10, 18), the last (smallest) at
- * (470, 100); the energy rises linearly: first at (10, 110+100).
+ * Convergence charts from a registration table (3 levels of 10, 8, 6
+ * iterations: mse falls from 100 by 0.75 an iteration, 746x over the run:
+ * a log axis; updates linear) and a growth table (7 steps).  Every point
+ * read back through the chart's ticks equals the table's value; the axes
+ * carry their labels and units, the levels their marks, the legend its
+ * series.
  */
-static void test_plot(void **state)
+static void test_charts(void **state)
 {
 	(void)state;
 	const int n[3] = { 8, 8, 8 };
 	const double h[3] = { 1, 1, 1 };
 	msg_t *in[NIN] = { 0 };
 	char err[1024] = "", path[512];
+	double x[24], mse[24], mean[24], mx[24], gx[7], ge[7], gi[7];
 	in[IMG] = &vol_fn("RAS", n, h, f_grad, DT_F32)->base;
-	tab_t *s = tab_new();
-	for (int k = 0; k <= 30; k++) {
-		int64_t r = tab_add_row(s);
-		tab_set_num(s, r, "step", k);
-		tab_set_num(s, r, "residual", pow(10, -k / 5.0));
-		tab_set_num(s, r, "energy", 2.0 * k);
+	tab_t *reg = tab_new();
+	static const int per_level[3] = { 10, 8, 6 };
+	for (int l = 0, k = 0; l < 3; l++)
+		for (int it = 0; it < per_level[l]; it++, k++) {
+			int64_t r = tab_add_row(reg);
+			x[k] = k + 1;
+			mse[k] = 100 * pow(0.75, k);
+			mean[k] = 0.5 - 0.015 * k;
+			mx[k] = 2 * mean[k];
+			tab_set_num(reg, r, "level", l + 1);
+			tab_set_num(reg, r, "iteration", it + 1);
+			tab_set_num(reg, r, "mse", mse[k]);
+			tab_set_num(reg, r, "mean_update_mm", mean[k]);
+			tab_set_num(reg, r, "max_update_mm", mx[k]);
+			tab_set_num(reg, r, "seconds", 0.01 * k);
+		}
+	in[REG] = &reg->base;
+	tab_t *gro = tab_new();
+	for (int k = 0; k < 7; k++) {
+		int64_t r = tab_add_row(gro);
+		gx[k] = k + 1;
+		ge[k] = 0.01 * (k + 1) * (k + 1);
+		gi[k] = 100 * (k + 1);
+		tab_set_num(gro, r, "step", k + 1);
+		tab_set_num(gro, r, "iterations", gi[k]);
+		tab_set_num(gro, r, "err_est_mm", ge[k]);
 	}
-	in[STATS] = &s->base;
-	const char *params[] = { "prefix=plot", NULL };
+	in[GROWTH] = &gro->base;
+	const char *params[] = { "prefix=charts", NULL };
 	if (run(params, in, NULL, err, sizeof err))
 		fail_msg("report failed: %s", err);
-	rgbimg_t im;
-	snprintf(path, sizeof path, "%s/plot/stats.png", outdir);
-	assert_int_equal(read_png(path, &im), 0);
-	assert_int_equal(im.w, 480);
-	assert_int_equal(im.h, 220);
-	assert_true(is_rgb(px(&im, 10, 18), 0, 90, 200));
-	assert_true(is_rgb(px(&im, 470, 100), 0, 90, 200));
-	assert_true(is_rgb(px(&im, 10, 210), 0, 90, 200));
-	assert_true(is_rgb(px(&im, 470, 128), 0, 90, 200));
-	/* a point off the curves is background */
-	assert_true(is_rgb(px(&im, 470, 18), 255, 255, 255));
-	free(im.px);
-	snprintf(path, sizeof path, "%s/plot/index.html", outdir);
+	snprintf(path, sizeof path, "%s/charts/index.html", outdir);
 	char *html = slurp(path);
 	assert_non_null(html);
-	assert_non_null(strstr(html, "<img src=\"stats.png\""));
+
+	char *svg = chart_svg(html, "reg_mse");
+	assert_non_null(svg);
+	assert_non_null(strstr(svg, "<text class=\"xlabel\" x=\"350.00\" "
+				    "y=\"290\">iteration (all levels in "
+				    "sequence, coarse to fine)</text>"));
+	assert_non_null(strstr(svg, "rotate(-90)\">MSE (intensity\xc2\xb2)"
+				    "</text>"));
+	assert_non_null(strstr(svg, "<tspan class=\"exp\""));  /* log axis */
+	check_series(svg, "mse", x, mse, 24, 3, 1, 0.002);
+	/* the levels: three marks, labelled */
+	assert_non_null(strstr(svg, ">level 1</text>"));
+	assert_non_null(strstr(svg, ">level 2</text>"));
+	assert_non_null(strstr(svg, ">level 3</text>"));
+	free(svg);
+
+	svg = chart_svg(html, "reg_update");
+	assert_non_null(svg);
+	assert_non_null(strstr(svg, ">update (mm)</text>"));
+	assert_null(strstr(svg, "<tspan class=\"exp\""));     /* linear */
+	check_series(svg, "max_update_mm", x, mx, 24, 3, 0, 0.001);
+	check_series(svg, "mean_update_mm", x, mean, 24, 3, 0, 0.001);
+	assert_non_null(strstr(svg, ">largest</text>"));      /* legend */
+	assert_non_null(strstr(svg, ">mean</text>"));
+	free(svg);
+
+	svg = chart_svg(html, "growth_err");
+	assert_non_null(svg);
+	assert_non_null(strstr(svg, ">growth step</text>"));
+	assert_non_null(strstr(svg, ">error estimate (mm)</text>"));
+	check_series(svg, "err_est_mm", gx, ge, 7, 1, 0, 0.001);
+	/* integer steps: ticks 1, 2, ... never 1.5 */
+	tick_t xt[32];
+	int nxt = read_ticks(svg, "xt", xt, 32);
+	for (int i = 0; i < nxt; i++)
+		assert_true(xt[i].v == floor(xt[i].v));
+	free(svg);
+	svg = chart_svg(html, "growth_iter");
+	assert_non_null(svg);
+	check_series(svg, "iterations", gx, gi, 7, 1, 0, 0.001);
+	free(svg);
+	/* no energies in the table: no energy chart */
+	assert_null(chart_svg(html, "growth_energy"));
+	/* captions: the last values */
+	assert_non_null(strstr(html, "Last: mean squared difference 0.1338 "
+				     "at iteration 24"));
+	assert_non_null(strstr(html, "Last: estimated error 0.49 mm at step "
+				     "7"));
+	free(html);
+	unref_all(in);
+}
+
+/*
+ * Checkerboard: 10 mm squares aligned to world multiples of 10 mm; in the
+ * axial view (radiological, 0.5 mm pixels) pixel (u, v) is world
+ * x = 19.75 - 0.5 u, y = 19.75 - 0.5 v.  Squares with odd
+ * floor(x/10) + floor(y/10) show the atlas image (a ball of 100 in 0:
+ * white inside, black outside, away from its edge), the others the patient
+ * image exactly as axial.png shows it.
+ */
+static double f_ball100(const double w[3])
+{
+	return w[0] * w[0] + w[1] * w[1] + w[2] * w[2] <= 100 ? 100 : 0;
+}
+
+static void test_checker(void **state)
+{
+	(void)state;
+	const int n[3] = { 40, 40, 40 };
+	const double h[3] = { 1, 1, 1 };
+	msg_t *in[NIN] = { 0 }, *files = NULL;
+	char err[1024] = "", path[512];
+	in[IMG] = &vol_fn("RAS", n, h, f_grad, DT_F32)->base;
+	in[AIMG] = &vol_fn("LAS", n, h, f_ball100, DT_I16)->base;
+	const char *params[] = { "prefix=chk", "slice_at=0,0,0",
+				 "checker_mm=10", NULL };
+	if (run(params, in, &files, err, sizeof err))
+		fail_msg("report failed: %s", err);
+	const tab_t *ft = (const tab_t *)files;
+	assert_int_equal(ft->nrows, 7);
+	assert_string_equal(tab_col(ft, "path")->str[3], "chk/checker_axial.png");
+	assert_string_equal(tab_col(ft, "kind")->str[3], "checkerboard");
+	msg_unref(files);
+	rgbimg_t ax, ch;
+	snprintf(path, sizeof path, "%s/chk/axial.png", outdir);
+	assert_int_equal(read_png(path, &ax), 0);
+	snprintf(path, sizeof path, "%s/chk/checker_axial.png", outdir);
+	assert_int_equal(read_png(path, &ch), 0);
+	assert_int_equal(ch.w, 80);
+	assert_int_equal(ch.h, 80);
+	int natlas = 0, npatient = 0;
+	for (int v = 0; v < 80; v++)
+		for (int u = 0; u < 80; u++) {
+			double x = 19.75 - 0.5 * u, y = 19.75 - 0.5 * v;
+			long i = (long)floor(x / 10), j = (long)floor(y / 10);
+			const uint8_t *c = px(&ch, u, v);
+			if (!((i + j) & 1)) {
+				const uint8_t *a = px(&ax, u, v);
+				assert_memory_equal(c, a, 3);
+				npatient++;
+				continue;
+			}
+			double r = sqrt(x * x + y * y);
+			if (fabs(r - 10) < 1.5)
+				continue; /* trilinear edge of the ball */
+			assert_int_equal(c[0], r < 10 ? 255 : 0);
+			natlas++;
+		}
+	assert_true(natlas > 2500 && npatient == 3200);
+	free(ax.px);
+	free(ch.px);
+	snprintf(path, sizeof path, "%s/chk/index.html", outdir);
+	char *html = slurp(path);
+	assert_non_null(html);
+	assert_non_null(strstr(html, "Checkerboard of 10 mm squares"));
+	assert_non_null(strstr(html, "href=\"checker_axial.png\""));
 	free(html);
 	unref_all(in);
 }
@@ -484,13 +732,78 @@ static void test_bad_inputs(void **state)
 	expect_bad(pb, in, "image");
 }
 
+/*
+ * The run graph drawing (graphsvg.c) on a table as host->run_graph gives
+ * it: a -> b, a -> c, b -> c, c -> d.  Layers are the longest chains of
+ * producers: a 0, b 1, c 2, d 3, so the boxes' tops are 14 + 74 layer px;
+ * one arrow per connection; c has a --set parameter: highlighted.
+ */
+static void gs_row(tab_t *t, const char *stage, const char *kind,
+		   const char *key, const char *value, const char *source)
+{
+	int64_t r = tab_add_row(t);
+	tab_set_str(t, r, "stage", stage);
+	tab_set_str(t, r, "plugin", "tp");
+	tab_set_str(t, r, "kind", kind);
+	tab_set_str(t, r, "key", key);
+	tab_set_str(t, r, "value", value);
+	tab_set_str(t, r, "unit", "");
+	tab_set_str(t, r, "source", source);
+}
+
+static void test_graph_drawing(void **state)
+{
+	(void)state;
+	tab_t *t = tab_new();
+	gs_row(t, "", "graph", "file", "g.ini", "");
+	gs_row(t, "d", "plugin", "plugin", "tp 1", "line 1");
+	gs_row(t, "d", "input", "in", "c.out", "line 2");
+	gs_row(t, "a", "plugin", "plugin", "tp 1", "line 3");
+	gs_row(t, "a", "param", "k", "1", "default");
+	gs_row(t, "c", "plugin", "plugin", "tp 1", "line 5");
+	gs_row(t, "c", "input", "x", "a.out", "line 6");
+	gs_row(t, "c", "input", "y", "b.out", "line 7");
+	gs_row(t, "c", "param", "k", "2", "--set");
+	gs_row(t, "b", "plugin", "plugin", "tp 1", "line 8");
+	gs_row(t, "b", "input", "in", "a.out", "line 9");
+	char *buf = NULL;
+	size_t len = 0;
+	FILE *f = open_memstream(&buf, &len);
+	assert_int_equal(rp_write_graph_svg(f, t), 4);
+	fclose(f);
+	static const char *const name[4] = { "a", "b", "c", "d" };
+	for (int l = 0; l < 4; l++) {
+		char head[64];
+		snprintf(head, sizeof head, "<a href=\"#stage-%s\"><rect",
+			 name[l]);
+		const char *p = strstr(buf, head);
+		if (!p)
+			fail_msg("no box for %s", name[l]);
+		const char *y = strstr(p, " y=\"");
+		assert_non_null(y);
+		assert_float_equal(atof(y + 4), 14 + 74 * l, 1e-9);
+		/* only c is highlighted */
+		assert_int_equal(!strncmp(p + strlen(head), " class=\"over\"",
+					  13), l == 2);
+	}
+	int npath = 0;
+	for (const char *p = strstr(buf, "<path class=\"e"); p;
+	     p = strstr(p + 1, "<path class=\"e"))
+		npath++;
+	assert_int_equal(npath, 4);
+	free(buf);
+	msg_unref(&t->base);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_png_overlay),
 		cmocka_unit_test(test_orientation),
 		cmocka_unit_test(test_html),
-		cmocka_unit_test(test_plot),
+		cmocka_unit_test(test_charts),
+		cmocka_unit_test(test_checker),
+		cmocka_unit_test(test_graph_drawing),
 		cmocka_unit_test(test_bad_inputs),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);

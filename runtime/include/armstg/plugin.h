@@ -29,6 +29,7 @@
  *   1.0    the descriptor up to fini; the host table up to threads
  *   1.1    descriptor: citation; vol_dtype_size, vol_dtype_name,
  *          msg_type_name and tab_col became static inline (msg.h)
+ *   1.2    host: run_graph
  *
  * Parameters are declared in a table (FFmpeg AVOption style).  The runtime
  * parses and range-checks every value against the table BEFORE init and
@@ -62,7 +63,7 @@ extern "C" {
 
 #define ARMSTG_PLUGIN_MAGIC 0x41524d53u /* "ARMS" */
 #define ARMSTG_ABI_MAJOR 1
-#define ARMSTG_ABI_MINOR 1
+#define ARMSTG_ABI_MINOR 2
 #define ARMSTG_ENTRY_SYMBOL "armstg_plugin_entry"
 
 #if defined(__GNUC__)
@@ -184,6 +185,7 @@ struct armstg_plugin {
  * claims that minor): offsetof the first member the next minor added. */
 #define ARMSTG_PLUGIN_SIZE_1_0 offsetof(armstg_plugin_t, citation)
 #define ARMSTG_PLUGIN_SIZE_1_1 sizeof(armstg_plugin_t)
+#define ARMSTG_PLUGIN_SIZE_1_2 sizeof(armstg_plugin_t) /* host only */
 
 /*
  * The host API table.  Append-only: new members go at the end and bump
@@ -245,6 +247,25 @@ struct armstg_host {
 	int (*tab_write)(armstg_stage_t *st, const char *path, const tab_t *t);
 	/* number of worker threads the stage may use (from --jobs / OMP) */
 	int (*threads)(armstg_stage_t *st);
+
+	/* ---- 1.2 ---- */
+	/* The resolved graph of the run this stage is part of, as a table
+	 * (what made the run, for reports); NULL outside a graph.  Owned by
+	 * the runtime, frozen, valid until process returns.  String columns
+	 * stage, plugin, kind, key, value, unit, source; one row per
+	 *   kind "graph"    key file | name          (stage "")
+	 *   kind "tune"     a key of [tune]           (stage "tune")
+	 *   kind "candidate" key = a [tune] value, value = its score or
+	 *                   "failed: why", source "chosen" for the one kept
+	 *   kind "plugin"   key "plugin", value "NAME VERSION"
+	 *   kind "node"     key "node", value = the [node] it runs on (only
+	 *                   for a stage with a node key)
+	 *   kind "input"    key = input port, value "STAGE.PORT"
+	 *   kind "param"    key = every parameter of the stage's plugin,
+	 *                   value as text ("" for an unset string), unit
+	 * and source "default", "line N" (of the graph file), "--set" or
+	 * "tune" (the value [tune] chose). */
+	const tab_t *(*run_graph)(armstg_stage_t *st);
 };
 
 typedef const armstg_plugin_t *(*armstg_entry_fn)(const armstg_host_t *host,

@@ -1,0 +1,42 @@
+#!/bin/sh
+# Screenshots of a report page, one per part, as a person sees them: headless
+# Chromium (Debian `chromium`) renders a copy of index.html in which a style
+# rule shows only that part (header, slices and checkerboard; convergence;
+# the run graph drawn; its [tune] and parameter tables), so each PNG starts at
+# its part without scrolling or cropping.
+#
+#   sh scripts/report_screenshots.sh OUT/report/index.html DEST_DIR [WIDTH]
+#
+# writes DEST_DIR/report-slices.png, report-convergence.png, report-graph.png,
+# report-parameters.png.
+# Used for docs/report/ (the demo's page: make demo, then this script).
+set -eu
+page=${1:?usage: report_screenshots.sh PAGE DEST_DIR [WIDTH]}
+dest=${2:?usage: report_screenshots.sh PAGE DEST_DIR [WIDTH]}
+width=${3:-1400}
+command -v chromium >/dev/null || { echo "report_screenshots: chromium not found (apt-get install chromium)" >&2; exit 2; }
+[ -f "$page" ] || { echo "report_screenshots: no page $page" >&2; exit 2; }
+mkdir -p "$dest"
+dir=$(cd "$(dirname "$page")" && pwd)
+dest=$(cd "$dest" && pwd)
+tmp="$dir/.shot-$$.html"
+trap 'rm -f "$tmp"' EXIT INT TERM
+
+# shot NAME HEIGHT CSS: the page with CSS added, HEIGHT px tall
+shot() {
+    sed "s|</style>|$3</style>|" "$page" > "$tmp"
+    chromium --headless --no-sandbox --disable-gpu --hide-scrollbars \
+        --force-device-scale-factor=1 --window-size="$width,$2" \
+        --screenshot="$dest/$1" "file://$tmp" >/dev/null 2>&1
+    [ -s "$dest/$1" ] || { echo "report_screenshots: chromium wrote no $1" >&2; exit 1; }
+    echo "wrote $dest/$1"
+}
+
+shot report-slices.png "${SLICES_H:-1640}" \
+    'nav,#convergence,#metrics,#graph,#tables{display:none}'
+shot report-convergence.png "${CONV_H:-1500}" \
+    'header,nav,#slices,#checker,#graph,#tables{display:none}'
+shot report-graph.png "${GRAPH_H:-1500}" \
+    'header,nav,#slices,#checker,#convergence,#metrics,#tables{display:none}'
+shot report-parameters.png "${PARAMS_H:-1500}" \
+    'header,nav,#slices,#checker,#convergence,#metrics,#tables,figure.dagfig{display:none}'
