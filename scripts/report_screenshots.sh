@@ -22,21 +22,37 @@ dest=$(cd "$dest" && pwd)
 tmp="$dir/.shot-$$.html"
 trap 'rm -f "$tmp"' EXIT INT TERM
 
-# shot NAME HEIGHT CSS: the page with CSS added, HEIGHT px tall
-shot() {
-    sed "s|</style>|$3</style>|" "$page" > "$tmp"
+# height CSS: the page's height in px with CSS added, as Chromium lays it out
+# at $width (a script writes it into the DOM, which --dump-dom prints)
+height() {
+    sed -e "s|</style>|$1</style>|" \
+        -e 's|</body>|<script>document.body.setAttribute("data-h",document.documentElement.scrollHeight)</script></body>|' \
+        "$page" > "$tmp"
     chromium --headless --no-sandbox --disable-gpu --hide-scrollbars \
-        --force-device-scale-factor=1 --window-size="$width,$2" \
-        --screenshot="$dest/$1" "file://$tmp" >/dev/null 2>&1
-    [ -s "$dest/$1" ] || { echo "report_screenshots: chromium wrote no $1" >&2; exit 1; }
-    echo "wrote $dest/$1"
+        --force-device-scale-factor=1 --window-size="$width,800" \
+        --dump-dom "file://$tmp" 2>/dev/null |
+        sed -n 's/.*data-h="\([0-9]*\)".*/\1/p' | head -1
 }
 
-shot report-slices.png "${SLICES_H:-1640}" \
+# shot NAME CSS: the page with CSS added, as tall as its content (at most
+# 6000 px), so a part is never cut off and nothing empty follows it
+shot() {
+    h=$(height "$2")
+    [ -n "$h" ] || { echo "report_screenshots: chromium gave no page height for $1" >&2; exit 1; }
+    [ "$h" -le 6000 ] || h=6000
+    sed "s|</style>|$2</style>|" "$page" > "$tmp"
+    chromium --headless --no-sandbox --disable-gpu --hide-scrollbars \
+        --force-device-scale-factor=1 --window-size="$width,$h" \
+        --screenshot="$dest/$1" "file://$tmp" >/dev/null 2>&1
+    [ -s "$dest/$1" ] || { echo "report_screenshots: chromium wrote no $1" >&2; exit 1; }
+    echo "wrote $dest/$1 ($width x $h px)"
+}
+
+shot report-slices.png \
     'nav,#convergence,#metrics,#graph,#tables{display:none}'
-shot report-convergence.png "${CONV_H:-1500}" \
+shot report-convergence.png \
     'header,nav,#slices,#checker,#graph,#tables{display:none}'
-shot report-graph.png "${GRAPH_H:-1500}" \
-    'header,nav,#slices,#checker,#convergence,#metrics,#tables{display:none}'
-shot report-parameters.png "${PARAMS_H:-1500}" \
+shot report-graph.png \
+    'header,nav,#slices,#checker,#convergence,#metrics,#tables,#graph>table,#graph>h3,#graph .cards{display:none}'
+shot report-parameters.png \
     'header,nav,#slices,#checker,#convergence,#metrics,#tables,figure.dagfig{display:none}'

@@ -107,7 +107,8 @@ static const char CSS[] =
 	"fill:#1d1d1d}\n"
 	"svg.dag .pn{font-size:11px;text-anchor:middle;fill:#555}\n"
 	"figure.dagfig{margin:8px 0 16px}\n"
-	"table.cand{max-width:980px}\n";
+	"table.cand{max-width:980px}\n"
+	"table.cand td:last-child{max-width:640px}\n";
 
 static void fmt_num(char *buf, size_t n, double x)
 {
@@ -439,20 +440,51 @@ static void section_graph(FILE *f, const tab_t *g)
 		fputs("</table>\n", f);
 	}
 	if (ncand) {
-		fputs("<table class=\"cand\">\n<tr><th>candidate value</th>"
-		      "<th>score</th>"
-		      "<th></th></tr>\n", f);
+		/* header from the [tune] keys: the parameter tried, and the
+		 * score's metric, structure and goal */
+		const char *tk[4] = { "param", "metric", "structure", "goal" };
+		const char *tv[4] = { "value", "score", "", "" };
+		for (int64_t r = 0; r < g->nrows; r++)
+			for (int k = 0; k < 4; k++)
+				if (is(c.kind, r, "tune") && is(c.key, r, tk[k]))
+					tv[k] = cell(c.value, r);
+		fputs("<table class=\"cand\">\n<tr><th>", f);
+		esc(f, tv[0]);
+		fputs("</th><th>score: ", f);
+		esc(f, tv[1]);
+		if (*tv[2]) {
+			fputc(' ', f);
+			esc(f, tv[2]);
+		}
+		if (*tv[3]) {
+			fputs(" (", f);
+			esc(f, tv[3]);
+			fputc(')', f);
+		}
+		fputs("</th><th>result</th></tr>\n", f);
 		for (int64_t r = 0; r < g->nrows; r++) {
 			if (!is(c.kind, r, "candidate"))
 				continue;
 			int ch = is(c.source, r, "chosen");
+			const char *v = cell(c.value, r);
+			int failed = !strncmp(v, "failed", 6);
 			fprintf(f, "<tr%s><td class=\"num\">", ch ? " "
 				"class=\"chosen\"" : "");
 			esc(f, cell(c.key, r));
+			fputs("</td><td class=\"num\">", f);
+			if (failed)
+				fputs("&ndash;", f);
+			else
+				esc(f, v);
 			fputs("</td><td>", f);
-			esc(f, cell(c.value, r));
-			fprintf(f, "</td><td>%s</td></tr>\n",
-				ch ? "chosen" : "");
+			if (failed) {
+				fputs("<span class=\"dim\">", f);
+				esc(f, v);
+				fputs("</span>", f);
+			} else {
+				fputs(ch ? "chosen" : "tried", f);
+			}
+			fputs("</td></tr>\n", f);
 		}
 		fputs("</table>\n", f);
 	}
