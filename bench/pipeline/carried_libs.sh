@@ -1,6 +1,13 @@
-# Sourced by device_phantoms.sh and shape_sweep.sh: a machine without the
-# Debian libraries (the GPU host) gets them from debs/*.deb, carried with
-# the checkout (device_phantoms.sh says how to download them).
+# Sourced by device_bg.sh: a machine without the Debian libraries (the GPU
+# host, used for its CPU cores) gets them from debs/*.deb, carried with the
+# checkout: every package that owns a library `ldd` lists, libcurl's
+# dependencies included, not libc6:
+#   ldd build/armstg build/plugins/*.so | awk '/=>/{print $3}' | sort -u |
+#     xargs -n1 readlink -f | xargs dpkg -S | cut -d: -f1 | sort -u |
+#     grep -vx libc6 | (cd debs && xargs apt-get download)
+# plus libcom-err2 libkeyutils1 zlib1g, which dpkg -S misses under /lib;
+# carry/ (carry/build = build/ without obj/ and tests/) and debs/ are listed
+# in .git/info/exclude.
 #
 # carried_libs: unpack debs/*.deb once into /tmp/dl (by rename, so batches
 #   started together never load a half-written library: SIGBUS) and put it

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """What the floor of `[tune]`'s depth grid costs, and the phantoms with a grid that
-starts at 1.5 mm (Session 16).
+starts at 1.5 mm (graphs since ccbabf1, 2026-11-25).
 
   python3 bench/pipeline/depth_floor.py [RESULTS_DIR]
 
@@ -27,7 +27,7 @@ import sys
 
 from inclusion_summary import fmt, pick, read_rows, rows_of, summary  # noqa: E402 (this folder)
 from inclusion_summary import paired as paired_summary  # noqa: E402
-from shape_summary import mean, se  # noqa: E402 (this folder)
+from inclusion_summary import mean, se  # noqa: E402 (this folder)
 
 TOL = 3e-4
 

@@ -1,5 +1,5 @@
 #!/bin/sh
-# Phantom batches that outlast one device call (session 16).  The GPU host
+# Phantom batches that outlast one device call.  The GPU host
 # lends its 16 CPU cores for at most 10 minutes a command, while a pool of
 # ~60 tuned runs needs ~20 minutes; a process in its own session (setsid)
 # lives on between calls while the machine stays warm.  So:
@@ -8,7 +8,7 @@
 #   sh bench/pipeline/device_bg.sh wait SECONDS    # later calls: wait, copy rows to $OUT
 #
 # start copies the checkout (with carry/build and debs/, see
-# device_phantoms.sh) to /tmp/bg/repo, so that the next call's re-sent
+# carried_libs.sh) to /tmp/bg/repo, so that the next call's re-sent
 # working tree never replaces a library a run has loaded, and runs one pool
 # of JOBS single-threaded run_phantom.sh runs over the task list
 # bench/pipeline/device_bg.tasks (or TASKS=file): one task a line,

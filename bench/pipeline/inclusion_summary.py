@@ -1,21 +1,22 @@
 #!/usr/bin/env python3
-"""Session 16: the inclusion layers (levelset scheme=inclusion, the graphs'
-default since Session 15) on every phantom of Session 12, against the sphere
-grown the same way, the old layers (scheme=exact) and direct demons.
+"""The phantoms with the graphs' inclusion layers (levelset scheme=inclusion, the
+graphs' default since 2026-11-25) against the sphere grown the same way, the old
+layers (scheme=exact) and direct demons.  Each row file is dated with the commit
+that added it.
 
   python3 bench/pipeline/inclusion_summary.py [RESULTS_DIR]
 
 Reads (RESULTS_DIR, default bench/pipeline/results):
-  inclusion_full.tsv     Session 16, `[tune]` as shipped: default 17-24, irregular 1-20
-  inclusion_tuned.tsv    Session 15, `[tune]` as shipped: default (lobulation 0.4) 1-16,
-                         lobulated single tumours (0.9) 1-24
-  phantom_ip_spacing.tsv Session 11 batch t45 (the old layers; default and irregular 1-8)
-  phantom_ipf075_9to24.tsv Session 12 (the old layers; default 9-24, irregular 9-20,
-                         direct demons on irregular 9-12)
-  phantom_image_voxel.tsv Session 8 (direct demons; its graph has not changed since)
-  shape_sweep_tuned.tsv  Session 14 (the old layers, lobulation 0.9 1-16, tuned)
-  shape_sweep_d45.tsv    Session 14 (direct demons, lobulation 0.9 1-16: it has no
-                         push depth, so the fixed-depth sweep's rows are its rows)
+  inclusion_full.tsv      48b5f52 2026-11-25, `[tune]` grid 3-9 mm: default 17-24, irregular 1-20
+  inclusion_tuned.tsv     f30fbef 2026-11-25, `[tune]` grid 3-9 mm: default (lobulation 0.4) 1-16,
+                          lobulated single tumours (0.9) 1-24
+  phantom_ip_spacing.tsv  4c12da1 2026-11-23, batch t45 (the old layers; default and irregular 1-8)
+  phantom_ipf075_9to24.tsv 73eab81 2026-11-23 (the old layers; default 9-24, irregular 9-20,
+                          direct demons on irregular 9-12)
+  phantom_image_voxel.tsv 33d6160 2026-11-23 (direct demons; its graph has not changed since)
+  shape_sweep_tuned.tsv   ce87ea5 2026-11-25 (the old layers, lobulation 0.9 1-16, tuned)
+  shape_sweep_d45.tsv     bcb19a8 2026-11-25 (direct demons, lobulation 0.9 1-16: it has no
+                          push depth, so the fixed-depth sweep's rows are its rows)
 
 Band error = mean displacement error within 15 mm outside the tumour, in the
 brain (mm).  Paired differences over the phantoms where both rows exist: mean
@@ -27,7 +28,18 @@ import math
 import os
 import sys
 
-from shape_summary import mean, se  # noqa: E402 (this folder)
+
+
+def mean(x):
+    return sum(x) / len(x) if x else math.nan
+
+
+def se(x):
+    """standard error of the mean: sd / sqrt(n)"""
+    if len(x) < 2:
+        return math.nan
+    m = mean(x)
+    return math.sqrt(sum((v - m) ** 2 for v in x) / (len(x) - 1) / len(x))
 
 
 def read_rows(path):
@@ -155,7 +167,7 @@ def main():
         print(f"| {names[kind]} | " + " | ".join(cells) + " |")
 
     print()
-    print("Against the old layers (scheme=exact: Sessions 11-12, lobulated Session 14), paired:")
+    print("Against the old layers (scheme=exact: rows of 2026-11-23, lobulated 2026-11-25), paired:")
     print()
     print("| phantoms | ARMSTG: inclusion - exact | sphere: inclusion - exact"
           " | ARMSTG (inclusion) - sphere (exact) | ARMSTG - sphere, both exact |")
