@@ -1,9 +1,9 @@
 #!/bin/sh
 # Screenshots of a report page, one per part, as a person sees them: headless
 # Chromium (Debian `chromium`) renders a copy of index.html in which a style
-# rule shows only that part (header, slices and checkerboard; convergence;
-# the run graph drawn; its [tune] and parameter tables), so each PNG starts at
-# its part without scrolling or cropping.
+# rule shows only that part (header, slices and checkerboard; convergence and
+# metrics; the run graph drawn; its [tune] tables and the first six stages'
+# parameters), so each PNG starts at its part without scrolling or cropping.
 #
 #   sh scripts/report_screenshots.sh OUT/report/index.html DEST_DIR [WIDTH]
 #
@@ -55,4 +55,4 @@ shot report-convergence.png \
 shot report-graph.png \
     'header,nav,#slices,#checker,#convergence,#metrics,#tables,#graph>table,#graph>h3,#graph .cards{display:none}'
 shot report-parameters.png \
-    'header,nav,#slices,#checker,#convergence,#metrics,#tables,figure.dagfig{display:none}'
+    'header,nav,#slices,#checker,#convergence,#metrics,#tables,figure.dagfig,#graph .card:nth-child(n+7){display:none}'

@@ -169,8 +169,14 @@ static void caption(FILE *f, const sp_chart_t *c, const tab_t *t,
 		rp_html_esc(f, src);
 		fputs("</code>", f);
 	}
-	fprintf(f, ", %lld rows%s.</figcaption>\n", (long long)t->nrows,
+	fprintf(f, ", %lld rows%s.", (long long)t->nrows,
 		c->logy ? "; logarithmic y axis" : "");
+	if (c->nmark > 1 && !strcmp(xword, "iteration") &&
+	    !strcmp(port, "registration"))
+		fputs(" Each level works on a finer copy of the images, so its "
+		      "values start afresh and are compared within the level, "
+		      "not across levels.", f);
+	fputs("</figcaption>\n", f);
 }
 
 static int emit(FILE *f, sp_chart_t *c, const tab_t *t, const char *port,

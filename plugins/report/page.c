@@ -89,7 +89,8 @@ static const char CSS[] =
 	"tr.ovr td{background:#fff1c2;font-weight:600}\n"
 	"tr.chosen td{background:#dff3df;font-weight:600}\n"
 	".cards{display:grid;grid-template-columns:repeat(auto-fill,"
-	"minmax(400px,1fr));gap:14px}\n"
+	"minmax(400px,1fr));gap:14px;align-items:start}\n"
+	".mcards{grid-template-columns:repeat(auto-fill,minmax(250px,1fr))}\n"
 	".card{background:#fff;border:1px solid #d6d6d6;padding:8px 12px}\n"
 	".card h3{margin:2px 0 4px;font-size:15px}\n"
 	".card h3 span{font-weight:400;color:#555}\n"
@@ -148,6 +149,47 @@ static void table_html(FILE *f, const tab_t *t)
 		fputs("</tr>\n", f);
 	}
 	fputs("</table>\n", f);
+}
+
+/* the metrics plugin's long table (metric, structure, value[, unit]) as one
+ * card per structure, in the order structures first appear, so the page
+ * shows a few short tables side by side instead of one long column; any
+ * other layout as it is */
+static void metrics_html(FILE *f, const tab_t *t)
+{
+	const tab_col_t *cm = tab_col(t, "metric"), *cs = tab_col(t, "structure"),
+			*cv = tab_col(t, "value"), *cu = tab_col(t, "unit");
+	if (!cm || !cs || !cv || cm->type != TAB_STR || cs->type != TAB_STR ||
+	    cv->type != TAB_NUM || (cu && cu->type != TAB_STR) || !t->nrows) {
+		table_html(f, t);
+		return;
+	}
+	fputs("<div class=\"cards mcards\">\n", f);
+	for (int64_t r = 0; r < t->nrows; r++) {
+		const char *s = cs->str[r] ? cs->str[r] : "";
+		int64_t q = 0;
+		while (q < r && strcmp(cs->str[q] ? cs->str[q] : "", s))
+			q++;
+		if (q < r)
+			continue;       /* this structure has its card already */
+		fputs("<div class=\"card\"><h3>", f);
+		esc(f, *s ? s : "(none)");
+		fputs("</h3>\n<table>\n<tr><th>metric</th><th>value</th>"
+		      "<th>unit</th></tr>\n", f);
+		for (q = r; q < t->nrows; q++) {
+			if (strcmp(cs->str[q] ? cs->str[q] : "", s))
+				continue;
+			char b[64];
+			fmt_num(b, sizeof b, cv->num[q]);
+			fputs("<tr><td>", f);
+			esc(f, cm->str[q]);
+			fprintf(f, "</td><td class=\"num\">%s</td><td>", b);
+			esc(f, cu ? cu->str[q] : NULL);
+			fputs("</td></tr>\n", f);
+		}
+		fputs("</table>\n</div>\n", f);
+	}
+	fputs("</div>\n", f);
 }
 
 /* storage orientation code of a grid ("LPS", "LAS"...): the world axis
@@ -650,7 +692,7 @@ int rp_write_page(report_ctx_t *rc)
 
 	fputs("<section id=\"metrics\">\n<h2>Metrics</h2>\n", f);
 	if (st->in[IN_METRICS])
-		table_html(f, (const tab_t *)st->in[IN_METRICS]);
+		metrics_html(f, (const tab_t *)st->in[IN_METRICS]);
 	else
 		fputs("<p class=\"dim\">No metrics table connected.</p>\n", f);
 	fputs("</section>\n", f);

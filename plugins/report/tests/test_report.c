@@ -361,8 +361,15 @@ static void test_html(void **state)
 	snprintf(path, sizeof path, "%s/h/page/index.html", outdir);
 	char *html = slurp(path);
 	assert_non_null(html);
-	assert_non_null(strstr(html, "<td class=\"num\">0.8125</td>"));
-	assert_non_null(strstr(html, "<td class=\"num\">1834.25</td>"));
+	/* the metrics one card per structure: metric, value, unit */
+	assert_non_null(strstr(html, "<div class=\"card\"><h3>tumour&lt;&amp;&gt;"
+			       "</h3>\n<table>\n<tr><th>metric</th><th>value"
+			       "</th><th>unit</th></tr>\n<tr><td>dice</td>"
+			       "<td class=\"num\">0.8125</td><td></td></tr>"));
+	assert_non_null(strstr(html, "<div class=\"card\"><h3>ventricles</h3>"
+			       "\n<table>\n<tr><th>metric</th><th>value</th>"
+			       "<th>unit</th></tr>\n<tr><td>S</td><td class="
+			       "\"num\">1834.25</td><td></td></tr>"));
 	assert_non_null(strstr(html, "<td class=\"num\">3.5e-07</td>"));
 	assert_non_null(strstr(html, "tumour&lt;&amp;&gt;"));
 	assert_non_null(strstr(html, "<title>Case &lt;7&gt;</title>"));
@@ -596,6 +603,8 @@ static void test_charts(void **state)
 	/* no energies in the table: no energy chart */
 	assert_null(chart_svg(html, "growth_energy"));
 	/* captions: the last values */
+	assert_non_null(strstr(html, "Each level works on a finer copy of "
+			       "the images"));
 	assert_non_null(strstr(html, "Last: mean squared difference 0.1338 "
 				     "at iteration 24"));
 	assert_non_null(strstr(html, "Last: estimated error 0.49 mm at step "
