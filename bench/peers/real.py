@@ -252,7 +252,8 @@ def method_T(args, c, d, m, x):
                   '(ImageSampler "RandomCoordinate")\n'
                   '(NumberOfSpatialSamples 4096)\n(NewSamplesEveryIteration "true")\n'
                   '(Interpolator "LinearInterpolator")\n'
-                  '(ResampleInterpolator "FinalLinearInterpolator")\n'
+                  '(ResampleInterpolator "FinalBSplineInterpolator")\n'
+                  '(FinalBSplineInterpolationOrder 1)\n'
                   '(Resampler "DefaultResampler")\n'
                   '(FixedImagePyramid "FixedSmoothingImagePyramid")\n'
                   '(MovingImagePyramid "MovingSmoothingImagePyramid")\n'
@@ -275,7 +276,7 @@ def method_T(args, c, d, m, x):
                            capture_output=True, text=True)
         t = time.time() - t0
         if r.returncode:
-            raise RuntimeError("elastix failed: %s" % r.stdout[-2000:])
+            raise RuntimeError("elastix failed: %s" % (r.stdout + r.stderr)[-2000:])
         tp = os.path.join(o, "TransformParameters.1.txt")
         cs = []
         for k, cimg in enumerate(coords):

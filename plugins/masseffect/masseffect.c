@@ -46,10 +46,17 @@
  *
  * Table (metric, structure, value, unit): shift patient, shift grown,
  * shift_error ventricles, volume atlas_ventricles / patient_ventricles (ml),
- * distance tumour_ventricles (|c_a - t|, mm); with `field` (the growth's
- * pull field v, grown(x) = atlas(x + v(x))): jac_min growth, the least
- * det(I + dv/dx) over the grid (central differences in world mm), so a
- * [tune] over the push depth can drop a growth that folds.
+ * distance tumour_ventricles (|c_a - t|, mm); with `field` (a pull field
+ * v: the growth's, or the total warp): jac_min field, the least
+ * det(I + dv/dx) over `brain` (else the grid; central differences in world
+ * mm), so a [tune] over the push depth can drop a warp that folds.
+ *
+ * In patient space (the graphs' stage `mass_reg`): `ventricles` and
+ * `grown` are the registered atlas's ventricles, `tumour` the patient's, and
+ * dice ventricles is the overlap after the registration, where the
+ * anatomy that differs between atlas and patient is mostly matched (before
+ * it, in atlas space, the overlap is 0.16-0.35 on BraTS 2013 pat0001-0003
+ * and the growth's few mm hardly move it).
  */
 #include <math.h>
 #include <stdint.h>
@@ -87,8 +94,8 @@ static const armstg_port_t ins[] = {
 	{ "exclude", MSG_VOLUME, 1, "tumour + edema on the atlas grid: "
 				    "never ventricle, not in the statistics" },
 	{ "brain", MSG_VOLUME, 1, "brain mask for the intensity statistics" },
-	{ "field", MSG_VOLUME, 1, "the growth's displacement field (3 "
-				  "components, mm): jac_min growth" },
+	{ "field", MSG_VOLUME, 1, "a pull field (3 components, mm): "
+				  "jac_min field over brain" },
 };
 
 static const armstg_port_t outs[] = {
@@ -207,7 +214,7 @@ static int dilate(uint8_t *m, int nx, int ny, int nz, const double sp[3],
 /* least det(I + dv/dx) of a 3-component field over its grid: central
  * differences in voxel index, chained through the inverse of the affine's
  * 3x3 part (world mm); the border voxels are left out */
-static double jac_min(const vol_t *f)
+static double jac_min(const vol_t *f, const vol_t *mask)
 {
 	double A[16], Ai[16];
 	memcpy(A, f->affine, sizeof A);
@@ -219,6 +226,8 @@ static double jac_min(const vol_t *f)
 		for (int j = 1; j < f->ny - 1; j++)
 			for (int i = 1; i < f->nx - 1; i++) {
 				int64_t e = vol_idx(f, i, j, k);
+				if (mask && !(vol_get(mask, e) > 0))
+					continue;
 				int64_t st3[3] = { 1, f->nx,
 						   (int64_t)f->nx * f->ny };
 				double g[3][3], J[3][3];
@@ -299,8 +308,9 @@ static int process(armstg_stage_t *st)
 		      "ml")))
 		goto out;
 	if (st->in[IN_FIELD]) {
-		double jm = jac_min((const vol_t *)st->in[IN_FIELD]);
-		if ((rc = row(&c, "jac_min", "growth", jm, "")))
+		double jm = jac_min((const vol_t *)st->in[IN_FIELD],
+				    (const vol_t *)st->in[IN_BRAIN]);
+		if ((rc = row(&c, "jac_min", "field", jm, "")))
 			goto out;
 	}
 	double sg = NAN, sp_ = NAN;

@@ -16,7 +16,7 @@
  *     shift_error = the true shift (within 0.5 mm), and a lower ventricle
  *     Dice with the patient's found ventricles than the true ones (the
  *     [tune] score, goal max);
- *   - jac_min growth of a linear field is its exact determinant;
+ *   - jac_min field of a linear field is its exact determinant;
  *   - the real-anatomy phantom (SRI24 with pat0001's tumour, 5 mm; needs
  *     ../shared/data): measured shift within 1 mm of the true one, and
  *     the true ventricles overlap the found ones better than the atlas's;
@@ -154,7 +154,7 @@ static void test_known_shift(void **state)
 	assert_true(se > 1.0);
 }
 
-/* jac_min growth of a linear field v = (0.1 x - 0.3 y, 0, 0.2 z) on a 2 mm
+/* jac_min field of a linear field v = (0.1 x - 0.3 y, 0, 0.2 z) on a 2 mm
  * LPS grid: det(I + dv/dx) = 1.1 * 1.2 = 1.32 everywhere */
 static void test_jacobian(void **state)
 {
