@@ -90,7 +90,7 @@ static const char CSS[] =
 	"tr.chosen td{background:#dff3df;font-weight:600}\n"
 	".cards{display:grid;grid-template-columns:repeat(auto-fill,"
 	"minmax(400px,1fr));gap:14px;align-items:start}\n"
-	".mcards{grid-template-columns:repeat(auto-fill,minmax(250px,1fr))}\n"
+	".mcards{grid-template-columns:repeat(auto-fill,minmax(330px,1fr))}\n"
 	".card{background:#fff;border:1px solid #d6d6d6;padding:8px 12px}\n"
 	".card h3{margin:2px 0 4px;font-size:15px}\n"
 	".card h3 span{font-weight:400;color:#555}\n"
@@ -342,7 +342,8 @@ static void section_checker(FILE *f, const report_ctx_t *rc)
 		"<code>atlas_image</code>) in turn, each in its own display "
 		"window (1st&ndash;99th percentile); faint lines mark the "
 		"squares. Where the registration is good, edges run on across "
-		"the squares' sides.</p>\n"
+		"the squares' sides. The tumour itself differs square by "
+		"square: the atlas has healthy tissue there.</p>\n"
 		"<div class=\"figs\">\n", rc->checker_mm);
 	for (int k = 0; k < 3; k++) {
 		const rp_figure_t *fig = &rc->checker[k];

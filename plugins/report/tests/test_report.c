@@ -676,6 +676,7 @@ static void test_checker(void **state)
 	char *html = slurp(path);
 	assert_non_null(html);
 	assert_non_null(strstr(html, "Checkerboard of 10 mm squares"));
+	assert_non_null(strstr(html, "the atlas has healthy tissue there"));
 	assert_non_null(strstr(html, "href=\"checker_axial.png\""));
 	free(html);
 	unref_all(in);
