@@ -33,7 +33,8 @@
  * or of sigma voxels of the fixed image as given, the same mm at every
  * level (sigma_unit=image_voxel: a width chosen on 1 mm images carries over
  * to other resolutions; on the 2 mm phantom 1.5 mm fitted the noise,
- * bench/pipeline/results.md "Session 8").
+ * bench/pipeline/results.md at 7a4d369, "the registration was fitting
+ * the phantom's noise").
  * The force, its bound and the update are those of ITK's
  * ESMDemonsRegistrationFunction / DiffeomorphicDemonsRegistrationFilter
  * (checked term by term; bench/demons/results.md): their denominator

@@ -12,8 +12,9 @@
  *           (world mm) as the input's non-zero voxels: the tumour of the
  *           semi-spherical baseline (thesis section 4.3.3)          (u8)
  *           components=each: one such ball per 26-connected component
- *           (a tumour's placement without its outline; Session 14 of
- *           bench/pipeline/results.md)
+ *           (a tumour's placement without its outline;
+ *           bench/pipeline/results.md at 7a4d369, "what the tumour's
+ *           shape is worth")
  *   points  out = the solid body enclosed by the `points` input's points
  *           whose labels are in `labels` ('all' = every point,
  *           'nonzero' = label != 0, or a list '3-5'), rasterised on the

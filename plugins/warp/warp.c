@@ -112,8 +112,8 @@ static const armstg_param_t warp_params[] = {
 	  "profile between the points (the push next to a grown tumour) is "
 	  "damped much less, linear fields stay exact away from the points' "
 	  "outer face (field.h); after the registration it made the irregular "
-	  "phantoms worse: the graphs use 1 (bench/pipeline/results.md, "
-	  "Session 10)", NULL,
+	  "phantoms worse: the graphs use 1 (bench/pipeline/results.md at "
+	  "7a4d369, \"a sharper dense field\")", NULL,
 	  OFF(passes), 0 },
 	{ "attr", PT_STRING, "u", 0, 0, "",
 	  "from_points: name of the 3-component displacement attribute", NULL,

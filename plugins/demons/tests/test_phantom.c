@@ -185,7 +185,8 @@ static void test_phantom_bias(void **state)
  * (3 mm here) the error is 1.22 mm, a third lower, but still not below the
  * zero field's on this healthy phantom with bias (plain SSD demons cannot
  * model the bias; test_phantom_bias).  On the tumour phantoms of the bench it
- * is below (bench/pipeline/results.md, "Session 8"). */
+ * is below (bench/pipeline/results.md at 7a4d369, "the registration was
+ * fitting the phantom's noise"). */
 static void test_phantom_graph_width(void **state)
 {
 	(void)state;
