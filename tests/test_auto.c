@@ -21,9 +21,11 @@
  *   - a case with no FLAIR and no T2 fails before the growth, in the stage
  *     that selects the tumour, naming its missing input.
  *
- * Measured 2026-11-26 (2-core box, load ~9): whole tumour Dice 0.966, core
- * 0.993, grown tumour 0.841, band error 2.520 mm against direct demons'
- * 4.523 mm, min det J 0.312; 3 min wall under that load (43 s of CPU).
+ * Measured 2026-11-26 (2-core box, load 9-15): whole tumour Dice 0.966, core
+ * 0.993, grown tumour 0.786, band error 1.075 mm against direct demons'
+ * 4.523 mm, min det J 0.240 (with the graphs' SSD registration before the
+ * LNCC one: grown tumour 0.841, band error 2.520 mm, det J 0.312); 3-4 min
+ * wall under that load (45 s of CPU).
  */
 #include <math.h>
 
