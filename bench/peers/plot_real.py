@@ -75,6 +75,9 @@ def main():
              "real cases: ventricle mean surface distance (mm)"),
             ([c for c in cases if c.startswith("phantom")], "err_band_mm",
              "real-anatomy phantoms: error within 15 mm of the tumour (mm)"))):
+        if not sel:
+            ax[k].text(0.5, 0.5, "no rows", ha="center", va="center",
+                       transform=ax[k].transAxes)
         w = 0.8 / max(len(methods), 1)
         for i, m in enumerate(methods):
             y = [num(rows[(c, m)], key) if (c, m) in rows else np.nan for c in sel]
