@@ -288,6 +288,100 @@ int field_vol_all_zero(const vol_t *v)
 	return 1;
 }
 
+static int64_t count_pos(const fimg_t *f)
+{
+	int64_t n = fgrid_nvox(&f->g), c = 0;
+	for (int64_t e = 0; e < n; e++)
+		c += f->d[e] > 0;
+	return c;
+}
+
+int field_mask_from_vol(const vol_t *m, const char *what, int min_dim,
+			const fgrid_t *target, fimg_t *out, int nthreads,
+			char *err, size_t errsize)
+{
+	int rc = field_check_vol(m, what, 1, min_dim, err, errsize);
+	if (rc)
+		return rc;
+	fimg_t raw;
+	if ((rc = fimg_from_vol(&raw, m))) {
+		snprintf(err, errsize, "%s: out of memory", what);
+		return rc;
+	}
+	if (!count_pos(&raw)) {
+		fimg_free(&raw);
+		snprintf(err, errsize,
+			 "%s is empty (no voxel > 0): nothing to register",
+			 what);
+		return ARMSTG_EINVAL;
+	}
+	if (!target || fgrid_same(&raw.g, target, 1e-4)) {
+		*out = raw;
+	} else {
+		rc = fimg_alloc(out, target, 1);
+		if (!rc)
+			rc = fimg_resample(&raw, NULL, FIELD_NEAREST, 0, out,
+					   nthreads);
+		fimg_free(&raw);
+		if (rc) {
+			snprintf(err, errsize, "%s: resampling failed (out of "
+				 "memory)", what);
+			return rc;
+		}
+		if (!count_pos(out)) {
+			fimg_free(out);
+			snprintf(err, errsize,
+				 "%s does not overlap the fixed volume in world "
+				 "space (check its affine)", what);
+			return ARMSTG_EINVAL;
+		}
+	}
+	const int64_t nv = fgrid_nvox(&out->g);
+	for (int64_t e = 0; e < nv; e++)
+		out->d[e] = out->d[e] > 0 ? 1.0f : 0.0f;
+	return 0;
+}
+
+int field_parse_ints(const char *s, const char *name, int lo, int hi,
+		     int *out, int max, int *n, char *err, size_t errsize)
+{
+	const char *s0 = s;
+	*n = 0;
+	while (*s) {
+		char *end;
+		while (*s == ' ' || *s == '\t')
+			s++;
+		long v = strtol(s, &end, 10);
+		if (end == s || v < lo || v > hi) {
+			snprintf(err, errsize, "parameter '%s': '%s' is not a "
+				 "comma separated list of integers in [%d, %d]",
+				 name, s0, lo, hi);
+			return ARMSTG_EINVAL;
+		}
+		if (*n == max) {
+			snprintf(err, errsize, "parameter '%s': more than %d "
+				 "values", name, max);
+			return ARMSTG_EINVAL;
+		}
+		out[(*n)++] = (int)v;
+		s = end;
+		while (*s == ' ' || *s == '\t')
+			s++;
+		if (*s == ',')
+			s++;
+		else if (*s) {
+			snprintf(err, errsize, "parameter '%s': unexpected '%c' "
+				 "in '%s'", name, *s, s0);
+			return ARMSTG_EINVAL;
+		}
+	}
+	if (!*n) {
+		snprintf(err, errsize, "parameter '%s' is empty", name);
+		return ARMSTG_EINVAL;
+	}
+	return 0;
+}
+
 /* ------------------------------------------------------------------ */
 /* interpolation kernels                                               */
 /* ------------------------------------------------------------------ */

@@ -105,6 +105,28 @@ int field_check_vol(const vol_t *v, const char *what, int nc_want,
 /* 1 when every value of component-0 (all components for fields) is 0. */
 int field_vol_all_zero(const vol_t *v);
 
+/*
+ * A mask volume as 0/1 floats (1 where > 0, for the registrations' fixed
+ * and moving masks): on its own grid when target is NULL or the same grid
+ * (to 1e-4), else resampled onto target by nearest voxel.  Refuses with
+ * ARMSTG_EINVAL and err set: a volume field_check_vol(m, what, 1, min_dim)
+ * refuses, an empty mask ("<what> is empty (no voxel > 0): nothing to
+ * register") and one that does not overlap target; ARMSTG_ENOMEM.
+ */
+int field_mask_from_vol(const vol_t *m, const char *what, int min_dim,
+			const fgrid_t *target, fimg_t *out, int nthreads,
+			char *err, size_t errsize);
+
+/* ---- parameters of multi-resolution stages ---- */
+/*
+ * A comma separated list of integers ("30,20,10", blanks allowed around
+ * each) into out[0..max-1], each in [lo, hi]; *n their number.  name is
+ * the parameter, for messages.  0, or ARMSTG_EINVAL with err set (not a
+ * list, a value out of range, more than max values, empty).
+ */
+int field_parse_ints(const char *s, const char *name, int lo, int hi,
+		     int *out, int max, int *n, char *err, size_t errsize);
+
 /* ---- interpolation ---- */
 enum field_interp {
 	FIELD_LINEAR = 0,   /* trilinear */

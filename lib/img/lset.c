@@ -47,8 +47,11 @@ int lset_parse(const char *spec, const char *what, lset_t *ls, char *err,
 		s++;
 	if (!*s || !strcmp(s, "none"))
 		return 0;
-	if (!strncmp(s, "all", 3)) {
-		const char *t = s + 3;
+	const size_t kw = !strncmp(s, "all", 3)       ? 3
+			  : !strncmp(s, "nonzero", 7) ? 7
+						      : 0;
+	if (kw) {
+		const char *t = s + kw;
 		while (isspace((unsigned char)*t))
 			t++;
 		if (!*t) {
@@ -66,8 +69,9 @@ int lset_parse(const char *spec, const char *what, lset_t *ls, char *err,
 		if (parse_i32(&s, &a))
 			return refuse(err, errsize,
 				      "%s: '%s' is not a label list (expected "
-				      "e.g. \"4,5\", \"201-414\", \"all\" or "
-				      "\"none\"; stuck at \"%.20s\")", what,
+				      "e.g. \"4,5\", \"201-414\", \"all\", "
+				      "\"nonzero\" or \"none\"; stuck at "
+				      "\"%.20s\")", what,
 				      spec, item);
 		b = a;
 		if (*s == '-') {

@@ -1,8 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Label sets: "4,5", "201-414,491-556", "all" (every non-zero label),
- * "none" / "" (empty), for choosing structures of label volumes (metrics,
- * report).
+ * Label sets: "4,5", "201-414,491-556", "all" or "nonzero" (every non-zero
+ * label), "none" / "" (empty), for choosing structures of label volumes and
+ * point labels (metrics, report, labelmap, the phantom's real atlas codes).
  */
 #ifndef IMG_LSET_H
 #define IMG_LSET_H
@@ -20,8 +20,8 @@ typedef struct lset {
 } lset_t;
 
 /*
- * Parse "4,5", "201-414, 491-556", "all" (every non-zero label) or
- * "none"/"" (empty set).  Items are separated by commas or blanks; a range is
+ * Parse "4,5", "201-414, 491-556", "all" or "nonzero" (every non-zero
+ * label) or "none"/"" (empty set).  Items are separated by commas or blanks; a range is
  * "a-b" with a <= b.  Negative labels are written in parentheses-free form
  * only as single values ("-1"); what = parameter name for the message.
  */
@@ -34,6 +34,18 @@ static inline int lset_has(const lset_t *ls, int32_t v)
 		return v != 0;
 	for (int i = 0; i < ls->n; i++)
 		if (v >= ls->lo[i] && v <= ls->hi[i])
+			return 1;
+	return 0;
+}
+
+/* A value of a float label volume: in a range widened by 1e-6 (labels
+ * stored as floats), or != 0 for "all". */
+static inline int lset_has_value(const lset_t *ls, double v)
+{
+	if (ls->all)
+		return v != 0;
+	for (int i = 0; i < ls->n; i++)
+		if (v >= ls->lo[i] - 1e-6 && v <= ls->hi[i] + 1e-6)
 			return 1;
 	return 0;
 }

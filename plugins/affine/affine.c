@@ -123,39 +123,6 @@ static const armstg_param_t affine_params[] = {
 
 #define FAIL(code, ...) st->host->fail(st, code, __VA_ARGS__)
 
-/* comma separated positive ints into out[], at most MAX_LEVELS */
-static int parse_list(armstg_stage_t *st, const char *name, const char *s,
-		      int lo, int hi, int *out, int *n)
-{
-	const char *s0 = s;
-	*n = 0;
-	while (*s) {
-		char *end;
-		while (*s == ' ' || *s == '\t')
-			s++;
-		long v = strtol(s, &end, 10);
-		if (end == s || v < lo || v > hi)
-			return FAIL(ARMSTG_EINVAL, "parameter '%s': '%s' is not a "
-				    "comma separated list of integers in "
-				    "[%d, %d]", name, s0, lo, hi);
-		if (*n == MAX_LEVELS)
-			return FAIL(ARMSTG_EINVAL, "parameter '%s': more than %d "
-				    "values", name, MAX_LEVELS);
-		out[(*n)++] = (int)v;
-		s = end;
-		while (*s == ' ' || *s == '\t')
-			s++;
-		if (*s == ',')
-			s++;
-		else if (*s)
-			return FAIL(ARMSTG_EINVAL, "parameter '%s': unexpected "
-				    "'%c' in '%s'", name, *s, s0);
-	}
-	if (!*n)
-		return FAIL(ARMSTG_EINVAL, "parameter '%s' is empty", name);
-	return 0;
-}
-
 static int ends_with(const char *s, const char *suf)
 {
 	size_t n = strlen(s), m = strlen(suf);
@@ -165,13 +132,13 @@ static int ends_with(const char *s, const char *suf)
 static int affine_init(armstg_stage_t *st)
 {
 	affine_priv_t *p = st->priv;
-	int rc;
-	if ((rc = parse_list(st, "shrink", p->shrink ? p->shrink : "4,2,1", 1,
-			     64, p->fac, &p->nlev)) ||
-	    (rc = parse_list(st, "iterations",
-			     p->iterations ? p->iterations : "100", 0,
-			     100000, p->niter, &p->nit)))
-		return rc;
+	char err[256];
+	if (field_parse_ints(p->shrink ? p->shrink : "4,2,1", "shrink", 1, 64,
+			     p->fac, MAX_LEVELS, &p->nlev, err, sizeof err) ||
+	    field_parse_ints(p->iterations ? p->iterations : "100",
+			     "iterations", 0, 100000, p->niter, MAX_LEVELS,
+			     &p->nit, err, sizeof err))
+		return FAIL(ARMSTG_EINVAL, "%s", err);
 	if (p->nit != 1 && p->nit != p->nlev)
 		return FAIL(ARMSTG_EINVAL, "parameter 'iterations' has %d values "
 			    "but 'shrink' %d levels (give one per level, or one "
@@ -224,29 +191,6 @@ static int centroid(const fimg_t *f, const fimg_t *mask, double c[3])
 		return -1;
 	for (int a = 0; a < 3; a++)
 		c[a] = s[a] / sw;
-	return 0;
-}
-
-/* a mask volume as 0/1 floats on its own grid, refused when empty */
-static int read_mask(armstg_stage_t *st, const vol_t *m, const char *what,
-		     fimg_t *out)
-{
-	char err[512];
-	if (field_check_vol(m, what, 1, 1, err, sizeof err))
-		return FAIL(ARMSTG_EINVAL, "%s", err);
-	int rc = fimg_from_vol(out, m);
-	if (rc)
-		return FAIL(rc, "%s: out of memory", what);
-	int64_t n = 0, nv = fgrid_nvox(&out->g);
-	for (int64_t e = 0; e < nv; e++) {
-		out->d[e] = out->d[e] > 0 ? 1.0f : 0.0f;
-		n += out->d[e] > 0;
-	}
-	if (!n) {
-		fimg_free(out);
-		return FAIL(ARMSTG_EINVAL, "%s is empty (no voxel > 0): nothing "
-			    "to register", what);
-	}
 	return 0;
 }
 
@@ -531,8 +475,11 @@ static int affine_process(armstg_stage_t *st)
 		goto out;
 	}
 	if (vfm) {
-		if ((rc = read_mask(st, vfm, "fixed_mask", &FMraw)))
+		if ((rc = field_mask_from_vol(vfm, "fixed_mask", 1, NULL,
+					      &FMraw, nt, err, sizeof err))) {
+			rc = FAIL(rc, "%s", err);
 			goto out;
+		}
 		if ((rc = fimg_alloc(&FM0, &F0.g, 1))) {
 			rc = FAIL(rc, "out of memory (fixed_mask)");
 			goto out;
@@ -548,8 +495,11 @@ static int affine_process(armstg_stage_t *st)
 			goto out;
 		}
 	}
-	if (vmm && (rc = read_mask(st, vmm, "moving_mask", &MM0)))
+	if (vmm && (rc = field_mask_from_vol(vmm, "moving_mask", 1, NULL, &MM0,
+					     nt, err, sizeof err))) {
+		rc = FAIL(rc, "%s", err);
 		goto out;
+	}
 
 	afr_xform_t T;
 	afr_identity(&T);

@@ -196,35 +196,11 @@ static const armstg_param_t demons_params[] = {
 static int demons_init(armstg_stage_t *st)
 {
 	demons_priv_t *p = st->priv;
-	const char *s = p->iterations ? p->iterations : "30,20,10";
-	p->nlist = 0;
-	while (*s) {
-		char *end;
-		while (*s == ' ' || *s == '\t')
-			s++;
-		long v = strtol(s, &end, 10);
-		if (end == s || v < 0 || v > 100000)
-			return FAIL(ARMSTG_EINVAL,
-				    "parameter 'iterations': '%s' is not a comma "
-				    "separated list of counts (e.g. 30,20,10)",
-				    p->iterations);
-		if (p->nlist == MAX_LEVELS)
-			return FAIL(ARMSTG_EINVAL,
-				    "parameter 'iterations': more than %d values",
-				    MAX_LEVELS);
-		p->niter[p->nlist++] = (int)v;
-		s = end;
-		while (*s == ' ' || *s == '\t')
-			s++;
-		if (*s == ',')
-			s++;
-		else if (*s)
-			return FAIL(ARMSTG_EINVAL,
-				    "parameter 'iterations': unexpected '%c' in "
-				    "'%s'", *s, p->iterations);
-	}
-	if (p->nlist == 0)
-		return FAIL(ARMSTG_EINVAL, "parameter 'iterations' is empty");
+	char err[256];
+	if (field_parse_ints(p->iterations ? p->iterations : "30,20,10",
+			     "iterations", 0, 100000, p->niter, MAX_LEVELS,
+			     &p->nlist, err, sizeof err))
+		return FAIL(ARMSTG_EINVAL, "%s", err);
 	if (p->nlist != 1 && p->nlist != p->levels)
 		return FAIL(ARMSTG_EINVAL,
 			    "parameter 'iterations' has %d values but levels = "
@@ -420,14 +396,6 @@ static int local_normalise(fimg_t *f, double sigma, int nt)
 		f->d[e] /= B.d[e];
 	fimg_free(&B);
 	return 0;
-}
-
-static int64_t count_pos(const fimg_t *f)
-{
-	int64_t n = fgrid_nvox(&f->g), c = 0;
-	for (int64_t e = 0; e < n; e++)
-		c += f->d[e] > 0;
-	return c;
 }
 
 /* resample a (field or image) src onto grid g, edge-clamped */
@@ -765,44 +733,6 @@ static int add_row(armstg_stage_t *st, tab_t *t, int level, int it,
 	return 0;
 }
 
-static int check_mask(armstg_stage_t *st, const vol_t *m, const char *what,
-		      const fgrid_t *target, fimg_t *out, int nt)
-{
-	char err[512];
-	if (field_check_vol(m, what, 1, 2, err, sizeof err))
-		return FAIL(ARMSTG_EINVAL, "%s", err);
-	fimg_t raw;
-	int rc = fimg_from_vol(&raw, m);
-	if (rc)
-		return FAIL(rc, "%s: cannot read (%s)", what,
-			    st->host->strerror(rc));
-	if (!count_pos(&raw)) {
-		fimg_free(&raw);
-		return FAIL(ARMSTG_EINVAL,
-			    "%s is empty (no voxel > 0): nothing to register",
-			    what);
-	}
-	if (!target || fgrid_same(&raw.g, target, 1e-4)) {
-		*out = raw;
-	} else {
-		rc = fimg_alloc(out, target, 1);
-		if (!rc)
-			rc = fimg_resample(&raw, NULL, FIELD_NEAREST, 0, out, nt);
-		fimg_free(&raw);
-		if (rc)
-			return FAIL(rc, "%s: resampling failed", what);
-		if (!count_pos(out)) {
-			fimg_free(out);
-			return FAIL(ARMSTG_EINVAL,
-				    "%s does not overlap the fixed volume in "
-				    "world space (check its affine)", what);
-		}
-	}
-	for (int64_t e = 0; e < fgrid_nvox(&out->g); e++)
-		out->d[e] = out->d[e] > 0 ? 1.0f : 0.0f;
-	return 0;
-}
-
 static int demons_process(armstg_stage_t *st)
 {
 	demons_priv_t *p = st->priv;
@@ -872,10 +802,13 @@ static int demons_process(armstg_stage_t *st)
 		rescale(&F0, flo, fhi);
 		rescale(&M0, mlo, mhi);
 	}
-	if (vfm && (rc = check_mask(st, vfm, "fixed_mask", &F0.g, &FM0, nt)))
+	if ((vfm && (rc = field_mask_from_vol(vfm, "fixed_mask", 2, &F0.g, &FM0,
+					      nt, err, sizeof err))) ||
+	    (vmm && (rc = field_mask_from_vol(vmm, "moving_mask", 2, NULL, &MM0,
+					      nt, err, sizeof err)))) {
+		rc = FAIL(rc, "%s", err);
 		goto out;
-	if (vmm && (rc = check_mask(st, vmm, "moving_mask", NULL, &MM0, nt)))
-		goto out;
+	}
 	if (vinit && (rc = fimg_from_vol(&init, vinit))) {
 		rc = FAIL(rc, "out of memory (initial_field)");
 		goto out;

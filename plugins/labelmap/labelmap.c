@@ -76,6 +76,7 @@
 #include "armstg/volmath.h"
 #include "img/edt.h"
 #include "img/kdtree.h"
+#include "img/lset.h"
 #include "img/sample.h"
 
 enum { OP_SELECT, OP_PAINT, OP_SPHERE, OP_POINTS };
@@ -133,36 +134,6 @@ static const armstg_param_t params[] = {
 	  "joint|each", offsetof(priv_t, components), 0 },
 };
 
-/* Parse "a,b-c,d" into ranges; 0 or -1. */
-static int parse_ranges(const char *s, double (*r)[2], int max, int *n)
-{
-	*n = 0;
-	while (*s) {
-		char *end;
-		double a = strtod(s, &end), b;
-		if (end == s || *n >= max)
-			return -1;
-		s = end;
-		b = a;
-		if (*s == '-') {
-			b = strtod(s + 1, &end);
-			if (end == s + 1)
-				return -1;
-			s = end;
-		}
-		while (*s == ' ')
-			s++;
-		if (*s == ',')
-			s++;
-		else if (*s)
-			return -1;
-		r[*n][0] = a < b ? a : b;
-		r[*n][1] = a < b ? b : a;
-		(*n)++;
-	}
-	return *n ? 0 : -1;
-}
-
 static int check_finite(armstg_stage_t *st, const vol_t *v, const char *what)
 {
 	int64_t n = vol_nvox(v) * v->nc;
@@ -202,17 +173,10 @@ static double mean_nn(const double *xyz, int64_t n)
 	return cnt ? sum / (double)cnt : -1;
 }
 
-/* Does point label l match the selection? */
-static int label_hit(int32_t l, int all, int nonzero, double (*r)[2], int nr)
+/* Does point label l match the selection ("all": every point)? */
+static int label_hit(int32_t l, int all, const lset_t *ls)
 {
-	if (all)
-		return 1;
-	if (nonzero)
-		return l != 0;
-	for (int k = 0; k < nr; k++)
-		if (l >= r[k][0] - 1e-6 && l <= r[k][1] + 1e-6)
-			return 1;
-	return 0;
+	return all || lset_has(ls, l);
 }
 
 static int op_points(armstg_stage_t *st)
@@ -224,10 +188,10 @@ static int op_points(armstg_stage_t *st)
 		return st->host->fail(st, ARMSTG_EINVAL,
 				      "op=points needs the 'points' input (a "
 				      "point set)");
-	double r[64][2];
-	int nr = 0, all = !strcmp(p->labels, "all"),
-	    nonzero = !strcmp(p->labels, "nonzero");
-	if (!all && !nonzero && parse_ranges(p->labels, r, 64, &nr))
+	lset_t ls = { 0 };
+	const int all = !strcmp(p->labels, "all");
+	if (!all && (lset_parse(p->labels, "labels", &ls, NULL, 0) ||
+		     lset_empty(&ls)))
 		return st->host->fail(st, ARMSTG_EINVAL,
 				      "labels '%s' is not 'all', 'nonzero' or "
 				      "a list like '4,5' or '3-5'", p->labels);
@@ -263,7 +227,7 @@ static int op_points(armstg_stage_t *st)
 	/* selection */
 	int64_t ns = 0;
 	for (int64_t i = 0; i < ps->n; i++)
-		ns += label_hit(ps->label[i], all, nonzero, r, nr);
+		ns += label_hit(ps->label[i], all, &ls);
 	if (!ns) {
 		char present[256] = "";
 		int32_t seen[16];
@@ -296,7 +260,7 @@ static int op_points(armstg_stage_t *st)
 		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
 	ns = 0;
 	for (int64_t i = 0; i < ps->n; i++)
-		if (label_hit(ps->label[i], all, nonzero, r, nr)) {
+		if (label_hit(ps->label[i], all, &ls)) {
 			memcpy(xyz + 3 * ns, ps->xyz + 3 * i, 3 * sizeof *xyz);
 			ns++;
 		}
@@ -563,9 +527,10 @@ static int process(armstg_stage_t *st)
 	if (rc)
 		return rc;
 	if (p->op == OP_SELECT) {
-		double r[64][2];
-		int nr = 0, nonzero = !strcmp(p->labels, "nonzero");
-		if (!nonzero && parse_ranges(p->labels, r, 64, &nr))
+		lset_t ls;
+		if (!strcmp(p->labels, "all") ||
+		    lset_parse(p->labels, "labels", &ls, NULL, 0) ||
+		    lset_empty(&ls))
 			return st->host->fail(st, ARMSTG_EINVAL,
 					      "labels '%s' is not 'nonzero' or "
 					      "a list like '4,5' or '1-3'",
@@ -576,11 +541,7 @@ static int process(armstg_stage_t *st)
 			return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
 		uint8_t *d = o->data;
 		for (int64_t e = 0; e < nv; e++) {
-			double x = vol_get(in, e);
-			int hit = nonzero ? x != 0 : 0;
-			for (int k = 0; !hit && k < nr; k++)
-				hit = x >= r[k][0] - 1e-6 && x <= r[k][1] + 1e-6;
-			d[e] = (uint8_t)hit;
+			d[e] = (uint8_t)lset_has_value(&ls, vol_get(in, e));
 		}
 		st->out[0] = &o->base;
 		return 0;

@@ -215,14 +215,15 @@ int ph_elastic_solve(ph_elastic_t *E, double *u);
 /* ---- a real atlas as the anatomy (ph_real.c) ---- */
 #include <stddef.h>
 #include "armstg/msg.h"
+#include "img/lset.h"
 
 typedef struct ph_real_in {
 	const vol_t *t1;          /* atlas T1 */
 	const vol_t *tissues;     /* tissue labels */
 	const vol_t *structures;  /* structure labels, or NULL */
 	int csf, gm, wm;          /* their codes in tissues */
-	const char *ventricles;   /* lateral ventricle codes in structures */
-	const char *third;        /* third ventricle codes */
+	const lset_t *ventricles; /* lateral ventricle codes in structures */
+	const lset_t *third;      /* third ventricle codes */
 } ph_real_in_t;
 
 /* canonical RAS grid of an axis-aligned isotropic volume; -1 with err */
@@ -241,8 +242,5 @@ int ph_real_tumour(const vol_t *tum, const ph_grid_t *G, uint8_t *tmask,
 /* ph_tumour_sample for such a mask (nearest voxel of G) */
 void ph_real_tsample(const uint8_t *tmask, const ph_grid_t *G,
 		     const double x[3], ph_tsample_t *s);
-/* "a-b,c" code ranges */
-int ph_in_ranges(const char *s, long x);
-int ph_ranges_valid(const char *s);
 
 #endif

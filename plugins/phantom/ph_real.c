@@ -11,32 +11,9 @@
 #include <string.h>
 
 #include "armstg/volmath.h"
+#include "img/lset.h"
+#include "img/sample.h"
 #include "ph.h"
-
-/* world -> voxel of a 4x4 row-major voxel -> world affine (3x3 inverse);
- * -1 when singular */
-static int aff_inv(const double A[16], double W[16])
-{
-	const double a = A[0], b = A[1], c = A[2], d = A[4], e = A[5], f = A[6],
-		     g = A[8], h = A[9], i = A[10];
-	double det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g);
-	if (!(fabs(det) > 1e-12))
-		return -1;
-	double M[9] = { (e * i - f * h) / det, (c * h - b * i) / det,
-			(b * f - c * e) / det, (f * g - d * i) / det,
-			(a * i - c * g) / det, (c * d - a * f) / det,
-			(d * h - e * g) / det, (b * g - a * h) / det,
-			(a * e - b * d) / det };
-	memset(W, 0, 16 * sizeof *W);
-	for (int r = 0; r < 3; r++) {
-		for (int k = 0; k < 3; k++)
-			W[4 * r + k] = M[3 * r + k];
-		W[4 * r + 3] = -(M[3 * r] * A[3] + M[3 * r + 1] * A[7] +
-				 M[3 * r + 2] * A[11]);
-	}
-	W[15] = 1;
-	return 0;
-}
 
 int ph_real_grid(const vol_t *v, ph_grid_t *G, char *err, size_t errsize)
 {
@@ -75,68 +52,15 @@ int ph_real_grid(const vol_t *v, ph_grid_t *G, char *err, size_t errsize)
 	return 0;
 }
 
-/* nearest voxel of v (component 0) at world p; NAN outside its grid */
+/* nearest voxel of v (component 0) at world p (lib/img, the voxels'
+ * extent); NAN outside its grid */
 static double nn_at(const vol_t *v, const double W[16], const double p[3])
 {
-	const int n[3] = { v->nx, v->ny, v->nz };
-	int64_t id[3];
-	for (int a = 0; a < 3; a++) {
-		double c = W[4 * a] * p[0] + W[4 * a + 1] * p[1] +
-			   W[4 * a + 2] * p[2] + W[4 * a + 3];
-		if (!(c > -0.5) || !(c < n[a] - 0.5))
-			return NAN;
-		id[a] = (int64_t)floor(c + 0.5);
-	}
-	return vol_get(v, (id[2] * n[1] + id[1]) * n[0] + id[0]);
-}
-
-/* 1 when the integer x lies in one of the ranges "a-b,c,d-e" */
-int ph_in_ranges(const char *s, long x)
-{
-	while (s && *s) {
-		char *end;
-		long a = strtol(s, &end, 10), b = a;
-		if (end == s)
-			return 0;
-		s = end;
-		if (*s == '-') {
-			b = strtol(s + 1, &end, 10);
-			s = end;
-		}
-		if (x >= a && x <= b)
-			return 1;
-		while (*s == ' ' || *s == ',')
-			s++;
-	}
-	return 0;
-}
-
-int ph_ranges_valid(const char *s)
-{
-	if (!s || !*s)
-		return 1;
-	while (*s) {
-		char *end;
-		long a = strtol(s, &end, 10);
-		if (end == s)
-			return 0;
-		s = end;
-		if (*s == '-') {
-			long b = strtol(s + 1, &end, 10);
-			if (end == s + 1 || b < a)
-				return 0;
-			s = end;
-		}
-		while (*s == ' ')
-			s++;
-		if (*s == ',')
-			s++;
-		else if (*s)
-			return 0;
-		while (*s == ' ')
-			s++;
-	}
-	return 1;
+	double c[3];
+	int inside;
+	aff_apply(W, p, c);
+	double x = img_vol_near(v, 0, c, 0, &inside);
+	return inside ? x : NAN;
 }
 
 int ph_real_atlas(const ph_real_in_t *in, const ph_grid_t *G, uint8_t *alab,
@@ -144,8 +68,8 @@ int ph_real_atlas(const ph_real_in_t *in, const ph_grid_t *G, uint8_t *alab,
 		  char *err, size_t errsize)
 {
 	double Wt[16], W1[16], Ws[16];
-	if (aff_inv(in->tissues->affine, Wt) || aff_inv(in->t1->affine, W1) ||
-	    (in->structures && aff_inv(in->structures->affine, Ws))) {
+	if (aff_invert(in->tissues->affine, Wt) || aff_invert(in->t1->affine, W1) ||
+	    (in->structures && aff_invert(in->structures->affine, Ws))) {
 		snprintf(err, errsize, "an atlas volume has a singular affine");
 		return -1;
 	}
@@ -177,9 +101,11 @@ int ph_real_atlas(const ph_real_in_t *in, const ph_grid_t *G, uint8_t *alab,
 				if (in->structures && l != PH_BG) {
 					double s = nn_at(in->structures, Ws, p);
 					long sl = isnan(s) ? 0 : lround(s);
-					if (sl && ph_in_ranges(in->ventricles, sl))
+					if (sl && lset_has_value(in->ventricles,
+								 (double)sl))
 						l = PH_LV;
-					else if (sl && ph_in_ranges(in->third, sl))
+					else if (sl && lset_has_value(in->third,
+								      (double)sl))
 						l = PH_V3;
 				}
 				if (l == PH_LV || l == PH_V3) {
@@ -261,7 +187,7 @@ int ph_real_tumour(const vol_t *tum, const ph_grid_t *G, uint8_t *tmask,
 		   double *radius, char *err, size_t errsize)
 {
 	double W[16];
-	if (aff_inv(tum->affine, W)) {
+	if (aff_invert(tum->affine, W)) {
 		snprintf(err, errsize, "tumour: singular affine");
 		return -1;
 	}
@@ -299,14 +225,13 @@ void ph_real_tsample(const uint8_t *tmask, const ph_grid_t *G,
 	memset(s, 0, sizeof *s);
 	s->t = 2;
 	s->dist = 1e9;
-	int64_t id[3];
-	for (int c = 0; c < 3; c++) {
-		double f = (x[c] - G->o[c]) / G->h;
-		if (!(f > -0.5) || !(f < G->n[c] - 0.5))
-			return;
-		id[c] = (int64_t)floor(f + 0.5);
-	}
-	uint8_t t = tmask[(id[2] * G->n[1] + id[1]) * G->n[0] + id[0]];
+	double f[3];
+	int64_t o;
+	for (int c = 0; c < 3; c++)
+		f[c] = (x[c] - G->o[c]) / G->h;
+	if (!img_near_at(G->n, f, 0, &o))
+		return;
+	uint8_t t = tmask[o];
 	if (t == PH_T_EDEMA) {
 		s->edema = 1;
 	} else if (t != PH_T_NONE) {

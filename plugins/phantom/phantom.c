@@ -282,6 +282,7 @@ typedef struct gen {
 	uint8_t *tmask;       /* real tumour labels, canonical (NULL: none) */
 	double t_radius;      /* its core's equal-volume radius, mm */
 	double vlo[3], vhi[3];/* ventricles' bounding box, world mm */
+	lset_t vent, third;   /* ventricle codes in atlas_structures */
 	/* figures */
 	int cg_iters, nsearch;
 	double cg_relres, vent_shift;
@@ -1128,14 +1129,12 @@ static int phantom_process(armstg_stage_t *st)
 				     : "atlas_t1");
 			goto out;
 		}
-		if (!ph_ranges_valid(P->ventricle_labels) ||
-		    !ph_ranges_valid(P->third_ventricle_labels)) {
-			rc = H->fail(st, ARMSTG_EINVAL, "ventricle_labels '%s' or "
-				     "third_ventricle_labels '%s' is not a list "
-				     "of codes and ranges (e.g. 201-414)",
-				     P->ventricle_labels ? P->ventricle_labels : "",
-				     P->third_ventricle_labels
-					     ? P->third_ventricle_labels : "");
+		if (lset_parse(P->ventricle_labels, "ventricle_labels",
+			       &g->vent, err, sizeof err) ||
+		    lset_parse(P->third_ventricle_labels,
+			       "third_ventricle_labels", &g->third, err,
+			       sizeof err)) {
+			rc = H->fail(st, ARMSTG_EINVAL, "%s", err);
 			goto out;
 		}
 		if (vti->nc != 1 || vt1->nc != 1 || (vst && vst->nc != 1) ||
@@ -1183,8 +1182,7 @@ static int phantom_process(armstg_stage_t *st)
 	if (g->real) {
 		char err[512];
 		ph_real_in_t ri = { vt1, vti, vst, P->csf_label, P->gm_label,
-				    P->wm_label, P->ventricle_labels,
-				    P->third_ventricle_labels };
+				    P->wm_label, &g->vent, &g->third };
 		int r = ph_real_atlas(&ri, &g->G, g->alab, g->clean, g->vlo,
 				      g->vhi, err, sizeof err);
 		if (r == -2)

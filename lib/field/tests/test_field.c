@@ -8,6 +8,7 @@
 
 #include "testutil.h"
 #include "field/field.h"
+#include "rt.h"
 
 /* LAS 1.5 mm grid with a small rotation about z (oblique) */
 static void aff_oblique(double A[16], double sp, double ang)
@@ -834,6 +835,96 @@ static void test_from_points_twicing(void **state)
 	fimg_free(&J);
 }
 
+/* field_parse_ints: lists, blanks, bounds and the refused forms */
+static void test_parse_ints(void **state)
+{
+	(void)state;
+	int v[4], n;
+	char err[256];
+	assert_int_equal(field_parse_ints(" 30, 20 ,10", "iterations", 0, 100,
+					  v, 4, &n, err, sizeof err), 0);
+	assert_int_equal(n, 3);
+	assert_true(v[0] == 30 && v[1] == 20 && v[2] == 10);
+	assert_int_equal(field_parse_ints("7", "x", 0, 100, v, 4, &n, err,
+					  sizeof err), 0);
+	assert_true(n == 1 && v[0] == 7);
+	assert_int_equal(field_parse_ints("4,0", "shrink", 1, 64, v, 4, &n, err,
+					  sizeof err), ARMSTG_EINVAL);
+	assert_string_equal(err, "parameter 'shrink': '4,0' is not a comma "
+			    "separated list of integers in [1, 64]");
+	assert_int_equal(field_parse_ints("1,2,3,4,5", "x", 0, 9, v, 4, &n,
+					  err, sizeof err), ARMSTG_EINVAL);
+	assert_string_equal(err, "parameter 'x': more than 4 values");
+	assert_int_equal(field_parse_ints("3;4", "x", 0, 9, v, 4, &n, err,
+					  sizeof err), ARMSTG_EINVAL);
+	assert_string_equal(err, "parameter 'x': unexpected ';' in '3;4'");
+	assert_int_equal(field_parse_ints(" ", "x", 0, 9, v, 4, &n, err,
+					  sizeof err), ARMSTG_EINVAL);
+	assert_int_equal(field_parse_ints("", "x", 0, 9, v, 4, &n, err,
+					  sizeof err), ARMSTG_EINVAL);
+	assert_string_equal(err, "parameter 'x' is empty");
+}
+
+/* field_mask_from_vol: 0/1 on its own grid, nearest onto another grid,
+ * empty and non-overlapping masks refused */
+static void test_mask_from_vol(void **state)
+{
+	(void)state;
+	double A[16];
+	aff_oblique(A, 1.5, 0.1);
+	vol_t *m = vol_new(6, 5, 4, 1, DT_F32, A);
+	assert_non_null(m);
+	float *d = m->data;
+	for (int64_t e = 0; e < 120; e++)
+		d[e] = (e % 6) >= 3 ? 2.5f : (e % 6 == 2 ? -1.0f : 0.0f);
+	fimg_t f, g2;
+	char err[256];
+	assert_int_equal(field_mask_from_vol(m, "fixed_mask", 2, NULL, &f, 1,
+					     err, sizeof err), 0);
+	for (int64_t e = 0; e < 120; e++)
+		assert_true(f.d[e] == ((e % 6) >= 3 ? 1.0f : 0.0f));
+	/* the same grid at a third of the spacing: voxel i of the fine grid
+	 * is at c = i / 3 of the mask (never half-way), in mask voxel
+	 * round(i / 3) */
+	fgrid_t fine;
+	double B[16];
+	memcpy(B, A, sizeof B);
+	for (int r = 0; r < 3; r++)
+		for (int c = 0; c < 3; c++)
+			B[4 * r + c] /= 3;
+	assert_int_equal(fgrid_make(&fine, 16, 13, 10, B), 0);
+	assert_int_equal(field_mask_from_vol(m, "fixed_mask", 2, &fine, &g2, 1,
+					     err, sizeof err), 0);
+	int64_t n1 = 0;
+	for (int64_t e = 0; e < fgrid_nvox(&fine); e++) {
+		int i = (int)(e % 16);
+		assert_true(g2.d[e] == (floor(i / 3.0 + 0.5) >= 3 ? 1.0f : 0.0f));
+		n1 += g2.d[e] > 0;
+	}
+	assert_int_equal(n1, 8 * 13 * 10); /* i = 8..15 */
+	fimg_free(&f);
+	fimg_free(&g2);
+	/* far away: no overlap */
+	B[3] += 1000;
+	assert_int_equal(fgrid_make(&fine, 11, 9, 7, B), 0);
+	assert_int_equal(field_mask_from_vol(m, "fixed_mask", 2, &fine, &g2, 1,
+					     err, sizeof err), ARMSTG_EINVAL);
+	assert_string_equal(err, "fixed_mask does not overlap the fixed volume "
+			    "in world space (check its affine)");
+	for (int64_t e = 0; e < 120; e++)
+		d[e] = -d[e] > 0 ? 0 : -d[e];
+	assert_int_equal(field_mask_from_vol(m, "moving_mask", 2, NULL, &f, 1,
+					     err, sizeof err), ARMSTG_EINVAL);
+	assert_string_equal(err, "moving_mask is empty (no voxel > 0): nothing "
+			    "to register");
+	msg_unref(&m->base);
+	vol_t *flat = vol_new(6, 5, 1, 1, DT_F32, A);
+	assert_int_equal(field_mask_from_vol(flat, "moving_mask", 2, NULL, &f,
+					     1, err, sizeof err), ARMSTG_EINVAL);
+	assert_non_null(strstr(err, "single-slice"));
+	msg_unref(&flat->base);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -848,6 +939,8 @@ int main(void)
 		cmocka_unit_test(test_from_points_slab),
 		cmocka_unit_test(test_from_points_twicing),
 		cmocka_unit_test(test_labels),
+		cmocka_unit_test(test_parse_ints),
+		cmocka_unit_test(test_mask_from_vol),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -30,6 +30,17 @@ static void test_lset(void **state)
 	assert_string_equal(buf, "201-414,491-556,4");
 	assert_int_equal(lset_parse("all", "x", &s, err, sizeof err), 0);
 	assert_true(s.all && lset_has(&s, -3) && !lset_has(&s, 0));
+	assert_int_equal(lset_parse(" nonzero ", "x", &s, err, sizeof err), 0);
+	assert_true(s.all && lset_has(&s, 7) && !lset_has(&s, 0));
+	assert_true(lset_has_value(&s, 0.25) && !lset_has_value(&s, 0));
+	assert_int_equal(lset_parse("nonzeros", "x", &s, err, sizeof err),
+			 ARMSTG_EINVAL);
+	/* float labels: ranges widened by 1e-6 */
+	assert_int_equal(lset_parse("3-5,9", "x", &s, err, sizeof err), 0);
+	assert_true(lset_has_value(&s, 3 - 5e-7) && lset_has_value(&s, 4.5) &&
+		    lset_has_value(&s, 9 + 5e-7));
+	assert_false(lset_has_value(&s, 3 - 2e-6) || lset_has_value(&s, 5.5) ||
+		     lset_has_value(&s, 8.99) || lset_has_value(&s, 0));
 	assert_int_equal(lset_parse("none", "x", &s, err, sizeof err), 0);
 	assert_true(lset_empty(&s));
 	assert_int_equal(lset_parse(NULL, "x", &s, err, sizeof err), 0);
