@@ -1,3 +1,3 @@
 # lib/img: image kernels shared by the plugins (distance transform,
-# resampling, Gaussian, k-d tree, PNG through libpng).
+# resampling, Gaussian, k-d tree, morphology, label sets, PNG through libpng).
 libimg_LDLIBS := -lpng -lz -lm

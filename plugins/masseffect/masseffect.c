@@ -65,6 +65,8 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "field/field.h"
+#include "img/morph.h"
 
 typedef struct {
 	double search_mm, level;
@@ -170,85 +172,31 @@ static int quantile(const vol_t *img, const uint8_t *sel, uint8_t want,
 	return 0;
 }
 
-/* in-place dilation of a 0/1 mask by r mm: alternate 6- and 26-neighbour
- * steps of one voxel (an octagon-like ball), spacing sp */
-static int dilate(uint8_t *m, int nx, int ny, int nz, const double sp[3],
-		  double r)
+/* least det(I + dv/dx) of a 3-component field over mask (> 0; NULL: the
+ * grid), lib/field's Jacobian (central differences in voxel index, chained
+ * through the inverse of the affine's 3x3 part, world mm), the border
+ * voxels left out; NAN for a singular affine or nothing to take the least
+ * of.  0 or ARMSTG_ENOMEM. */
+static int jac_min(const vol_t *f, const vol_t *mask, int nthreads,
+		   double *jmin)
 {
-	double h = fmin(sp[0], fmin(sp[1], sp[2]));
-	int steps = (int)floor(r / h + 0.5);
-	int64_t nv = (int64_t)nx * ny * nz;
-	uint8_t *o = malloc((size_t)nv);
-	if (!o)
-		return -1;
-	for (int s = 0; s < steps; s++) {
-		int full = s % 2; /* 0: 6-neighbours, 1: 26 */
-		memcpy(o, m, (size_t)nv);
-		for (int k = 0; k < nz; k++)
-			for (int j = 0; j < ny; j++)
-				for (int i = 0; i < nx; i++) {
-					int64_t e = i + (int64_t)nx * (j + (int64_t)ny * k);
-					if (o[e])
-						continue;
-					int hit = 0;
-					for (int dk = -1; dk <= 1 && !hit; dk++)
-						for (int dj = -1; dj <= 1 && !hit; dj++)
-							for (int di = -1; di <= 1 && !hit; di++) {
-								int a = abs(di) + abs(dj) + abs(dk);
-								if (!a || (!full && a > 1))
-									continue;
-								int ii = i + di, jj = j + dj, kk = k + dk;
-								if (ii < 0 || jj < 0 || kk < 0 || ii >= nx ||
-								    jj >= ny || kk >= nz)
-									continue;
-								hit = o[ii + (int64_t)nx * (jj + (int64_t)ny * kk)];
-							}
-					if (hit)
-						m[e] = 1;
-				}
-	}
-	free(o);
-	return 0;
-}
-
-/* least det(I + dv/dx) of a 3-component field over its grid: central
- * differences in voxel index, chained through the inverse of the affine's
- * 3x3 part (world mm); the border voxels are left out */
-static double jac_min(const vol_t *f, const vol_t *mask)
-{
-	double A[16], Ai[16];
-	memcpy(A, f->affine, sizeof A);
-	if (aff_invert(A, Ai))
-		return NAN;
-	int64_t nv = vol_nvox(f);
+	fimg_t u = { 0 }, J = { 0 };
 	double m = INFINITY;
-	for (int k = 1; k < f->nz - 1; k++)
-		for (int j = 1; j < f->ny - 1; j++)
-			for (int i = 1; i < f->nx - 1; i++) {
-				int64_t e = vol_idx(f, i, j, k);
-				if (mask && !(vol_get(mask, e) > 0))
-					continue;
-				int64_t st3[3] = { 1, f->nx,
-						   (int64_t)f->nx * f->ny };
-				double g[3][3], J[3][3];
-				for (int c = 0; c < 3; c++)
-					for (int a = 0; a < 3; a++)
-						g[c][a] = 0.5 * (vol_get(f, e + st3[a] + c * nv) -
-								 vol_get(f, e - st3[a] + c * nv));
-				/* dv_c/dx_b = sum_a dv_c/di_a * di_a/dx_b */
-				for (int c = 0; c < 3; c++)
-					for (int b = 0; b < 3; b++) {
-						J[c][b] = c == b;
-						for (int a = 0; a < 3; a++)
-							J[c][b] += g[c][a] * Ai[4 * a + b];
-					}
-				double d = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) -
-					   J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
-					   J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
-				if (d < m)
-					m = d;
-			}
-	return isfinite(m) ? m : NAN;
+	int rc = fimg_from_vol(&u, f);
+	if (!rc && !(rc = fimg_alloc(&J, &u.g, 1)))
+		rc = fimg_jacobian(&u, &J, NULL, nthreads);
+	if (!rc)
+		for (int k = 1; k < f->nz - 1; k++)
+			for (int j = 1; j < f->ny - 1; j++)
+				for (int i = 1; i < f->nx - 1; i++) {
+					int64_t e = vol_idx(f, i, j, k);
+					if (!mask || vol_get(mask, e) > 0)
+						m = fmin(m, J.d[e]);
+				}
+	fimg_free(&u);
+	fimg_free(&J);
+	*jmin = isfinite(m) ? m : NAN;
+	return rc == ARMSTG_ENOMEM ? rc : 0;
 }
 
 static int process(armstg_stage_t *st)
@@ -280,7 +228,7 @@ static int process(armstg_stage_t *st)
 	ctx_t c = { st, h->tab_new() };
 	if (!c.t)
 		return h->fail(st, ARMSTG_ENOMEM, "out of memory (table)");
-	int rc = 0;
+	int rc = 0, nthr = h->threads ? h->threads(st) : 1;
 	uint8_t *cand = NULL, *sel = NULL, *pv = NULL;
 	int32_t *queue = NULL;
 	double ca[3], tc[3], sp[3];
@@ -308,8 +256,12 @@ static int process(armstg_stage_t *st)
 		      "ml")))
 		goto out;
 	if (st->in[IN_FIELD]) {
-		double jm = jac_min((const vol_t *)st->in[IN_FIELD],
-				    (const vol_t *)st->in[IN_BRAIN]);
+		double jm;
+		if (jac_min((const vol_t *)st->in[IN_FIELD],
+			    (const vol_t *)st->in[IN_BRAIN], nthr, &jm)) {
+			rc = h->fail(st, ARMSTG_ENOMEM, "out of memory");
+			goto out;
+		}
 		if ((rc = row(&c, "jac_min", "field", jm, "")))
 			goto out;
 	}
@@ -339,10 +291,10 @@ static int process(armstg_stage_t *st)
 		for (int64_t e = 0; e < nv; e++)
 			cand[e] = vol_get(vent, e) > 0;
 		memcpy(sel, cand, (size_t)nv);
-		if (dilate(cand, vent->nx, vent->ny, vent->nz, sp,
-			   p->search_mm) ||
-		    (!br && dilate(sel, vent->nx, vent->ny, vent->nz, sp,
-				   3 * p->search_mm))) {
+		const int dims[3] = { vent->nx, vent->ny, vent->nz };
+		if (img_dilate(cand, dims, sp, p->search_mm, nthr, cand) ||
+		    (!br && img_dilate(sel, dims, sp, 3 * p->search_mm, nthr,
+				       sel))) {
 			rc = h->fail(st, ARMSTG_ENOMEM, "out of memory");
 			goto out;
 		}

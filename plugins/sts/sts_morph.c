@@ -1,13 +1,13 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * sts: binary morphology in mm (lib/img's exact distance transform),
+ * sts: binary morphology in mm (lib/img/morph.h),
  * geodesic reconstruction, hole filling, connected components.
  */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "img/edt.h"
+#include "img/morph.h"
 #include "sts_algo.h"
 
 static inline int64_t gidx(const sts_grid_t *g, int i, int j, int k)
@@ -20,103 +20,18 @@ static inline int64_t gnvox(const sts_grid_t *g)
 	return (int64_t)g->nx * g->ny * g->nz;
 }
 
-/* Bounding box of m grown by `margin` voxels per axis (clipped). Returns 0
- * when m is empty. */
-static int bbox(const sts_grid_t *g, const uint8_t *m, const int margin[3],
-		int lo[3], int hi[3])
-{
-	lo[0] = g->nx, lo[1] = g->ny, lo[2] = g->nz;
-	hi[0] = hi[1] = hi[2] = -1;
-	for (int k = 0; k < g->nz; k++)
-		for (int j = 0; j < g->ny; j++) {
-			const uint8_t *row = m + gidx(g, 0, j, k);
-			for (int i = 0; i < g->nx; i++)
-				if (row[i]) {
-					if (i < lo[0]) lo[0] = i;
-					if (i > hi[0]) hi[0] = i;
-					if (j < lo[1]) lo[1] = j;
-					if (j > hi[1]) hi[1] = j;
-					if (k < lo[2]) lo[2] = k;
-					if (k > hi[2]) hi[2] = k;
-				}
-		}
-	if (hi[0] < 0)
-		return 0;
-	int dim[3] = { g->nx, g->ny, g->nz };
-	for (int a = 0; a < 3; a++) {
-		lo[a] = lo[a] - margin[a] < 0 ? 0 : lo[a] - margin[a];
-		hi[a] = hi[a] + margin[a] >= dim[a] ? dim[a] - 1
-						    : hi[a] + margin[a];
-	}
-	return 1;
-}
-
-/* dilate (erode = 0) or erode (erode = 1) by a ball of r mm, computed on
- * the bounding box of m plus the radius (and one voxel) only. */
-static int morph(const sts_grid_t *g, const uint8_t *m, double r_mm,
-		 int erode, uint8_t *out)
-{
-	int64_t n = gnvox(g);
-	if (!(r_mm > 0)) {
-		if (out != m)
-			memcpy(out, m, (size_t)n);
-		return 0;
-	}
-	int margin[3], lo[3], hi[3];
-	for (int a = 0; a < 3; a++)
-		margin[a] = erode ? 1 : (int)ceil(r_mm / g->sp[a]) + 1;
-	if (!bbox(g, m, margin, lo, hi)) {
-		memset(out, 0, (size_t)n);
-		return 0;
-	}
-	sts_grid_t sg = { hi[0] - lo[0] + 1, hi[1] - lo[1] + 1,
-			  hi[2] - lo[2] + 1, { g->sp[0], g->sp[1], g->sp[2] },
-			  g->threads };
-	int64_t sn = gnvox(&sg);
-	uint8_t *sub = malloc((size_t)sn);
-	float *d2 = malloc(sizeof(float) * sn);
-	if (!sub || !d2) {
-		free(sub);
-		free(d2);
-		return -2;
-	}
-	for (int k = 0; k < sg.nz; k++)
-		for (int j = 0; j < sg.ny; j++)
-			for (int i = 0; i < sg.nx; i++) {
-				uint8_t b = m[gidx(g, i + lo[0], j + lo[1],
-						   k + lo[2])] != 0;
-				sub[gidx(&sg, i, j, k)] = erode ? !b : b;
-			}
-	const int sdim[3] = { sg.nx, sg.ny, sg.nz };
-	int rc = img_edt_sq(sub, sdim, sg.sp, sg.threads, d2);
-	if (!rc) {
-		float r2 = (float)(r_mm * r_mm);
-		memset(out, 0, (size_t)n);
-		for (int k = 0; k < sg.nz; k++)
-			for (int j = 0; j < sg.ny; j++)
-				for (int i = 0; i < sg.nx; i++) {
-					int64_t s = gidx(&sg, i, j, k);
-					uint8_t b = erode ? (!sub[s] && d2[s] > r2)
-							  : d2[s] <= r2;
-					out[gidx(g, i + lo[0], j + lo[1],
-						 k + lo[2])] = b;
-				}
-	}
-	free(sub);
-	free(d2);
-	return rc;
-}
-
 int sts_dilate(const sts_grid_t *g, const uint8_t *m, double r_mm,
 	       uint8_t *out)
 {
-	return morph(g, m, r_mm, 0, out);
+	const int n[3] = { g->nx, g->ny, g->nz };
+	return img_dilate(m, n, g->sp, r_mm, g->threads, out);
 }
 
 int sts_erode(const sts_grid_t *g, const uint8_t *m, double r_mm,
 	      uint8_t *out)
 {
-	return morph(g, m, r_mm, 1, out);
+	const int n[3] = { g->nx, g->ny, g->nz };
+	return img_erode(m, n, g->sp, r_mm, g->threads, out);
 }
 
 /* Breadth-first flood of `in` (values 1) through voxels where allow != 0;
