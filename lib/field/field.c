@@ -689,13 +689,7 @@ int fimg_jacobian(const fimg_t *u, fimg_t *out, field_jac_stats_t *stats,
 	const fgrid_t *g = &u->g;
 	const int nx = g->nx, ny = g->ny, nz = g->nz;
 	const int64_t nv = fgrid_nvox(g);
-	const int64_t stride[3] = { 1, nx, (int64_t)nx * ny };
 	const int dims[3] = { nx, ny, nz };
-	/* L^{-1}: row a (index axis) = d idx_a / d world */
-	double Li[3][3];
-	for (int a = 0; a < 3; a++)
-		for (int w = 0; w < 3; w++)
-			Li[a][w] = g->w2v[a * 4 + w];
 	double jmin = DBL_MAX, jmax = -DBL_MAX, jsum = 0;
 	int64_t nneg = 0;
 #pragma omp parallel for num_threads(NT(nthreads)) schedule(static) \
@@ -704,37 +698,8 @@ int fimg_jacobian(const fimg_t *u, fimg_t *out, field_jac_stats_t *stats,
 		for (int j = 0; j < ny; j++)
 			for (int i = 0; i < nx; i++) {
 				int64_t e = ((int64_t)k * ny + j) * nx + i;
-				int idx[3] = { i, j, k };
-				double D[3][3]; /* D[c][a] = du_c / d idx_a */
-				for (int a = 0; a < 3; a++) {
-					int64_t lo = e, hi = e;
-					double h = 0;
-					if (dims[a] > 1) {
-						if (idx[a] > 0) {
-							lo = e - stride[a];
-							h += 1;
-						}
-						if (idx[a] < dims[a] - 1) {
-							hi = e + stride[a];
-							h += 1;
-						}
-					}
-					for (int c = 0; c < 3; c++)
-						D[c][a] = h > 0 ? (u->d[hi + c * nv] -
-								   u->d[lo + c * nv]) / h
-								: 0;
-				}
-				double J[3][3];
-				for (int c = 0; c < 3; c++)
-					for (int w = 0; w < 3; w++) {
-						double s = c == w ? 1 : 0;
-						for (int a = 0; a < 3; a++)
-							s += D[c][a] * Li[a][w];
-						J[c][w] = s;
-					}
-				double det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) -
-					     J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
-					     J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+				double det = field_jac_det_at(u->d, dims, g->w2v,
+							      i, j, k);
 				out->d[e] = (float)det;
 				if (det < jmin)
 					jmin = det;

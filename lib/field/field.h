@@ -197,6 +197,54 @@ int fimg_invert(const fimg_t *u, fimg_t *out, int max_iter, double tol_mm,
 		field_inv_stats_t *stats, int nthreads);
 
 /*
+ * det(I + du/dx) at voxel (i, j, k) of a planar 3-component displacement u
+ * (mm, n voxels, x fastest): du_c / d index_a by central differences (one-
+ * sided at the faces, 0 along an axis of one voxel), in doubles, chained
+ * through Li (d index / d world: the inverse of the affine's 3x3, row a at
+ * Li[4 a], as fgrid_t's w2v).  The one copy of the Jacobian determinant:
+ * fimg_jacobian (warp, demons, masseffect), metrics and the phantom call it.
+ */
+static inline double field_jac_det_at(const float *u, const int n[3],
+				      const double Li[16], int i, int j,
+				      int k)
+{
+	const int64_t nv = (int64_t)n[0] * n[1] * n[2];
+	const int64_t stride[3] = { 1, n[0], (int64_t)n[0] * n[1] };
+	const int64_t e = ((int64_t)k * n[1] + j) * n[0] + i;
+	const int idx[3] = { i, j, k };
+	double D[3][3]; /* D[c][a] = du_c / d idx_a */
+	for (int a = 0; a < 3; a++) {
+		int64_t lo = e, hi = e;
+		double h = 0;
+		if (n[a] > 1) {
+			if (idx[a] > 0) {
+				lo = e - stride[a];
+				h += 1;
+			}
+			if (idx[a] < n[a] - 1) {
+				hi = e + stride[a];
+				h += 1;
+			}
+		}
+		for (int c = 0; c < 3; c++)
+			D[c][a] = h > 0 ? ((double)u[hi + c * nv] -
+					   (double)u[lo + c * nv]) / h
+					: 0.0;
+	}
+	double J[3][3];
+	for (int c = 0; c < 3; c++)
+		for (int w = 0; w < 3; w++) {
+			double s = c == w;
+			for (int a = 0; a < 3; a++)
+				s += D[c][a] * Li[4 * a + w];
+			J[c][w] = s;
+		}
+	return J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) -
+	       J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
+	       J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+}
+
+/*
  * Jacobian determinant of phi(x) = x + u(x): det(I + du/dx) with world
  * derivatives (central differences in voxels, one-sided at borders, mapped
  * to world axes through the inverse of the affine's 3x3).  out: nc 1 on

@@ -173,28 +173,30 @@ static int quantile(const vol_t *img, const uint8_t *sel, uint8_t want,
 }
 
 /* least det(I + dv/dx) of a 3-component field over mask (> 0; NULL: the
- * grid), lib/field's Jacobian (central differences in voxel index, chained
- * through the inverse of the affine's 3x3 part, world mm), the border
- * voxels left out; NAN for a singular affine or nothing to take the least
- * of.  0 or ARMSTG_ENOMEM. */
+ * grid), lib/field's determinant (central differences in voxel index,
+ * chained through the inverse of the affine's 3x3 part, world mm), the
+ * border voxels left out; NAN for a singular affine or nothing to take the
+ * least of.  0 or ARMSTG_ENOMEM. */
 static int jac_min(const vol_t *f, const vol_t *mask, int nthreads,
 		   double *jmin)
 {
-	fimg_t u = { 0 }, J = { 0 };
+	fimg_t u = { 0 };
 	double m = INFINITY;
 	int rc = fimg_from_vol(&u, f);
-	if (!rc && !(rc = fimg_alloc(&J, &u.g, 1)))
-		rc = fimg_jacobian(&u, &J, NULL, nthreads);
-	if (!rc)
-		for (int k = 1; k < f->nz - 1; k++)
-			for (int j = 1; j < f->ny - 1; j++)
-				for (int i = 1; i < f->nx - 1; i++) {
-					int64_t e = vol_idx(f, i, j, k);
-					if (!mask || vol_get(mask, e) > 0)
-						m = fmin(m, J.d[e]);
-				}
+	if (!rc) {
+		const int n[3] = { f->nx, f->ny, f->nz };
+#pragma omp parallel for schedule(static) reduction(min : m) \
+	num_threads(nthreads > 0 ? nthreads : 1)
+		for (int k = 1; k < n[2] - 1; k++)
+			for (int j = 1; j < n[1] - 1; j++)
+				for (int i = 1; i < n[0] - 1; i++)
+					if (!mask ||
+					    vol_get(mask, vol_idx(f, i, j, k)) > 0)
+						m = fmin(m, field_jac_det_at(
+								    u.d, n, u.g.w2v,
+								    i, j, k));
+	}
 	fimg_free(&u);
-	fimg_free(&J);
 	*jmin = isfinite(m) ? m : NAN;
 	return rc == ARMSTG_ENOMEM ? rc : 0;
 }

@@ -1,2 +1,2 @@
-# metrics: the distance transform of lib/img
-metrics_LIBS := img
+# metrics: the distance transform of lib/img, the Jacobian of lib/field
+metrics_LIBS := field img

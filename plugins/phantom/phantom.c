@@ -38,6 +38,7 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "field/field.h"
 #include "img/sample.h"
 #include "ph.h"
 
@@ -1024,41 +1025,25 @@ static int make_patient(gen_t *g, vol_t **o)
 	return 0;
 }
 
-/* min det(I + du/dx) over interior voxels; fields in output order, so
- * derivatives go through the output affine's axis signs */
+/* min det(I + du/dx) over interior voxels (lib/field's determinant);
+ * fields in output order, so derivatives go through the output affine's
+ * axis signs */
 static double min_detj(const ph_grid_t *G, int orient, const float *u,
 		       int nt)
 {
 	int flip[3];
 	orient_flips(orient, flip);
 	const int nx = G->n[0], ny = G->n[1], nz = G->n[2];
-	const int64_t nv = ph_nvox(G), sy = nx, sz = (int64_t)nx * ny;
-	double m = INFINITY;
+	double m = INFINITY, Li[16] = { 0 };
 	if (nx < 3 || ny < 3 || nz < 3)
 		return 1.0;
+	for (int d = 0; d < 3; d++)
+		Li[5 * d] = (flip[d] ? -1.0 : 1.0) / G->h;
 #pragma omp parallel for schedule(static) reduction(min : m) num_threads(nt)
 	for (int k = 1; k < nz - 1; k++)
 		for (int j = 1; j < ny - 1; j++)
-			for (int i = 1; i < nx - 1; i++) {
-				int64_t e = ((int64_t)k * ny + j) * nx + i;
-				double J[3][3];
-				const int64_t st[3] = { 1, sy, sz };
-				for (int c = 0; c < 3; c++)
-					for (int d = 0; d < 3; d++) {
-						double sgn = flip[d] ? -1 : 1;
-						J[c][d] = (c == d) +
-							  sgn *
-								  ((double)u[c * nv + e + st[d]] -
-								   u[c * nv + e - st[d]]) /
-								  (2 * G->h);
-					}
-				double det =
-					J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) -
-					J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
-					J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
-				if (det < m)
-					m = det;
-			}
+			for (int i = 1; i < nx - 1; i++)
+				m = fmin(m, field_jac_det_at(u, G->n, Li, i, j, k));
 	return m;
 }
 

@@ -1,2 +1,2 @@
-# phantom: the samplers of lib/img
-phantom_LIBS := img
+# phantom: the samplers of lib/img, the Jacobian of lib/field
+phantom_LIBS := field img
