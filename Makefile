@@ -122,7 +122,7 @@ $(foreach p,$(PLUGINS),$(eval $(call PLUGIN_template,$(p))))
 
 $(BUILD)/obj/%.cu.o: %.cu
 	@mkdir -p $(dir $@)
-	$(NVCC) -arch=sm_90 -O3 $(EXTRA_NVFLAGS) -Xcompiler -fPIC -Iruntime/include -Iruntime -Ilib -c $< -o $@
+	$(NVCC) -arch=sm_90 -O3 $(EXTRA_NVFLAGS) -Xcompiler -fPIC -Iruntime/include -Iruntime -Ilib -MD -MP -MF $(@:.o=.d) -c $< -o $@
 
 $(BUILD)/test-plugins/%.so: $(wildcard tests/plugins/*/*.c)
 	@mkdir -p $(dir $@)

@@ -335,16 +335,35 @@ static int cmp_layer(const void *a, const void *b)
  * ramp). */
 #define TLED_SUBSTEP_DEPTH 4
 
+/* Saturation: an increment of 1/2^TLED_SUBSTEP_DEPTH that still inverts a
+ * point cannot be taken: the tissue between the front and what holds it
+ * (the fixed brain boundary, nodes stuck to it) is compressed as far as it
+ * goes (CSF at det F ~ 0.01 with volumetric = log).  The growth then keeps
+ * the last equilibrium (the step's push stops there, at the fraction
+ * *done of the step) instead of failing: relax_sub returns 1, relax_step
+ * logs where and how far, and the growth goes on with the next layer. */
 static int relax_sub(tled_solver_t *s, const tled_solver_opts_t *so,
 		     const double *tgt, const char *tag, tled_relax_stats_t *rs,
-		     char *err, size_t errsize, int depth, int *nsub)
+		     char *err, size_t errsize, int depth, int *nsub,
+		     double *done)
 {
 	int r = tled_relax(s, so, tgt, tag, rs, err, errsize);
-	if (r != -1 || !tgt || s->m->ebc || depth >= TLED_SUBSTEP_DEPTH ||
+	if (!r)
+		*done += 1.0 / (double)(1 << depth);
+	if (r != -1 || !tgt || s->m->ebc ||
 	    (!strstr(err, "inverted material") && !strstr(err, "non-finite")))
 		return r;
 	tled_model_t *m = s->m;
 	size_t n3 = (size_t)(3 * m->n);
+	if (depth >= TLED_SUBSTEP_DEPTH) {
+		/* saturated: back to the last equilibrium (tled_relax
+		 * started from s->ustart), at rest */
+		memcpy(s->u, s->ustart, n3 * sizeof *s->u);
+		memset(s->v, 0, n3 * sizeof *s->v);
+		rs->converged = 1;
+		rs->jmin = NAN;
+		return 1;
+	}
 	double *u0 = malloc(n3 * sizeof *u0), *mid = malloc(n3 * sizeof *mid);
 	if (!u0 || !mid) {
 		free(u0);
@@ -360,13 +379,16 @@ static int relax_sub(tled_solver_t *s, const tled_solver_opts_t *so,
 	snprintf(tag2, sizeof tag2, "%s, half %d/2 (depth %d)", tag, 1, depth + 1);
 	tled_relax_stats_t r1;
 	(*nsub)++;
-	r = relax_sub(s, so, mid, tag2, &r1, err, errsize, depth + 1, nsub);
+	r = relax_sub(s, so, mid, tag2, &r1, err, errsize, depth + 1, nsub, done);
 	if (!r) {
 		snprintf(tag2, sizeof tag2, "%s, half %d/2 (depth %d)", tag, 2,
 			 depth + 1);
-		r = relax_sub(s, so, tgt, tag2, rs, err, errsize, depth + 1, nsub);
+		r = relax_sub(s, so, tgt, tag2, rs, err, errsize, depth + 1, nsub,
+			      done);
 		rs->iters += r1.iters;
-		rs->jmin = fmin(rs->jmin, r1.jmin);
+		rs->jmin = isnan(rs->jmin) ? r1.jmin : fmin(rs->jmin, r1.jmin);
+	} else {
+		*rs = r1;
 	}
 	free(u0);
 	free(mid);
@@ -381,11 +403,22 @@ static int relax_step(armstg_stage_t *st, tled_solver_t *s,
 	const armstg_host_t *H = st->host;
 	memset(rs, 0, sizeof *rs);
 	int nsub = 0;
-	int r = relax_sub(s, so, tgt, tag, rs, err, errsize, 0, &nsub);
+	double done = 0;
+	int r = relax_sub(s, so, tgt, tag, rs, err, errsize, 0, &nsub, &done);
 	if (nsub > 0 && !r)
 		H->log(st, LOG_INFO, "%s: an integration point inverted; "
 		       "replayed in %d sub-steps (min det F %.3f)", tag,
 		       nsub + 1, rs->jmin);
+	if (r == 1) {
+		const char *at = strstr(err, "at the integration point");
+		H->log(st, LOG_WARN, "%s: saturated: the push stopped at %.1f %% "
+		       "of the step, where 1/%d more of it inverted a point "
+		       "(%.*s): the tissue there is compressed as far as it "
+		       "goes; the growth keeps the last equilibrium", tag,
+		       100 * done, 1 << TLED_SUBSTEP_DEPTH,
+		       at ? (int)strcspn(at, ":") : 0, at ? at : "");
+		return 0;
+	}
 	if (r == -2)
 		return H->fail(st, ARMSTG_ECANCELLED, "%s", err);
 	if (r)
@@ -426,7 +459,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	const vol_t *lv = (const vol_t *)st->in[2];
 	char err[1024] = "";
 	int rc = 0;
-	double t0 = now_s();
+	double t0 = now_s(), jmin_all = INFINITY;
 	/* where a node is: front=push reads u^h(X_a), the displacement of
 	 * the material point (MLS shape functions do not interpolate: with
 	 * nodal driving the parameter u_a is not it); front=sweep keeps the
@@ -588,6 +621,8 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 		rc = H->fail(st, ARMSTG_EINVAL, "invalid material parameters");
 		goto out;
 	}
+	for (int i = 0; i < MAT_N; i++)
+		mo.mat[i].vol = pv->vol_law;
 	H->progress(st, 0, "building the model: %lld nodes", (long long)nin);
 	if (tled_model_build(&m, Xin, pn->label, nin, NULL, NULL, &mo, err,
 			     sizeof err)) {
@@ -613,6 +648,17 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	       (long long)m.ipptr[m.nip], m.h_mean / TLED_MM,
 	       m.h_min / TLED_MM, now_s() - t0,
 	       ops && ops->name ? ops->name : "cpu");
+	{
+		char ph[512];
+		int o = 0;
+		for (int i = 0; i < TLED_NPHASE && o < (int)sizeof ph; i++)
+			o += snprintf(ph + o, sizeof ph - (size_t)o, "%s%s %.2f s",
+				      i ? ", " : "", tled_phase_name[i],
+				      m.t_phase[i]);
+		H->log(st, LOG_DEBUG, "model build phases: %s; consistency "
+		       "correction: %d CG iterations, residual %.2e", ph,
+		       m.corr_iters, m.corr_rel);
+	}
 	/* seed clusters much denser than the other nodes give one-sided,
 	 * extrapolating MLS supports around them: the first growth steps
 	 * then invert integration points (phantom seeds 2 and 5 with seeds
@@ -1078,6 +1124,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 			H->tab_set_num(tab, row, "growth_stretch", gshow);
 			H->tab_set_num(tab, row, "core_volume_fraction", vfrac);
 			tab_relax(H, tab, row, &rs);
+			jmin_all = fmin(jmin_all, rs.jmin);
 			H->tab_set_num(tab, row, "driven", 0);
 			H->tab_set_num(tab, row, "swept", 0);
 			H->tab_set_num(tab, row, "collocated", 0);
@@ -1290,6 +1337,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 		H->tab_set_num(tab, row, "step", step + 1);
 		H->tab_set_num(tab, row, "layer", l);
 		tab_relax(H, tab, row, &rs);
+		jmin_all = fmin(jmin_all, rs.jmin);
 		H->tab_set_num(tab, row, "driven", (double)ndriven);
 		H->tab_set_num(tab, row, "swept", (double)swept);
 		H->tab_set_num(tab, row, "collocated", (double)ncol);
@@ -1418,8 +1466,9 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 			}
 		}
 	}
-	H->log(st, LOG_INFO, "%d growth steps, %lld tumour nodes, %.2f s",
-	       lmax + 1, (long long)ndriven, now_s() - t0);
+	H->log(st, LOG_INFO, "%d growth steps, %lld tumour nodes, %.2f s, "
+	       "min det F %.4f", lmax + 1, (long long)ndriven, now_s() - t0,
+	       jmin_all);
 	st->out[0] = &on->base;
 	st->out[1] = &ot->base;
 	st->out[2] = &tab->base;

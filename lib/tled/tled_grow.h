@@ -109,6 +109,7 @@ typedef struct tled_grow_params {
 	int drive;
 	int contact_stick;
 	int front;
+	int vol_law;   /* enum tled_vol */
 	double push_mm;
 	double push_wall;
 } tled_grow_params_t;

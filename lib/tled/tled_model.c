@@ -42,6 +42,7 @@ int tled_material_set(tled_material_t *m, double E, double nu, double rho)
 	m->kappa = E / (3 * (1 - 2 * nu));
 	m->lambda = m->kappa - 2 * m->mu / 3;
 	m->c = sqrt((m->lambda + 2 * m->mu) / rho);
+	m->vol = TLED_VOL_QUAD;
 	return 0;
 }
 
@@ -796,7 +797,7 @@ int tled_model_interp(const tled_model_t *m, const tled_grid_t *ng, int K,
  * unconstrained nodes): the residual of the ip's MLS linear fit of mu.  The
  * multipliers solve the SPD system Q mu = -g with
  *   (Q v)_a = sum_ip V_ip w_a (v_a - p_a^T M^-1 sum_b w_b p_b v_b),
- * by conjugate gradients (3 right-hand sides).
+ * by conjugate gradients (3 right-hand sides, Jacobi preconditioned).
  */
 typedef struct corr_ctx {
 	const tled_model_t *m;
@@ -963,6 +964,38 @@ static int correct_gradients(tled_model_t *m, const double *w, const double *P,
 	}
 	for (int c = 0; c < 3; c++)
 		g0[c] = sqrt(rr[c]);
+	/* Jacobi preconditioner: the diagonal of Q,
+	 *   Q_aa = sum_ip V_ip w_a (1 - w_a p_a^T M^-1 p_a)
+	 * (the correction's coupling through one ip is strongest on its own
+	 * node; node volumes and weights vary by orders of magnitude between
+	 * the boundary and the interior, so scaling cuts the iterations) */
+	double *dg = malloc((size_t)n * sizeof *dg);
+	if (!dg) {
+		rc = errf(err, errsize, "out of memory in the gradient "
+			  "correction");
+		goto out;
+	}
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t a = 0; a < n; a++) {
+		double q = 0;
+		for (int64_t t = m->nptr[a]; t < m->nptr[a + 1]; t++) {
+			int64_t e = m->nent[t], p = ent_ip[e];
+			const double *pa = P + 4 * e, *Mp = Mi + 16 * p;
+			double pMp = 0;
+			for (int i = 0; i < 4; i++)
+				for (int j = 0; j < 4; j++)
+					pMp += pa[i] * Mp[4 * i + j] * pa[j];
+			q += m->ipV[p] * w[e] * (1 - w[e] * pMp);
+		}
+		dg[a] = con[a] && q > 0 ? 1 / q : 0;
+	}
+	/* z = D^-1 r, rz = r . z per component */
+	double rz[3] = { 0, 0, 0 };
+	for (int64_t a = 0; a < n; a++)
+		for (int c = 0; c < 3; c++) {
+			d[3 * a + c] = dg[a] * r[3 * a + c];
+			rz[c] += r[3 * a + c] * d[3 * a + c];
+		}
 	/* scale for the stopping test: sum |V dN| is O(h^2) per node */
 	int it;
 	for (it = 0; it < 5000; it++) {
@@ -978,9 +1011,9 @@ static int correct_gradients(tled_model_t *m, const double *w, const double *P,
 		for (int64_t a = 0; a < n; a++)
 			for (int c = 0; c < 3; c++)
 				dq[c] += d[3 * a + c] * q[3 * a + c];
-		double al[3], rn[3] = { 0, 0, 0 };
+		double al[3], rn[3] = { 0, 0, 0 }, zn[3] = { 0, 0, 0 };
 		for (int c = 0; c < 3; c++)
-			al[c] = dq[c] > 0 ? rr[c] / dq[c] : 0;
+			al[c] = dq[c] > 0 ? rz[c] / dq[c] : 0;
 		for (int64_t a = 0; a < n; a++)
 			for (int c = 0; c < 3; c++) {
 				x[3 * a + c] += al[c] * d[3 * a + c];
@@ -989,16 +1022,21 @@ static int correct_gradients(tled_model_t *m, const double *w, const double *P,
 		if (singular && it % 20 == 19)
 			null_project(m, con, r);
 		for (int64_t a = 0; a < n; a++)
-			for (int c = 0; c < 3; c++)
+			for (int c = 0; c < 3; c++) {
 				rn[c] += r[3 * a + c] * r[3 * a + c];
+				zn[c] += r[3 * a + c] * dg[a] * r[3 * a + c];
+			}
 		for (int64_t a = 0; a < n; a++)
 			for (int c = 0; c < 3; c++)
-				d[3 * a + c] = r[3 * a + c] +
-					       (rr[c] > 0 ? rn[c] / rr[c] : 0) *
+				d[3 * a + c] = dg[a] * r[3 * a + c] +
+					       (rz[c] > 0 ? zn[c] / rz[c] : 0) *
 						       d[3 * a + c];
-		for (int c = 0; c < 3; c++)
+		for (int c = 0; c < 3; c++) {
 			rr[c] = rn[c];
+			rz[c] = zn[c];
+		}
 	}
+	free(dg);
 	m->corr_iters = it;
 	/* apply: dN += w (mu - fit(mu)) */
 	corr_resid(&cx, x, ev);
@@ -1358,6 +1396,19 @@ static int fine_target(const tled_model_t *m, const tled_grid_t *ng,
 	return rc;
 }
 
+/* wall time of build phase i (tled_model_t.t_phase) since the last mark */
+static void phase_mark(tled_model_t *m, int i, double *t)
+{
+	double now = omp_get_wtime();
+	m->t_phase[i] = now - *t;
+	*t = now;
+}
+
+const char *const tled_phase_name[TLED_NPHASE] = {
+	"merge", "spacing", "integration points", "supports and shape functions",
+	"masses", "nodal rows", "consistency correction"
+};
+
 int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		     int64_t nin, const uint8_t *kind0, const uint8_t *constrain,
 		     const tled_model_opts_t *o, char *err, size_t errsize)
@@ -1385,11 +1436,14 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 			return errf(err, errsize, "material %d: invalid E=%g "
 				    "Pa, nu=%g, rho=%g kg/m^3", i, o->mat[i].E,
 				    o->mat[i].nu, o->mat[i].rho);
+	for (int i = 0; i < MAT_N; i++)
+		m->mat[i].vol = o->mat[i].vol;
 	for (int64_t i = 0; i < 3 * nin; i++)
 		if (!isfinite(Xin[i]))
 			return errf(err, errsize, "node %lld has a non-finite "
 				    "coordinate", (long long)(i / 3));
 
+	double tmark = omp_get_wtime();
 	/* ---- merge coincident nodes (union-find, highest label wins) ---- */
 	{
 		double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX }, hi[3];
@@ -1493,6 +1547,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		goto fail;
 	}
 
+	phase_mark(m, 0, &tmark);
 	/* ---- node spacing ---- */
 	{
 		double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX }, hi[3];
@@ -1536,6 +1591,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		goto fail;
 	}
 
+	phase_mark(m, 1, &tmark);
 	/* ---- background integration points ---- */
 	{
 		double h = o->ip_factor * m->h_mean;
@@ -1721,6 +1777,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		okip = NULL;
 	}
 
+	phase_mark(m, 2, &tmark);
 	/* ---- supports, shape functions ---- */
 	int64_t nip = m->nip, ne;
 	m->support_nodal = o->support_nodal != 0;
@@ -1862,6 +1919,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		goto fail;
 	}
 
+	phase_mark(m, 3, &tmark);
 	/* ---- transposed CSR node -> entries ---- */
 	m->nptr = calloc((size_t)(n + 1), sizeof *m->nptr);
 	m->nent = malloc((size_t)ne * sizeof *m->nent);
@@ -1898,6 +1956,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 			con[a] = 0;
 		}
 
+	phase_mark(m, 4, &tmark);
 	/* ---- nodal rows: u^h(X_a) = sum_b Phi_b(X_a) u_b ---- */
 	m->ebc = o->ebc != 0;
 	m->ebc_fixed = o->ebc_fixed != 0;
@@ -1990,6 +2049,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		goto fail;
 	}
 
+	phase_mark(m, 5, &tmark);
 	/* ---- integration-constraint correction ---- */
 	double *G = NULL;
 	if (m->ebc) {
@@ -2059,6 +2119,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 	}
 	free(G);
 
+	phase_mark(m, 6, &tmark);
 	/* wave-speed time step estimate: h_min / c_max */
 	{
 		double cmax = 0;

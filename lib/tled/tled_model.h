@@ -78,6 +78,9 @@ enum tled_label {
  * essential boundary get distorted gradients (bench/tled/results.md). */
 enum tled_corr { TLED_CORR_NONE = 0, TLED_CORR_INTERIOR = 1, TLED_CORR_ALL = 2 };
 
+#define TLED_NPHASE 7
+extern const char *const tled_phase_name[TLED_NPHASE];
+
 enum tled_mat_id { MAT_BRAIN = 0, MAT_CSF = 1, MAT_TUMOUR = 2, MAT_N = 3 };
 
 typedef struct tled_material {
@@ -89,7 +92,21 @@ typedef struct tled_material {
 	double kappa;  /* bulk modulus E/(3(1-2nu)), Pa */
 	double lambda; /* Lame lambda kappa - 2mu/3, Pa */
 	double c;      /* dilatational wave speed sqrt((lambda+2mu)/rho), m/s */
+	int vol;       /* volumetric energy U(J), enum tled_vol (default 0) */
 } tled_material_t;
+
+/* The volumetric part U(J) of the strain energy (tled_step.h).  Both have
+ * U(1) = U'(1) = 0 and U''(1) = kappa, so they agree to first order in the
+ * strain; they differ under large compression:
+ *   TLED_VOL_QUAD: U = kappa/2 (J-1)^2 (Miller et al. 2007 TLED; the
+ *       pressure kappa (J-1) stays finite as J -> 0, so a soft material
+ *       (CSF, kappa 4.2 Pa) is squeezed through J = 0 by any push above
+ *       kappa: an inverted point);
+ *   TLED_VOL_LOG: U = kappa/4 (J^2 - 1 - 2 ln J) (Simo & Taylor 1982,
+ *       CMAME 35:107, eq. 3.6; the volumetric law of FEBio and ITK's
+ *       neo-Hookean), pressure kappa/2 (J - 1/J) -> -inf as J -> 0: a
+ *       barrier, compression costs unbounded energy before J reaches 0. */
+enum tled_vol { TLED_VOL_QUAD = 0, TLED_VOL_LOG = 1 };
 
 int tled_material_set(tled_material_t *m, double E, double nu, double rho);
 
@@ -183,6 +200,8 @@ typedef struct tled_model {
 	double *ipX;        /* 3*nip reference positions, m */
 	double *ipV;        /* nip volumes (weights), m^3 */
 	int32_t *ipmat;     /* nip tled_mat_id */
+	double t_phase[TLED_NPHASE]; /* wall s of each build phase
+	                                (tled_phase_name) */
 	double *ipg;        /* nip isotropic growth stretch g (NULL: 1
 	                       everywhere; front = expand).  F = F_e F_g,
 	                       F_g = g I: the stress is that of F_e = F / g

@@ -5,8 +5,8 @@
 #include <math.h>
 #include <string.h>
 
-double tled_neohooke(const double F[9], double mu, double kappa, double S[9],
-		     double *W)
+double tled_neohooke(const double F[9], double mu, double kappa, int vol,
+		     double S[9], double *W)
 {
 	double C[9];
 	for (int i = 0; i < 3; i++)
@@ -35,13 +35,19 @@ double tled_neohooke(const double F[9], double mu, double kappa, double S[9],
 	Ci[8] = (C[0] * C[4] - C[1] * C[3]) * iJ2;
 	double trC = C[0] + C[4] + C[8];
 	double J23 = pow(J, -2.0 / 3.0);
-	double a = mu * J23, b = kappa * J * (J - 1) - a * trC / 3;
+	/* J U'(J) and U(J) of enum tled_vol */
+	double Jp = vol == TLED_VOL_LOG ? 0.5 * kappa * (J * J - 1)
+					 : kappa * J * (J - 1);
+	double U = vol == TLED_VOL_LOG
+			   ? 0.25 * kappa * (J * J - 1 - 2 * log(J))
+			   : 0.5 * kappa * (J - 1) * (J - 1);
+	double a = mu * J23, b = Jp - a * trC / 3;
 	for (int i = 0; i < 9; i++)
 		S[i] = b * Ci[i];
 	S[0] += a;
 	S[4] += a;
 	S[8] += a;
-	*W = 0.5 * mu * (J23 * trC - 3) + 0.5 * kappa * (J - 1) * (J - 1);
+	*W = 0.5 * mu * (J23 * trC - 3) + U;
 	return J;
 }
 
@@ -82,11 +88,11 @@ void tled_ip_stress_c(const tled_model_t *m, const uint8_t *ipact,
 				double Fe[9];
 				for (int i = 0; i < 9; i++)
 					Fe[i] = F[i] / g;
-				J = tled_neohooke(Fe, mt->mu, mt->kappa, S, &W);
+				J = tled_neohooke(Fe, mt->mu, mt->kappa, mt->vol, S, &W);
 				W *= g * g * g;
 				V *= g;
 			} else {
-				J = tled_neohooke(F, mt->mu, mt->kappa, S, &W);
+				J = tled_neohooke(F, mt->mu, mt->kappa, mt->vol, S, &W);
 			}
 			if (!(J > 0) || !isfinite(W)) {
 				nbad++;

@@ -7,10 +7,12 @@
  * Per time step (Horton et al. 2010, Miller et al. 2007 TLED):
  *   1. tled_ip_stress_c: at every active ip, F = I + sum_a u_a (x) dN_a,
  *      neo-Hookean 2nd Piola-Kirchhoff stress
- *        S = mu J^(-2/3) (I - tr(C)/3 C^-1) + kappa J (J-1) C^-1,
+ *        S = mu J^(-2/3) (I - tr(C)/3 C^-1) + J U'(J) C^-1,
  *      C = F^T F, J = det F, and the 1st PK stress times the ip volume,
  *      VP = V F S (Pa m^3 = N m);  strain energy density
- *        W = mu/2 (J^(-2/3) tr C - 3) + kappa/2 (J-1)^2   (S = 2 dW/dC).
+ *        W = mu/2 (J^(-2/3) tr C - 3) + U(J)   (S = 2 dW/dC),
+ *      U(J) = kappa/2 (J-1)^2 or kappa/4 (J^2 - 1 - 2 ln J) (enum tled_vol,
+ *      tled_model.h).
  *   2. tled_gather_c: nodal internal forces f_a = sum_ip VP_ip dN_a(ip)
  *      (a gather over the node->entry CSR: no atomics, deterministic, the
  *      same order on any thread count).
@@ -58,7 +60,8 @@ void tled_cd_step_c(const tled_model_t *m, const uint8_t *kind,
 
 /* Neo-Hookean stress at one point: F (row-major 3x3) -> S (2nd PK), returns
  * J; *W gets the strain energy density (J/m^3). */
-double tled_neohooke(const double F[9], double mu, double kappa, double S[9],
+double tled_neohooke(const double F[9], double mu, double kappa, int vol,
+		     double S[9],
 		     double *W);
 
 #endif

@@ -98,6 +98,7 @@ struct dmod {
 	const int *ipptr, *ipnode, *nptr, *nent, *entip, *ipmat;
 	const double *dN, *ipV, *mass, *X;
 	double mu[MAT_N], kappa[MAT_N];
+	int vol[MAT_N];
 	/* brain boundary: nodes, normals and their uniform grid */
 	int nb;
 	const double *bX, *bn;
@@ -107,9 +108,9 @@ struct dmod {
 };
 
 /* neo-Hookean 2nd Piola-Kirchhoff stress, as tled_neohooke (tled_step.c):
- * S = mu J^-2/3 (I - tr C / 3 C^-1) + kappa J (J - 1) C^-1, returns J */
+ * S = mu J^-2/3 (I - tr C / 3 C^-1) + J U'(J) C^-1, returns J */
 __device__ double d_neohooke(const double F[9], double mu, double kappa,
-			     double S[9], double *W)
+			     int vol, double S[9], double *W)
 {
 	double C[9];
 	for (int i = 0; i < 3; i++)
@@ -137,13 +138,18 @@ __device__ double d_neohooke(const double F[9], double mu, double kappa,
 	Ci[8] = (C[0] * C[4] - C[1] * C[3]) * iJ2;
 	double trC = C[0] + C[4] + C[8];
 	double J23 = pow(J, -2.0 / 3.0);
-	double a = mu * J23, b = kappa * J * (J - 1) - a * trC / 3;
+	double Jp = vol == TLED_VOL_LOG ? 0.5 * kappa * (J * J - 1)
+					 : kappa * J * (J - 1);
+	double U = vol == TLED_VOL_LOG
+			   ? 0.25 * kappa * (J * J - 1 - 2 * log(J))
+			   : 0.5 * kappa * (J - 1) * (J - 1);
+	double a = mu * J23, b = Jp - a * trC / 3;
 	for (int i = 0; i < 9; i++)
 		S[i] = b * Ci[i];
 	S[0] += a;
 	S[4] += a;
 	S[8] += a;
-	*W = 0.5 * mu * (J23 * trC - 3) + 0.5 * kappa * (J - 1) * (J - 1);
+	*W = 0.5 * mu * (J23 * trC - 3) + U;
 	return J;
 }
 
@@ -195,11 +201,11 @@ __global__ void k_stress(dmod m, const unsigned char *ipact, const double *ipg,
 			double Fe[9];
 			for (int i = 0; i < 9; i++)
 				Fe[i] = F[i] / g;
-			J = d_neohooke(Fe, m.mu[mt], m.kappa[mt], S, &W);
+			J = d_neohooke(Fe, m.mu[mt], m.kappa[mt], m.vol[mt], S, &W);
 			W *= g * g * g;
 			V *= g;
 		} else {
-			J = d_neohooke(F, m.mu[mt], m.kappa[mt], S, &W);
+			J = d_neohooke(F, m.mu[mt], m.kappa[mt], m.vol[mt], S, &W);
 		}
 		if (!(J > 0) || !isfinite(W)) {
 			r.cnt++;
@@ -655,6 +661,7 @@ static int ensure_model(tled_cuda_t *c, const tled_model_t *m)
 	for (int i = 0; i < MAT_N; i++) {
 		d.mu[i] = m->mat[i].mu;
 		d.kappa[i] = m->mat[i].kappa;
+		d.vol[i] = m->mat[i].vol;
 	}
 	d.nb = (int)m->nb;
 	if (m->nb > 0) {

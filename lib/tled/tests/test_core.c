@@ -47,42 +47,61 @@ static void test_neohooke(void **state)
 	assert_int_equal(tled_material_set(&mt, 3000, 0.49, 1000), 0);
 	assert_true(fabs(mt.mu - 3000 / 2.98) < 1e-9);
 	assert_true(fabs(mt.kappa - 3000 / (3 * 0.02)) < 1e-6);
-	double F[9] = { 1.1, 0.05, -0.02, 0.03, 0.95, 0.04, -0.01, 0.02, 1.05 };
-	double S[9], W;
-	tled_neohooke(F, mt.mu, mt.kappa, S, &W);
-	/* dW/dF = F S (1st PK); compare with central differences */
-	for (int i = 0; i < 3; i++)
-		for (int j = 0; j < 3; j++) {
-			double Fp[9], Fm[9], Sx[9], Wp, Wm, h = 1e-6;
-			memcpy(Fp, F, sizeof Fp);
-			memcpy(Fm, F, sizeof Fm);
-			Fp[3 * i + j] += h;
-			Fm[3 * i + j] -= h;
-			tled_neohooke(Fp, mt.mu, mt.kappa, Sx, &Wp);
-			tled_neohooke(Fm, mt.mu, mt.kappa, Sx, &Wm);
-			double P = 0;
-			for (int k = 0; k < 3; k++)
-				P += F[3 * i + k] * S[3 * k + j];
-			double fd = (Wp - Wm) / (2 * h);
-			assert_true(fabs(P - fd) <= 1e-6 * (fabs(fd) + mt.mu));
-		}
-	double I[9] = { 1, 0, 0, 0, 1, 0, 0, 0, 1 };
-	tled_neohooke(I, mt.mu, mt.kappa, S, &W);
-	for (int i = 0; i < 9; i++)
-		assert_true(fabs(S[i]) < 1e-9);
-	assert_true(fabs(W) < 1e-12);
-	double e = 1e-6, Fe[9] = { 1 + e, 0, 0, 0, 1, 0.5 * e, 0, 0.5 * e, 1 };
-	tled_neohooke(Fe, mt.mu, mt.kappa, S, &W);
-	assert_true(fabs(S[0] - (mt.lambda + 2 * mt.mu) * e) <
-		    1e-4 * (mt.lambda + 2 * mt.mu) * e);
-	assert_true(fabs(S[4] - mt.lambda * e) < 1e-3 * mt.lambda * e);
-	assert_true(fabs(S[5] - mt.mu * e) < 1e-3 * mt.mu * e);
-	/* inverted: J <= 0 reported, no NaN */
-	double Fi[9] = { -1, 0, 0, 0, 1, 0, 0, 0, 1 };
-	double J = tled_neohooke(Fi, mt.mu, mt.kappa, S, &W);
-	assert_true(J <= 0);
-	assert_true(isfinite(S[0]) && isfinite(W));
+	for (int vol = TLED_VOL_QUAD; vol <= TLED_VOL_LOG; vol++) {
+		double F[9] = { 1.1, 0.05, -0.02, 0.03, 0.95, 0.04, -0.01, 0.02, 1.05 };
+		double S[9], W;
+		tled_neohooke(F, mt.mu, mt.kappa, vol, S, &W);
+		/* dW/dF = F S (1st PK); compare with central differences */
+		for (int i = 0; i < 3; i++)
+			for (int j = 0; j < 3; j++) {
+				double Fp[9], Fm[9], Sx[9], Wp, Wm, h = 1e-6;
+				memcpy(Fp, F, sizeof Fp);
+				memcpy(Fm, F, sizeof Fm);
+				Fp[3 * i + j] += h;
+				Fm[3 * i + j] -= h;
+				tled_neohooke(Fp, mt.mu, mt.kappa, vol, Sx, &Wp);
+				tled_neohooke(Fm, mt.mu, mt.kappa, vol, Sx, &Wm);
+				double P = 0;
+				for (int k = 0; k < 3; k++)
+					P += F[3 * i + k] * S[3 * k + j];
+				double fd = (Wp - Wm) / (2 * h);
+				assert_true(fabs(P - fd) <= 1e-6 * (fabs(fd) + mt.mu));
+			}
+		double I[9] = { 1, 0, 0, 0, 1, 0, 0, 0, 1 };
+		tled_neohooke(I, mt.mu, mt.kappa, vol, S, &W);
+		for (int i = 0; i < 9; i++)
+			assert_true(fabs(S[i]) < 1e-9);
+		assert_true(fabs(W) < 1e-12);
+		double e = 1e-6, Fe[9] = { 1 + e, 0, 0, 0, 1, 0.5 * e, 0, 0.5 * e, 1 };
+		tled_neohooke(Fe, mt.mu, mt.kappa, vol, S, &W);
+		assert_true(fabs(S[0] - (mt.lambda + 2 * mt.mu) * e) <
+			    1e-4 * (mt.lambda + 2 * mt.mu) * e);
+		assert_true(fabs(S[4] - mt.lambda * e) < 1e-3 * mt.lambda * e);
+		assert_true(fabs(S[5] - mt.mu * e) < 1e-3 * mt.mu * e);
+		/* inverted: J <= 0 reported, no NaN */
+		double Fi[9] = { -1, 0, 0, 0, 1, 0, 0, 0, 1 };
+		double J = tled_neohooke(Fi, mt.mu, mt.kappa, vol, S, &W);
+		assert_true(J <= 0);
+		assert_true(isfinite(S[0]) && isfinite(W));
+		/* isotropic compression F = s I: Cauchy stress = U'(J) I,
+		 * kappa (J-1) (quadratic, bounded by kappa as J -> 0) or
+		 * kappa/2 (J - 1/J) (log, unbounded: Simo & Taylor 1982) */
+		double sc = 0.2, Fs[9] = { sc, 0, 0, 0, sc, 0, 0, 0, sc };
+		double Js = tled_neohooke(Fs, mt.mu, mt.kappa, vol, S, &W);
+		double p = vol == TLED_VOL_LOG ? 0.5 * mt.kappa * (Js - 1 / Js)
+					       : mt.kappa * (Js - 1);
+		assert_true(fabs(Js - sc * sc * sc) < 1e-15);
+		for (int k = 0; k < 9; k++)
+			assert_true(fabs(S[k] * sc * sc / Js -
+					 (k % 4 == 0 ? p : 0)) <=
+				    1e-9 * fabs(p));
+		if (vol == TLED_VOL_LOG)
+			assert_true(p < -60 * mt.kappa);
+		else
+			assert_true(p > -mt.kappa);
+	}
 }
+
 
 /* MLS: partition of unity and linear reproduction of values and gradients */
 static void test_mls_linear(void **state)
