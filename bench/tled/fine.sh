@@ -55,11 +55,13 @@ for c in $CASES; do
                         if ($(i+1) == "nodes") nodes = $i
                         if ($i == "built") bs = $(i+2) } }
                 /\[grow@/ && /growth step/ && /iterations/ { for (i = 1; i <= NF; i++) if ($(i+1) ~ /^iterations/) it += $i }
-                /\[grow@/ && /growth steps,/ { for (i = 1; i <= NF; i++) if ($(i+1) == "s") gs = $i }
+                /\[grow@/ && /growth steps,/ { for (i = 1; i <= NF; i++) if ($(i+1) ~ /^s,?$/) gs = $i }
                 /\[grow@/ && /sub-steps/ { ns++ }
+                /\[grow@/ && /saturated/ { for (i = 1; i <= NF; i++) if ($i == "at" && $(i+2) == "%") sat = sat (sat == "" ? "" : " ") "saturated at " $(i+1) " %" }
                 /\[grow@/ && /min det F/ { for (i = 1; i <= NF; i++) if ($i == "det" && $(i+1) == "F") { v = $(i+2); gsub(/[^-0-9.e]/, "", v); jm = v } }
-                /inverted|failed:|error|non-finite/ && err == "" { err = $0; gsub(/\t/, " ", err); err = substr(err, 1, 300) }
+                /inverted material|failed:|error:|non-finite/ && err == "" { err = $0; gsub(/\t/, " ", err); err = substr(err, 1, 300) }
                 END { if (st == "failed" && err == "") err = "failed or timed out (" to " s)"
+                      if (st == "ok") err = sat
                       printf "%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%d\t%s\t%s\n", c, sp, vn, pm, st, nodes, bs, it, gs, ns, jm, err }' "$d/log" >>"$OUT"
             tail -1 "$OUT"
             [ "$st" = ok ] || tail -3 "$d/log" | cut -c1-400
