@@ -891,7 +891,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 		 * resist.  Nothing is driven: the push is set by the load, so
 		 * the core grows further where the tissue beside it is soft
 		 * (the kinematic front pushes the same distance everywhere;
-		 * bench/pipeline/results.md, Session 12).  The final outline is
+		 * the record at 7a4d369: bench/pipeline/results.md, its twelfth round).  The final outline is
 		 * left to the registration. */
 		int nc = 0;
 		for (int j = 0; j < nl; j++)

@@ -73,7 +73,7 @@
  * farther away (layer_side).
  *
  * front = expand (experimental; measured worse, bench/pipeline/results.md
- * Session 13) replaces the replay: the core inside the innermost kept layer
+ * at 7a4d369, the front=expand round) replaces the replay: the core inside the innermost kept layer
  * grows by a volumetric growth stretch (F = F_e g I, tled_ip_stress_c)
  * until its deformed volume is the tumour's; see the block in
  * tled_process.
