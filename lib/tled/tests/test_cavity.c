@@ -105,7 +105,7 @@ static void test_cavity_convergence(void **state)
  * points, 0.9 -> 2.1 s CPU; ip_factor 0.5 gives 1.48 % for 6.3 s, and at
  * h = 3 mm 1.56 -> 1.18 % (0.5: 1.16 %): one point per node
  * under-integrates the MLS Galerkin form (bench/tled/run_sweep.sh,
- * bench/pipeline/results.md Session 11).  Asserted: the finer grid cuts
+ * bench/pipeline/results.md at 7a4d369, the ip_factor round).  Asserted: the finer grid cuts
  * the RMS error by at least 20 % and the max error, with more than twice
  * the points. */
 static void test_cavity_ip_factor(void **state)

@@ -395,7 +395,7 @@ static void test_grow_push(void **state)
  * ratio 1.09 and 1.15: this homogeneous ball has no analytic push to
  * compare with, so the test guards the grid and stability).  The gain in
  * accuracy is measured on the phantom, where soft ventricles lie within a
- * node spacing of the tumour (bench/pipeline/results.md Session 11). */
+ * node spacing of the tumour (bench/pipeline/results.md at 7a4d369, the ip_factor round). */
 static void test_ip_factor(void **state)
 {
 	TLED_TEST_REQUIRE();
@@ -493,7 +493,7 @@ static void test_grow_expand(void **state)
 	/* full size in the quick (asan-test) run too: in the 20 mm ball the
 	 * soft ball reaches within 2.5 mm of the fixed boundary and the
 	 * expand step 12 did not converge (10 000 iterations, estimated
-	 * error 2.8 mm; session 14) */
+	 * error 2.8 mm; bench/pipeline/results.md at 7a4d369) */
 	const double Rb = 24, h = 3, Rt = 7;
 	double rat[2], pl[2], mi[2];
 	const char *front[] = { "front=push", "front=expand" };
