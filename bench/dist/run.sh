@@ -76,12 +76,18 @@ stop_workers() {
 
 HDF5_CFLAGS=$(pkg-config --cflags hdf5 2>/dev/null || true)
 HDF5_LIBS=$(pkg-config --libs hdf5 2>/dev/null || true)
+# ROUNDTRIP=FILE: a roundtrip binary built elsewhere (a host without the
+# -dev packages, e.g. the GPU host with a carried build)
+if [ -n "${ROUNDTRIP:-}" ]; then
+    cp "$ROUNDTRIP" "$TMP/roundtrip"
+else
 # shellcheck disable=SC2086
 ${CC:-cc} -O2 -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -fopenmp \
     -Iruntime/include -Iruntime -I/usr/include/nifti $HDF5_CFLAGS \
     bench/dist/roundtrip.c "$BUILD/libarmstg_rt.a" -o "$TMP/roundtrip" \
     -lniftiio -lznz -lz $HDF5_LIBS -lmsgpackc -linih -lpng -lczmq -lzmq \
     -ldl -lpthread -lm
+fi
 
 CORES=$(getconf _NPROCESSORS_ONLN)
 LOAD=$(cut -d' ' -f1 /proc/loadavg)
