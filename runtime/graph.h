@@ -10,10 +10,16 @@
  *                       score = STAGE.PORT (a table output), metric = M,
  *                       structure = S (optional), goal = max | min,
  *                       require = M2 [S2] OP NUMBER (optional),
- *                       tolerance = T (optional, >= 0, the score's units)
+ *                       tolerance = T (optional, >= 0, the score's units),
+ *                       metric_column = C, structure_column = C,
+ *                       value_column = C (optional: the score table's
+ *                       columns; default metric, structure, value)
  *
- * Values may use ${VAR} and ${VAR:-default} (environment variables; "$$" is a
- * literal '$').  `--set stage.key=value` overrides or adds any key.  Loading
+ * Values may use ${VAR} and ${VAR:-default} (environment variables; the
+ * default is expanded too, so they nest; "$$" is a literal '$').  The
+ * code: graph_parse.c (the file), graph_check.c (graph_load), tune.c,
+ * sched.c, runtab.c, run.c (graph_run); graph_int.h says which does
+ * what.  `--set stage.key=value` overrides or adds any key.  Loading
  * validates everything before any stage runs; each error reads
  *     FILE:LINE: stage 'S': key 'K': what is wrong
  *
@@ -23,10 +29,12 @@
  * and runs only what the score stage needs; stages that do not depend on
  * the tuned stage run once and keep their outputs for every candidate and
  * the final run; the others are reset between candidates and what they
- * write is discarded.  The score is the number column 'value' of the first
- * row of the table whose 'metric' column is M (and 'structure' is S),
- * the metrics plugin's layout; a table without those columns or that row
- * fails the run (an error naming the score stage).  A candidate that fails
+ * write is discarded.  The score is the number column value_column of the
+ * first row of the table whose text column metric_column is M (and
+ * structure_column is S): by default the metrics plugin's layout (metric,
+ * structure, value), any table by naming its columns; a table without
+ * those columns or that row fails the run (an error naming the score
+ * stage).  A candidate that fails
  * in a stage that depends on the tuned one, or scores NaN (or +-inf), or
  * whose row M2 (S2) of the same table fails `require` (OP: > >= < <=), is
  * skipped with a warning; if all fail, the run fails.  Ties keep the
@@ -102,6 +110,9 @@ typedef struct run_opts {
  * were; a run that ran stages leaves its tables as run.failed.tsv (and
  * tune.failed.tsv). */
 int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize);
+/* (graph_run reads the graph as const: each run makes its own stage
+ * instances and state, so one loaded graph can run again unchanged; the
+ * only thing it writes in g is what graph_run_refused reads.) */
 /* 1 when the last graph_run stopped before any stage ran */
 int graph_run_refused(const graph_t *g);
 

@@ -30,8 +30,8 @@
  * into the same folder (outdir_open, holding the lock) rolls back by that
  * run's journal when it has one, then removes the dead run's temporaries
  * (.armstg-tmp-P*, also those of older versions that wrote them beside the
- * final files) under DIR (8 folders deep, the first 20 000 entries).  A run is dead when no process P exists
- * on this machine (kill(P, 0)).
+ * final files) under DIR (8 folders deep, the first 20 000 entries).  A
+ * run is dead when no process P exists on this machine (kill(P, 0)).
  */
 #include <dirent.h>
 #include <errno.h>

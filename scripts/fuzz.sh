@@ -67,9 +67,9 @@ status=0
 summary=""
 for t in $TARGETS; do
     src="tests/fuzz/fuzz_$t.c"
-    if [ "$t" = graph ] && ! grep -q 'graph_parse_string' runtime/graph.c \
+    if [ "$t" = graph ] && ! grep -q 'graph_parse_string' runtime/graph_parse.c \
             2>/dev/null; then
-        echo "fuzz: skipping graph: runtime/graph.c has no graph_parse_string"
+        echo "fuzz: skipping graph: runtime/graph_parse.c has no graph_parse_string"
         continue
     fi
     bin="$B/fuzz_$t"

@@ -1,11 +1,10 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Graph files and the scheduler, on the test-only plugins in
- * $BUILD/test-plugins (tp_gen, tp_add, tp_sink).
- *
- * Every file in tests/graphs/bad/ starts with "; expect: ERROR" (or
- * "; expect-prefix: ...") and must be refused with exactly that error;
- * {FILE} stands for the file's path.
+ * Graph files loaded and run end to end (graph_load, graph_run, the
+ * armstg command line) on the test-only plugins in $BUILD/test-plugins
+ * (tp_gen, tp_add, tp_sink, tp_score).  The parts have their own tests:
+ * test_graph_parse (parsing), test_graph_check (the refused graphs of
+ * tests/graphs/bad), test_sched, test_runtab, test_tune, test_commit.
  */
 #include <dirent.h>
 #include <sys/wait.h>
@@ -23,56 +22,6 @@ static int setup(void **state)
 	setenv("ARMSTG_PLUGIN_PATH", plugdir, 1);
 	unsetenv("ARMSTG_TEST_UNSET_VAR");
 	return 0;
-}
-
-static void replace_file(const char *in, const char *file, char *out,
-			 size_t n)
-{
-	const char *p = strstr(in, "{FILE}");
-	if (!p) {
-		snprintf(out, n, "%s", in);
-		return;
-	}
-	snprintf(out, n, "%.*s%s%s", (int)(p - in), in, file, p + 6);
-}
-
-static void test_bad_graphs(void **state)
-{
-	(void)state;
-	const char *dir = "tests/graphs/bad";
-	DIR *dp = opendir(dir);
-	assert_non_null(dp);
-	struct dirent *de;
-	int n = 0;
-	while ((de = readdir(dp))) {
-		size_t l = strlen(de->d_name);
-		if (l < 5 || strcmp(de->d_name + l - 4, ".ini"))
-			continue;
-		char path[1024], line[1024], want[2048], err[8192];
-		snprintf(path, sizeof path, "%s/%s", dir, de->d_name);
-		FILE *f = fopen(path, "r");
-		assert_non_null(f);
-		assert_non_null(fgets(line, sizeof line, f));
-		fclose(f);
-		line[strcspn(line, "\n")] = 0;
-		int prefix = !strncmp(line, "; expect-prefix: ", 17);
-		const char *exp = prefix ? line + 17
-			: !strncmp(line, "; expect: ", 10) ? line + 10 : NULL;
-		if (!exp)
-			fail_msg("%s: first line must be '; expect: ...'", path);
-		replace_file(exp, path, want, sizeof want);
-		graph_t *g = graph_load(path, NULL, 0, err, sizeof err);
-		if (g) {
-			graph_free(g);
-			fail_msg("%s was accepted", path);
-		}
-		if (prefix ? strncmp(err, want, strlen(want)) : strcmp(err, want))
-			fail_msg("%s:\n  want: %s\n  got:  %s", path, want, err);
-		n++;
-	}
-	closedir(dp);
-	print_message("%d bad graphs refused with their exact errors\n", n);
-	assert_true(n >= 15);
 }
 
 static const char *write_tmp(const char *text, char *path, size_t n)
@@ -197,40 +146,6 @@ static void test_targets_run_only_needed(void **state)
 	graph_free(g);
 	unlink(gp);
 	tu_cleanup(out);
-}
-
-static double run_time(const char *text, int jobs)
-{
-	char gp[256], err[4096], out[] = "/tmp/armstg-out-XXXXXX";
-	assert_non_null(mkdtemp(out));
-	graph_t *g = graph_load(write_tmp(text, gp, sizeof gp), NULL, 0, err,
-				sizeof err);
-	if (!g)
-		fail_msg("%s", err);
-	struct timespec a, b;
-	clock_gettime(CLOCK_MONOTONIC, &a);
-	run_opts_t o = { .outdir = out, .jobs = jobs, .quiet = 1 };
-	assert_int_equal(graph_run(g, &o, err, sizeof err), 0);
-	clock_gettime(CLOCK_MONOTONIC, &b);
-	graph_free(g);
-	unlink(gp);
-	tu_cleanup(out);
-	return (b.tv_sec - a.tv_sec) + (b.tv_nsec - a.tv_nsec) * 1e-9;
-}
-
-static void test_jobs_run_concurrently(void **state)
-{
-	(void)state;
-	const char *text =
-		"[stage gen]\nplugin = tp_gen\n"
-		"[stage s1]\nplugin = tp_add\na = gen.volume\nsleep_ms = 400\n"
-		"[stage s2]\nplugin = tp_add\na = gen.volume\nsleep_ms = 400\n"
-		"[stage s3]\nplugin = tp_add\na = gen.volume\nsleep_ms = 400\n";
-	double t1 = run_time(text, 1), t3 = run_time(text, 3);
-	print_message("3 independent 0.4 s stages: %.3f s with --jobs 1, "
-		      "%.3f s with --jobs 3\n", t1, t3);
-	assert_true(t1 >= 1.19);
-	assert_true(t3 < 0.9);
 }
 
 static void test_failure_leaves_no_files(void **state)
@@ -778,10 +693,8 @@ static void test_run_graph_table(void **state)
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
-		cmocka_unit_test(test_bad_graphs),
 		cmocka_unit_test(test_run_and_expansion),
 		cmocka_unit_test(test_targets_run_only_needed),
-		cmocka_unit_test(test_jobs_run_concurrently),
 		cmocka_unit_test(test_failure_leaves_no_files),
 		cmocka_unit_test(test_cli),
 		cmocka_unit_test(test_fuzz_entry_rejects_garbage),

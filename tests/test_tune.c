@@ -513,7 +513,7 @@ static void test_set_rules(void **state)
 		  "empty (give one or more values separated by commas)" },
 		{ "tune.steps=3", "key 'steps': unknown key in [tune] (known: "
 		  "param, values, score, metric, structure, goal, require, "
-		  "tolerance)" },
+		  "tolerance, metric_column, structure_column, value_column)" },
 		{ "tune.tolerance=nan", "key 'tolerance': [tune] tolerance "
 		  "must be a number >= 0 in the score's units, got 'nan'" },
 		{ "tune.tolerance=-0.1", "key 'tolerance': [tune] tolerance "
@@ -749,6 +749,52 @@ static void test_run_graph_after_tune(void **state)
 	tu_cleanup(r.cnt);
 }
 
+/* issue 26.2: [tune] names the score table's columns (default: the metrics
+ * plugin's metric, structure, value); the runtime knows no table layout */
+static void test_score_columns(void **state)
+{
+	(void)state;
+	trun_t r;
+	/* by default: metric sq, structure near -> (x - 3.2)^2, best 3 */
+	const char *def[] = { "tune.structure=near" };
+	run_sets(&r, def, 1);
+	assert_int_equal(r.rc, 0);
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_float_equal(chosen_value(&tt), 3, 0);
+	ttab_free(&tt);
+	done(&r);
+	/* the same table read through other columns: the row whose
+	 * 'structure' is far and 'metric' is sq, (x - 13.2)^2: best 5 */
+	const char *swap[] = { "tune.metric_column=structure",
+			       "tune.structure_column=metric",
+			       "tune.metric=far", "tune.structure=sq" };
+	run_sets(&r, swap, 4);
+	if (r.rc)
+		fail_msg("%s", r.err);
+	tune_tsv(r.out, &tt);
+	assert_float_equal(chosen_value(&tt), 5, 0);
+	assert_float_equal(tt.score->num[4], (5 - 13.2) * (5 - 13.2), 1e-9);
+	ttab_free(&tt);
+	done(&r);
+	/* a column the table does not have: the run fails naming it */
+	const char *miss[] = { "tune.value_column=score" };
+	run_sets(&r, miss, 1);
+	assert_int_equal(r.rc, ARMSTG_EINVAL);
+	assert_string_equal(r.err, "[tune] score: the table of stage 'fit' "
+			    "(output 'table') has no number column 'score' "
+			    "(columns: metric, structure, value, unit)");
+	done(&r);
+	/* one column cannot select twice */
+	char err[4096], want[1024];
+	const char *twice[] = { "tune.structure_column=metric" };
+	assert_null(graph_load(graph_path, twice, 1, err, sizeof err));
+	snprintf(want, sizeof want, "%s: --set: key 'structure_column': "
+		 "[tune] structure_column: 'metric' is also the metric_column",
+		 graph_path);
+	assert_string_equal(err, want);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -756,6 +802,7 @@ int main(void)
 		cmocka_unit_test(test_goal_metric_structure),
 		cmocka_unit_test(test_ties_keep_the_earlier_value),
 		cmocka_unit_test(test_tolerance),
+		cmocka_unit_test(test_score_columns),
 		cmocka_unit_test(test_failed_candidates_are_skipped),
 		cmocka_unit_test(test_require),
 		cmocka_unit_test(test_all_candidates_fail),

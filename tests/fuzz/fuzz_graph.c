@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * libFuzzer target: the graph file parser (runtime/graph.c,
+ * libFuzzer target: the graph file parser (runtime/graph_parse.c,
  * graph_parse_string: INI syntax, sections, keys, ${VAR} expansion; no
  * plugin loading).  Any text must parse or fail with a message, never
  * crash.  Built and run by scripts/fuzz.sh (`make fuzz`).

@@ -1,0 +1,250 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Inside the graph: the types and functions the graph's files share.
+ *
+ *   graph_parse.c   the file: INI (libinih), sections, keys, ${VAR}
+ *                   expansion, --set                        -> graph_t
+ *   graph_check.c   plugins, parameters, ports, connections, cycles,
+ *                   targets, declared outputs; graph_load   -> graph_t
+ *   tune.c          [tune]: its keys checked; the search during a run
+ *   sched.c         the scheduler: which stages, in what order, threads
+ *   runtab.c        the run table (run.tsv)
+ *   run_graph.c     the run's graph as a table for plugins (run_graph)
+ *   run.c           graph_run: a run's state, the output folder, commit
+ *
+ * A graph_t is built by graph_load and not changed afterwards: every
+ * function of a run takes it const.  What a run changes (the stage
+ * instances with their parameter values, what is needed, states, timings,
+ * the [tune] candidates) lives in a g_run_t made for that run.  Test
+ * programs include this header to test each part on its own.
+ */
+#ifndef ARMSTG_GRAPH_INT_H
+#define ARMSTG_GRAPH_INT_H
+
+#include <limits.h>
+#include <stdio.h>
+
+#include "graph.h"
+#include "remote.h"
+
+#define G_MAX_STAGES 256
+#define G_MAX_PORTS 32
+#define G_NAME 64
+/* longest line of a graph file, '\n' included (libinih's buffer, see
+ * graph_parse.c); values after ${VAR} expansion have the same limit */
+#define G_MAX_LINE 16384
+
+typedef struct g_kv {
+	char key[G_NAME];
+	char *val;
+	int line;         /* 0: from --set */
+} g_kv_t;
+
+/* A stage as the file (and --set) describe it, checked by graph_load. */
+typedef struct g_stage {
+	char name[G_NAME];
+	int line;
+	g_kv_t *kv;
+	int nkv;
+	rt_plugin_t plug;
+	int loaded;
+	int src[G_MAX_PORTS];      /* producer stage per input port, or -1 */
+	int src_port[G_MAX_PORTS];
+	int conn_line[G_MAX_PORTS];
+	int node;                  /* [node] index; NODE_UNSET, NODE_LOCAL */
+} g_stage_t;
+
+enum { NODE_UNSET = -1, NODE_LOCAL = -2 };
+
+typedef struct g_node {
+	char name[G_NAME];
+	int line;
+	remote_node_t rn;          /* endpoints, keys, time-out (remote.h) */
+} g_node_t;
+
+/* [tune]: one stage parameter chosen per run by a score (see graph.h),
+ * as checked by tune_check. */
+typedef struct g_tune {
+	int present, line;         /* line of the [tune] header */
+	g_kv_t *kv;
+	int nkv;
+	int stage;                 /* tuned stage (index), -1 if unresolved */
+	char key[G_NAME];          /* its parameter */
+	char **values;             /* candidates, in order */
+	int nvalues;
+	int score, score_port;     /* table output read for the score */
+	const char *metric;        /* row selectors (point into kv) */
+	const char *structure;     /* NULL: the first row with metric */
+	/* the score table's columns: text columns that select the row,
+	 * the number column read (metric_column, structure_column,
+	 * value_column; default the metrics plugin's metric, structure,
+	 * value) */
+	const char *col_metric, *col_structure, *col_value;
+	int goal_max;
+	/* tolerance: the earliest candidate within tol of the best score is
+	 * chosen (a score difference below the score's noise does not pick
+	 * a later, usually larger, value); 0: the best, ties the earlier */
+	double tol;
+	/* require = METRIC [STRUCTURE] OP NUMBER: a candidate whose row
+	 * fails it is dropped like a failed one */
+	int has_req;
+	char req_metric[G_NAME], req_structure[G_NAME]; /* "": any */
+	char req_op[3];            /* ">", ">=", "<", "<=" */
+	double req_value;
+	int search;                /* 1: try the candidates when running */
+	int one_value;             /* no search: the single value is used */
+	char why[512];             /* when present but no search: why */
+} g_tune_t;
+
+struct graph {
+	char file[PATH_MAX];
+	char name[G_NAME];
+	char targets[1024];
+	int targets_line;
+	g_stage_t *stages;
+	int nstages;
+	g_node_t nodes[16];
+	int nnodes;
+	g_tune_t tune;
+	/* variables that win over the environment ("NAME=value"; a batch
+	 * case's row; the caller's, used only while loading) */
+	const char *const *vars;
+	int nvars;
+	int plugin_failed;          /* a plugin could not be loaded */
+	/* written by graph_run, read by graph_run_refused: the one thing a
+	 * run leaves in the graph */
+	int last_refused;
+	/* parse state (graph_parse.c) */
+	int cur_kind;               /* 0 none, 1 graph, 2 stage, 3 node,
+				       4 tune */
+	int cur_index;
+	int lineno;
+	int cont;                   /* current raw line is a continuation */
+	int stop;                   /* a line was refused: no more keys */
+	FILE *fp;
+	const char *text;           /* string parsing */
+	size_t textpos;
+	/* errors while loading (g_err) */
+	char *err;
+	size_t errsize, errlen;
+	int nerr;
+};
+
+/* ---- graph_parse.c ---- */
+/* Record an error "FILE:LINE: stage 'S': key 'K': message" (line 0: a
+ * --set) in g->err, control bytes escaped; counts g->nerr. */
+void g_err(graph_t *g, int line, const char *stage, const char *key,
+	   const char *fmt, ...) ARMSTG_PRINTF(5, 6);
+/* [A-Za-z_][A-Za-z0-9_-]*, shorter than G_NAME */
+int g_is_name(const char *s);
+graph_t *g_alloc(const char *fname, char *err, size_t errsize);
+/* Read path (refusing a folder) into g: sections and keys, expanded.
+ * 0, or -1 when it cannot be opened (err set, g->err detached). */
+int g_parse_file(graph_t *g, const char *path);
+/* the same on text (no file) */
+void g_parse_text(graph_t *g, const char *text);
+/* --set stage.key=value / tune.key=value, expanded */
+void g_apply_sets(graph_t *g, const char *const *sets, int nsets);
+int g_stage_index(const graph_t *g, const char *name);
+const g_kv_t *g_kv_find(const g_kv_t *kv, int n, const char *key);
+const g_kv_t *g_stage_kv(const g_stage_t *s, const char *key);
+
+/* ---- graph_check.c ---- */
+/* "stage.port" into its two names; 0 or -1 */
+int g_parse_conn(const char *val, char *stage, char *port);
+int g_port_index(const armstg_port_t *p, int n, const char *name);
+void g_port_list(const armstg_port_t *p, int n, char *buf, size_t sz);
+/* 1 when stage v is stage t or reads (transitively) one of its outputs.
+ * memo: -1 unknown (n entries); set to 0 on entry so a cycle ends. */
+int g_depends_on(const graph_t *g, int v, int t, signed char *memo);
+/* the key is a parameter of the stage's plugin (not plugin, node or a
+ * port) */
+int g_is_param(const g_stage_t *s, const char *key);
+/* Two outputs that are one file (or a file where another needs a
+ * folder), outputs named like the run table; outdir NULL: compared
+ * lexically, relative with relative; else resolved on disk under outdir.
+ * Errors through g_err. */
+void g_check_outputs(graph_t *g, const char *outdir);
+
+/* Before a run: g_check_outputs with the output folder known, and no
+ * output file of a needed stage (needed[i]) whose name is a folder on
+ * disk.  0, or -1 with every error in err. */
+int g_check_run_outputs(const graph_t *g, const char *outdir,
+			const char *needed, char *err, size_t errsize);
+
+/* One output path a stage declares (PARAM_OUT_FILE / PARAM_OUT_DIR). */
+typedef struct g_out {
+	int stage, line;
+	const char *key, *value;
+	int dir;                    /* a folder (PARAM_OUT_DIR) */
+	char norm[PATH_MAX];        /* normalised (see g_check_outputs) */
+} g_out_t;
+/* every declared output path (*outs malloc'ed); the count or -1 */
+int g_collect_outputs(const graph_t *g, const char *outdir, g_out_t **outs);
+
+/* ---- the state of one run (run.c, sched.c, tune.c, runtab.c) ---- */
+enum { ST_WAIT = 0, ST_RUNNING, ST_DONE, ST_FAILED, ST_SKIPPED };
+
+typedef struct r_stage {
+	rt_stage_t *st;             /* the instance, with its parameters */
+	int needed, state, consumers_left, rc;
+	int keep;                   /* outputs held across the passes of a
+				       tuning run (not released by
+				       consumers) */
+	double wall_s;
+	double rss_mb, out_mb;
+} r_stage_t;
+
+/* One candidate of a [tune] search, as tune.tsv reports it. */
+typedef struct tune_row {
+	double score;               /* NaN when the candidate failed */
+	double wall_s;
+	int ok, rc;
+	char err[2048];
+} tune_row_t;
+
+typedef struct g_run {
+	const graph_t *g;
+	run_opts_t o;               /* outdir, jobs set */
+	r_stage_t *rs;              /* [g->nstages] */
+	tune_row_t *rows;           /* [tune] candidates tried */
+	int nrows, best;
+} g_run_t;
+
+/* run.c: a run's stages, each a fresh instance with the graph's
+ * parameters (and [tune]'s single value); NULL with err on failure */
+g_run_t *run_new(const graph_t *g, const run_opts_t *o, char *err,
+		 size_t errsize);
+void run_free(g_run_t *r);
+
+/* ---- sched.c ---- */
+/* mark stage v and what it reads as needed */
+void sched_mark_needed(g_run_t *r, int v);
+/* One pass over the stages marked needed: in dependency order, o.jobs at
+ * a time; stages already ST_DONE (kept by a tuning run) feed the others.
+ * Files stay pending.  0, or a negative code with err. */
+int sched_pass(g_run_t *r, char *err, size_t errsize);
+double sched_now(void);
+/* peak resident set (VmHWM) in MiB */
+double sched_peak_rss_mb(void);
+
+/* ---- runtab.c ---- */
+const char *runtab_state(const r_stage_t *x);
+/* Write the run table of r (total: wall seconds) to path; each row is
+ * also logged unless o.quiet.  0 or -1 (errno). */
+int runtab_write(const g_run_t *r, double total, const char *path);
+
+/* ---- run_graph.c ---- */
+/* the run's graph as host->run_graph's table (plugin.h 1.2), frozen;
+ * NULL when out of memory */
+tab_t *run_graph_table(const g_run_t *r);
+
+/* ---- tune.c ---- */
+/* check the [tune] section (after the stages are checked) */
+void tune_check(graph_t *g);
+/* The search before the final run (see tune.c); 0 or a negative code. */
+int tune_search(g_run_t *r, char *err, size_t errsize);
+/* tune.tsv of r to path; 0 or -1 */
+int tune_table_write(const g_run_t *r, const char *path);
+
+#endif

@@ -1,0 +1,268 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The scheduler: runs the stages a run needs, each once its producers are
+ * done, o.jobs at a time (threads), each with its share of the machine's
+ * OpenMP threads.  A stage's outputs are dropped once every consumer has
+ * run (unless a tuning run keeps them for the next candidate).  The first
+ * failure stops the pass (running stages finish); so does rt_interrupted.
+ * Stages with a node (or, in a batch, stages a worker can run) run through
+ * remote.h; the rest in this process.  Per stage: wall time, peak resident
+ * memory (VmHWM, reset before each stage when one runs at a time) and the
+ * size of its outputs, for the run table.
+ */
+#include <pthread.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "graph_int.h"
+
+typedef struct runner {
+	g_run_t *r;
+	pthread_mutex_t mu;
+	pthread_cond_t cv;
+	int running, remaining, failed;
+	char err[2048];
+} runner_t;
+
+void sched_mark_needed(g_run_t *r, int v)
+{
+	const g_stage_t *s = &r->g->stages[v];
+	if (r->rs[v].needed)
+		return;
+	r->rs[v].needed = 1;
+	for (int ip = 0; ip < s->plug.desc->n_inputs; ip++)
+		if (s->src[ip] >= 0)
+			sched_mark_needed(r, s->src[ip]);
+}
+
+double sched_now(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+double sched_peak_rss_mb(void)
+{
+	FILE *f = fopen("/proc/self/status", "r");
+	char line[256];
+	double kb = 0;
+	if (!f)
+		return 0;
+	while (fgets(line, sizeof line, f))
+		if (!strncmp(line, "VmHWM:", 6))
+			kb = atof(line + 6);
+	fclose(f);
+	return kb / 1024.0;
+}
+
+/* reset of VmHWM (Linux >= 4.0) */
+static void reset_peak_rss(void)
+{
+	FILE *f = fopen("/proc/self/clear_refs", "w");
+	if (f) {
+		fputs("5", f);
+		fclose(f);
+	}
+}
+
+static int ready(const g_run_t *r, int v)
+{
+	const g_stage_t *s = &r->g->stages[v];
+	for (int ip = 0; ip < s->plug.desc->n_inputs; ip++)
+		if (s->src[ip] >= 0 && r->rs[s->src[ip]].state != ST_DONE)
+			return 0;
+	return 1;
+}
+
+static void run_one(g_run_t *r, int v)
+{
+	const graph_t *g = r->g;
+	const g_stage_t *s = &g->stages[v];
+	r_stage_t *x = &r->rs[v];
+	const armstg_plugin_t *d = s->plug.desc;
+	const msg_t *in[G_MAX_PORTS] = { 0 };
+	for (int ip = 0; ip < d->n_inputs; ip++)
+		if (s->src[ip] >= 0)
+			in[ip] = stage_output(r->rs[s->src[ip]].st,
+					      s->src_port[ip]);
+	stage_set_outdir(x->st, r->o.outdir);
+	if (r->o.jobs <= 1)
+		reset_peak_rss();
+	double t0 = sched_now();
+	rt_log(s->name, LOG_DEBUG, "start (plugin %s)", d->name);
+	/* on a node, or in a batch on the case's worker (remote.h) */
+	remote_ctx_t *rx = r->o.remote;
+	const remote_node_t *rn = NULL;
+	int first = 0;
+	if (s->node >= 0) {
+		rn = &g->nodes[s->node].rn;
+	} else if (s->node == NODE_UNSET && rx && rx->pool &&
+		   remote_batch_eligible(d)) {
+		rn = rx->pool;
+		first = rx->first;
+	}
+	int rc;
+	if (rn) {
+		rc = remote_stage_run(rn, first, rx, x->st, in);
+	} else {
+		rc = stage_init(x->st);
+		if (!rc)
+			rc = stage_process(x->st, in);
+	}
+	x->wall_s = sched_now() - t0;
+	x->rss_mb = sched_peak_rss_mb();
+	double ob = 0;
+	for (int o = 0; o < d->n_outputs; o++) {
+		msg_t *m = stage_output(x->st, o);
+		if (m)
+			ob += (double)m->bytes;
+	}
+	x->out_mb = ob / 1048576.0;
+	x->rc = rc;
+	if (rc)
+		rt_log(s->name, LOG_ERROR, "%s", stage_error(x->st));
+	else
+		rt_log(s->name, LOG_DEBUG, "done in %.2f s", x->wall_s);
+}
+
+/* Drop a producer's outputs once all its consumers have run (unless a
+ * tuning run keeps them for the next candidate). */
+static void release_inputs(g_run_t *r, int v)
+{
+	const g_stage_t *s = &r->g->stages[v];
+	for (int ip = 0; ip < s->plug.desc->n_inputs; ip++) {
+		if (s->src[ip] < 0)
+			continue;
+		const g_stage_t *ps = &r->g->stages[s->src[ip]];
+		r_stage_t *p = &r->rs[s->src[ip]];
+		if (--p->consumers_left == 0 && !p->keep)
+			for (int o = 0; o < ps->plug.desc->n_outputs; o++)
+				msg_unref(stage_take_output(p->st, o));
+	}
+}
+
+static void *worker(void *arg)
+{
+	runner_t *rn = arg;
+	g_run_t *r = rn->r;
+	const graph_t *g = r->g;
+	pthread_mutex_lock(&rn->mu);
+	for (;;) {
+		int pick = -1;
+		if (!rn->failed && !rt_interrupted)
+			for (int i = 0; i < g->nstages && pick < 0; i++)
+				if (r->rs[i].needed &&
+				    r->rs[i].state == ST_WAIT && ready(r, i))
+					pick = i;
+		if (pick < 0) {
+			if (rn->running == 0 &&
+			    (rn->remaining == 0 || rn->failed ||
+			     rt_interrupted))
+				break;
+			pthread_cond_wait(&rn->cv, &rn->mu);
+			continue;
+		}
+		r_stage_t *x = &r->rs[pick];
+		x->state = ST_RUNNING;
+		rn->running++;
+		pthread_mutex_unlock(&rn->mu);
+		run_one(r, pick);
+		pthread_mutex_lock(&rn->mu);
+		rn->running--;
+		rn->remaining--;
+		if (x->rc) {
+			x->state = ST_FAILED;
+			if (!rn->failed)
+				snprintf(rn->err, sizeof rn->err,
+					 "stage '%s' (plugin %s) failed: %s",
+					 g->stages[pick].name,
+					 g->stages[pick].plug.desc->name,
+					 stage_error(x->st));
+			rn->failed = 1;
+		} else {
+			x->state = ST_DONE;
+			release_inputs(r, pick);
+		}
+		pthread_cond_broadcast(&rn->cv);
+	}
+	pthread_cond_broadcast(&rn->cv);
+	pthread_mutex_unlock(&rn->mu);
+	return NULL;
+}
+
+int sched_pass(g_run_t *r, char *err, size_t errsize)
+{
+	const graph_t *g = r->g;
+	runner_t rn = { .r = r };
+	/* the threads the stages share: OMP_NUM_THREADS when set, else the
+	 * cores (omp_get_max_threads); split over --jobs.  (Counting the
+	 * cores alone ignored OMP_NUM_THREADS: tled_cpu ran 16 threads when
+	 * told 1, 2026-11-25.) */
+	int nthreads_total = 1;
+#ifdef _OPENMP
+	nthreads_total = omp_get_max_threads();
+	if (nthreads_total < 1)
+		nthreads_total = 1;
+#endif
+	int jobs = r->o.jobs > 0 ? r->o.jobs : 1;
+	int per = nthreads_total / jobs;
+	/* what made the run, for the stages that report it
+	 * (host->run_graph); after a [tune] search, with its candidates */
+	tab_t *gt = run_graph_table(r);
+	if (!gt) {
+		snprintf(err, errsize, "out of memory");
+		return ARMSTG_ENOMEM;
+	}
+	for (int i = 0; i < g->nstages; i++)
+		stage_set_run_graph(r->rs[i].st, &gt->base);
+	msg_unref(&gt->base);
+	for (int i = 0; i < g->nstages; i++) {
+		r_stage_t *x = &r->rs[i];
+		x->consumers_left = 0;
+		if (x->state == ST_DONE)
+			continue;
+		x->state = x->needed ? ST_WAIT : ST_SKIPPED;
+		x->rc = 0;
+		if (!x->needed)
+			continue;
+		rn.remaining++;
+		stage_set_threads(x->st, per > 0 ? per : 1);
+	}
+	for (int i = 0; i < g->nstages; i++) {
+		const g_stage_t *s = &g->stages[i];
+		if (r->rs[i].state != ST_WAIT)
+			continue;
+		for (int ip = 0; ip < s->plug.desc->n_inputs; ip++)
+			if (s->src[ip] >= 0)
+				r->rs[s->src[ip]].consumers_left++;
+	}
+	pthread_mutex_init(&rn.mu, NULL);
+	pthread_cond_init(&rn.cv, NULL);
+	pthread_t th[64];
+	int nth = jobs < 64 ? jobs : 64;
+	int started = 0;
+	for (int i = 0; i < nth; i++)
+		if (!pthread_create(&th[i], NULL, worker, &rn))
+			started++;
+	if (!started)
+		worker(&rn);
+	for (int i = 0; i < started; i++)
+		pthread_join(th[i], NULL);
+	pthread_mutex_destroy(&rn.mu);
+	pthread_cond_destroy(&rn.cv);
+	if (!rn.failed && !rt_interrupted)
+		return 0;
+	int rc = rn.failed ? ARMSTG_EINVAL : ARMSTG_ECANCELLED;
+	for (int i = 0; i < g->nstages; i++)
+		if (r->rs[i].rc)
+			rc = r->rs[i].rc;
+	snprintf(err, errsize, "%s", rn.failed ? rn.err : "interrupted");
+	return rc;
+}

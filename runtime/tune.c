@@ -1,0 +1,631 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * [tune] (at most one per graph) chooses one stage parameter per run by a
+ * score that the graph computes (see graph.h for the keys).
+ *
+ * Checking (tune_check, when the graph is loaded): every candidate is
+ * parsed by the stage's own parameter parser, the score names a table
+ * output that depends on the tuned stage, the other keys are well formed.
+ *
+ * The search (tune_search, when a run starts): the candidates are tried
+ * in order.  Stages the score needs that do not depend on the tuned stage
+ * run once and keep their outputs for every candidate and for the final
+ * run; the others are reset between candidates and what they write is
+ * discarded.  The score is the number column value_column (default
+ * 'value') of the first row of the score table whose text column
+ * metric_column ('metric') is the [tune] metric (and structure_column
+ * ('structure') the structure, when one is given): by default the layout
+ * of the metrics plugin's table, any table by naming its columns.  A table
+ * without those columns or that row fails the run (an error naming the
+ * score stage).  A candidate that fails in a stage that depends on the
+ * tuned one, or scores NaN (or +-inf), or whose row of `require` fails, is
+ * skipped with a warning; if all fail, the run fails.  Ties keep the
+ * earlier value; with a tolerance T the earliest candidate whose score is
+ * within T of the best is chosen.  tune.tsv lists the candidates
+ * (tune_table_write).
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "graph_int.h"
+
+/* the whole of s is one finite number (strtod): 1, else 0 */
+static int finite_number(const char *s, double *x)
+{
+	char *end = NULL;
+	*x = strtod(s, &end);
+	return end != s && !*end && isfinite(*x);
+}
+
+static const char *const tune_keys[] = { "param", "values", "score", "metric",
+					 "structure", "goal", "require",
+					 "tolerance", "metric_column",
+					 "structure_column", "value_column" };
+
+/* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
+ * with an error reported when the list is empty or has an empty item. */
+static int tune_split(graph_t *g, const g_kv_t *vk)
+{
+	g_tune_t *t = &g->tune;
+	int nempty = 0, nitems = 0;
+	for (const char *p = vk->val;; p++) {
+		const char *end = strchr(p, ',');
+		if (!end)
+			end = p + strlen(p);
+		const char *a = p, *b = end;
+		while (a < b && (*a == ' ' || *a == '\t'))
+			a++;
+		while (b > a && (b[-1] == ' ' || b[-1] == '\t'))
+			b--;
+		nitems++;
+		if (a == b) {
+			nempty++;
+		} else {
+			size_t sz = (size_t)(t->nvalues + 1) * sizeof(char *);
+			char **nv = realloc(t->values, sz);
+			char *v = strndup(a, (size_t)(b - a));
+			if (!nv || !v) {
+				free(v);
+				if (nv)
+					t->values = nv;
+				g_err(g, vk->line, NULL, "values",
+				     "out of memory");
+				return -1;
+			}
+			t->values = nv;
+			t->values[t->nvalues++] = v;
+		}
+		p = end;
+		if (!*p)
+			break;
+	}
+	if (nempty == nitems) {
+		g_err(g, vk->line, NULL, "values", "[tune] values: the list is "
+		     "empty (give one or more values separated by commas)");
+		return -1;
+	}
+	if (nempty) {
+		g_err(g, vk->line, NULL, "values", "[tune] values: empty value "
+		     "in '%s' (values are separated by commas)", vk->val);
+		return -1;
+	}
+	return 0;
+}
+
+/* [tune]: resolve the tuned parameter and the score table, check every
+ * candidate with the stage's own parameter parser, and decide whether the
+ * run searches (2+ values and no explicit --set of the parameter). */
+void tune_check(graph_t *g)
+{
+	g_tune_t *t = &g->tune;
+	t->stage = t->score = -1;
+	if (!t->present)
+		return;
+	int nerr0 = g->nerr;
+	int ci = g_stage_index(g, "tune");
+	const g_stage_t *clash = ci >= 0 ? &g->stages[ci] : NULL;
+	if (clash)
+		g_err(g, clash->line, clash->name, NULL, "a stage cannot be "
+		     "called 'tune' in a graph with a [tune] section "
+		     "(--set tune.KEY changes the section)");
+	for (int i = 0; i < t->nkv; i++) {
+		const g_kv_t *kv = &t->kv[i];
+		int known = 0;
+		for (int k = 0; k < ARMSTG_COUNT(tune_keys); k++)
+			known |= !strcmp(kv->key, tune_keys[k]);
+		if (!known)
+			g_err(g, kv->line, NULL, kv->key, "unknown key in "
+			     "[tune] (known: param, values, score, metric, "
+			     "structure, goal, require, tolerance, "
+			     "metric_column, structure_column, value_column)");
+		else if (!kv->val[0] && strcmp(kv->key, "values"))
+			g_err(g, kv->line, NULL, kv->key, "empty value");
+	}
+	static const struct { const char *key, *what; } need[] = {
+		{ "param", "the parameter tried, STAGE.KEY" },
+		{ "values", "the candidates, separated by commas" },
+		{ "score", "the table output that scores them, STAGE.PORT" },
+		{ "metric", "the row of the score table whose 'metric' column "
+			    "is this" },
+		{ "goal", "max or min" },
+	};
+	for (int k = 0; k < ARMSTG_COUNT(need); k++)
+		if (!g_kv_find(t->kv, t->nkv, need[k].key))
+			g_err(g, t->line, NULL, NULL, "[tune] needs a '%s' key "
+			     "(%s)", need[k].key, need[k].what);
+	const g_kv_t *pk = g_kv_find(t->kv, t->nkv, "param");
+	const g_kv_t *vk = g_kv_find(t->kv, t->nkv, "values");
+	const g_kv_t *sk = g_kv_find(t->kv, t->nkv, "score");
+	const g_kv_t *mk = g_kv_find(t->kv, t->nkv, "metric");
+	const g_kv_t *stk = g_kv_find(t->kv, t->nkv, "structure");
+	const g_kv_t *gk = g_kv_find(t->kv, t->nkv, "goal");
+	char sn[G_NAME], pn[G_NAME], e[1024];
+	g_stage_t *ts = NULL, *ss = NULL;
+	if (pk && pk->val[0]) {
+		if (g_parse_conn(pk->val, sn, pn)) {
+			g_err(g, pk->line, NULL, "param", "[tune] param must "
+			     "name <stage>.<parameter>, got '%s'", pk->val);
+		} else if (g_stage_index(g, sn) < 0) {
+			g_err(g, pk->line, NULL, "param", "[tune] param: "
+			     "unknown stage '%s'", sn);
+		} else if (!(ts = &g->stages[g_stage_index(g, sn)])->loaded) {
+			ts = NULL; /* its own error was reported */
+		} else if (!g_is_param(ts, pn)) {
+			const char *pl = ts->plug.desc->name;
+			g_err(g, pk->line, NULL, "param", "[tune] param: '%s' "
+			     "is not a parameter of plugin '%s' (stage '%s'; "
+			     "see 'armstg describe %s')", pn, pl, sn, pl);
+			ts = NULL;
+		}
+		if (ts) {
+			t->stage = (int)(ts - g->stages);
+			snprintf(t->key, sizeof t->key, "%s", pn);
+		}
+	}
+	if (vk && !tune_split(g, vk) && ts) {
+		/* a scratch stage: the real one keeps the file's value */
+		rt_stage_t *scr = stage_new(ts->plug.desc, ts->name);
+		if (!scr)
+			g_err(g, vk->line, NULL, "values", "out of memory");
+		for (int k = 0; scr && k < t->nvalues; k++)
+			if (stage_set_param(scr, t->key, t->values[k], e,
+					    sizeof e))
+				g_err(g, vk->line, ts->name, t->key,
+				     "[tune] values: %s", e);
+		stage_free(scr);
+	}
+	if (sk && sk->val[0]) {
+		if (g_parse_conn(sk->val, sn, pn)) {
+			g_err(g, sk->line, NULL, "score", "[tune] score must "
+			     "name <stage>.<output port> of a table, got '%s'",
+			     sk->val);
+		} else if (g_stage_index(g, sn) < 0) {
+			g_err(g, sk->line, NULL, "score", "[tune] score: "
+			     "unknown stage '%s'", sn);
+		} else if ((ss = &g->stages[g_stage_index(g, sn)])->loaded) {
+			const armstg_plugin_t *d = ss->plug.desc;
+			int op = g_port_index(d->outputs, d->n_outputs, pn);
+			if (op < 0) {
+				char outs[512];
+				g_port_list(d->outputs, d->n_outputs, outs,
+					  sizeof outs);
+				g_err(g, sk->line, NULL, "score",
+				     "[tune] score: stage '%s' (plugin '%s') "
+				     "has no output port '%s' (outputs: %s)",
+				     sn, d->name, pn, outs);
+			} else if (d->outputs[op].type != MSG_TABLE) {
+				g_err(g, sk->line, NULL, "score",
+				     "[tune] score: '%s.%s' is a %s, not a "
+				     "table", sn, pn,
+				     msg_type_name(d->outputs[op].type));
+			} else {
+				t->score = (int)(ss - g->stages);
+				t->score_port = op;
+			}
+		}
+	}
+	/* only on an otherwise sound graph: unresolved inputs would make
+	 * this a false alarm */
+	if (g->nerr == 0 && t->stage >= 0 && t->score >= 0) {
+		signed char *memo = malloc((size_t)g->nstages);
+		if (memo) {
+			memset(memo, -1, (size_t)g->nstages);
+			if (!g_depends_on(g, t->score, t->stage, memo))
+				g_err(g, sk->line, NULL, "score",
+				     "[tune] score: stage '%s' does not depend "
+				     "on stage '%s', so every value would "
+				     "score the same", g->stages[t->score].name,
+				     ts->name);
+			free(memo);
+		}
+	}
+	t->metric = mk ? mk->val : NULL;
+	t->structure = stk && stk->val[0] ? stk->val : NULL;
+	/* the score table's columns (default: the metrics plugin's) */
+	static const struct { const char *key, *def; } cols[3] = {
+		{ "metric_column", "metric" },
+		{ "structure_column", "structure" },
+		{ "value_column", "value" },
+	};
+	const char **col[3] = { &t->col_metric, &t->col_structure,
+				&t->col_value };
+	for (int c = 0; c < 3; c++) {
+		const g_kv_t *ck = g_kv_find(t->kv, t->nkv, cols[c].key);
+		*col[c] = ck ? ck->val : cols[c].def;
+		for (int d = 0; ck && d < c; d++)
+			if (!strcmp(*col[d], ck->val))
+				g_err(g, ck->line, NULL, cols[c].key, "[tune] "
+				      "%s: '%s' is also the %s", cols[c].key,
+				      ck->val, cols[d].key);
+	}
+	if (gk && gk->val[0]) {
+		if (!strcmp(gk->val, "max") || !strcmp(gk->val, "min"))
+			t->goal_max = gk->val[1] == 'a';
+		else
+			g_err(g, gk->line, NULL, "goal", "[tune] goal must be "
+			     "max or min, got '%s'", gk->val);
+	}
+	const g_kv_t *tk = g_kv_find(t->kv, t->nkv, "tolerance");
+	t->tol = 0;
+	if (tk && tk->val[0]) {
+		if (!finite_number(tk->val, &t->tol) || t->tol < 0)
+			g_err(g, tk->line, NULL, "tolerance", "[tune] tolerance "
+			     "must be a number >= 0 in the score's units, got "
+			     "'%s'", tk->val);
+	}
+	const g_kv_t *rk = g_kv_find(t->kv, t->nkv, "require");
+	if (rk && rk->val[0]) {
+		/* METRIC [STRUCTURE] OP NUMBER, blank separated */
+		char tok[5][G_NAME];
+		int nt = 0, bad = 0;
+		for (const char *p = rk->val; *p && !bad;) {
+			while (*p == ' ' || *p == '\t')
+				p++;
+			if (!*p)
+				break;
+			size_t l = strcspn(p, " \t");
+			if (nt == 5 || l >= G_NAME)
+				bad = 1;
+			else
+				snprintf(tok[nt++], G_NAME, "%.*s", (int)l, p);
+			p += l;
+		}
+		const char *op = nt >= 3 ? tok[nt - 2] : "";
+		if (!bad && (nt == 3 || nt == 4)) {
+			bad = !finite_number(tok[nt - 1], &t->req_value) ||
+			      (strcmp(op, ">") && strcmp(op, ">=") &&
+			       strcmp(op, "<") && strcmp(op, "<="));
+		} else {
+			bad = 1;
+		}
+		if (bad) {
+			g_err(g, rk->line, NULL, "require", "[tune] require "
+			     "must read METRIC [STRUCTURE] OP NUMBER with OP "
+			     "one of > >= < <= (e.g. 'jac_min mask > 0'), got "
+			     "'%s'", rk->val);
+		} else {
+			t->has_req = 1;
+			snprintf(t->req_metric, sizeof t->req_metric, "%s",
+				 tok[0]);
+			snprintf(t->req_structure, sizeof t->req_structure,
+				 "%s", nt == 4 ? tok[1] : "");
+			snprintf(t->req_op, sizeof t->req_op, "%s", op);
+		}
+	}
+	if (g->nerr != nerr0 || !ts || t->score < 0)
+		return;
+	/* an explicit --set of the parameter wins; one value: no search */
+	const g_kv_t *set = g_stage_kv(ts, t->key);
+	if (set && set->line == 0) {
+		snprintf(t->why, sizeof t->why, "%s.%s = %s given with --set "
+			 "wins over [tune]: no search", ts->name, t->key,
+			 set->val);
+	} else if (t->nvalues == 1) {
+		/* run_new sets it (checked above) */
+		t->one_value = 1;
+		snprintf(t->why, sizeof t->why, "one value for %s.%s (%s): no "
+			 "search", ts->name, t->key, t->values[0]);
+	} else {
+		t->search = 1;
+	}
+}
+
+/* Back to "not run" for the stages that depend on the tuned one: outputs
+ * dropped, pending files discarded, fini called so the next init starts
+ * clean. */
+static void tune_reset(g_run_t *r, const char *down)
+{
+	const graph_t *g = r->g;
+	for (int i = 0; i < g->nstages; i++) {
+		r_stage_t *x = &r->rs[i];
+		if (!down[i])
+			continue;
+		stage_fini(x->st);
+		for (int o = 0; o < g->stages[i].plug.desc->n_outputs; o++)
+			msg_unref(stage_take_output(x->st, o));
+		stage_discard_files(x->st);
+		x->state = ST_WAIT;
+		x->rc = 0;
+		x->wall_s = x->rss_mb = x->out_mb = 0;
+	}
+}
+
+/* The score of the candidate just run: the value column of the first row
+ * of the score table whose metric column (and structure column, when a
+ * structure is given) match (the column names of [tune]; by default the
+ * metrics plugin's layout). */
+static int tune_lookup(const g_run_t *r, const char *metric,
+		       const char *structure, double *score, char *err,
+		       size_t errsize)
+{
+	const g_tune_t *t = &r->g->tune;
+	const g_stage_t *s = &r->g->stages[t->score];
+	const char *port = s->plug.desc->outputs[t->score_port].name;
+	const msg_t *m = stage_output(r->rs[t->score].st, t->score_port);
+	if (!msg_valid(m, MSG_TABLE)) {
+		snprintf(err, errsize, "[tune] score: stage '%s' gave no table "
+			 "on its output '%s'", s->name, port);
+		return ARMSTG_EINVAL;
+	}
+	const tab_t *tab = (const tab_t *)m;
+	const tab_col_t *mc = tab_col(tab, t->col_metric);
+	const tab_col_t *sc = tab_col(tab, t->col_structure);
+	const tab_col_t *vc = tab_col(tab, t->col_value);
+	char miss[G_NAME + 32] = "";
+	if (!mc || mc->type != TAB_STR)
+		snprintf(miss, sizeof miss, "text column '%s'",
+			 t->col_metric);
+	else if (structure && (!sc || sc->type != TAB_STR))
+		snprintf(miss, sizeof miss, "text column '%s'",
+			 t->col_structure);
+	else if (!vc || vc->type != TAB_NUM)
+		snprintf(miss, sizeof miss, "number column '%s'",
+			 t->col_value);
+	if (miss[0]) {
+		char cols[1024] = "none";
+		size_t o = 0;
+		for (int c = 0; c < tab->ncols && o < sizeof cols; c++)
+			o += (size_t)snprintf(cols + o, sizeof cols - o, "%s%s",
+					      c ? ", " : "", tab->col[c].name);
+		snprintf(err, errsize, "[tune] score: the table of stage '%s' "
+			 "(output '%s') has no %s (columns: %s)", s->name, port,
+			 miss, cols);
+		return ARMSTG_EINVAL;
+	}
+	for (int64_t k = 0; k < tab->nrows; k++) {
+		if (!mc->str[k] || strcmp(mc->str[k], metric))
+			continue;
+		if (structure && (!sc->str[k] ||
+				     strcmp(sc->str[k], structure)))
+			continue;
+		*score = vc->num[k];
+		return 0;
+	}
+	snprintf(err, errsize, "[tune] score: the table of stage '%s' (output "
+		 "'%s') has no row with %s '%s'%s%s%s%s%s (%lld rows)", s->name,
+		 port, t->col_metric, metric, structure ? " and " : "",
+		 structure ? t->col_structure : "", structure ? " '" : "",
+		 structure ? structure : "", structure ? "'" : "",
+		 (long long)tab->nrows);
+	return ARMSTG_EINVAL;
+}
+
+static int tune_score(const g_run_t *r, double *score, char *err,
+		      size_t errsize)
+{
+	return tune_lookup(r, r->g->tune.metric, r->g->tune.structure, score,
+			   err, errsize);
+}
+
+/* 1 when the candidate just run meets [tune] require (or there is none),
+ * 0 with the reason in why; < 0: the row is missing (a graph error). */
+static int tune_require(const g_run_t *r, char *why, size_t whysize,
+			char *err, size_t errsize)
+{
+	const g_tune_t *t = &r->g->tune;
+	if (!t->has_req)
+		return 1;
+	double v;
+	int rc = tune_lookup(r, t->req_metric,
+			     t->req_structure[0] ? t->req_structure : NULL, &v,
+			     err, errsize);
+	if (rc)
+		return rc; /* the ARMSTG_E* codes are negative */
+	const char *op = t->req_op;
+	int ok = !strcmp(op, ">") ? v > t->req_value
+		 : !strcmp(op, ">=") ? v >= t->req_value
+		 : !strcmp(op, "<") ? v < t->req_value
+		 : v <= t->req_value; /* NaN meets nothing */
+	if (!ok)
+		snprintf(why, whysize, "require %s%s%s %s %g not met: %.6g",
+			 t->req_metric, t->req_structure[0] ? " " : "",
+			 t->req_structure, op, t->req_value, v);
+	return ok;
+}
+
+/*
+ * The [tune] search, before the final run.  Stages the score needs that do
+ * not depend on the tuned stage run once (pass 0) and keep their outputs
+ * (keep = 1: release_inputs leaves them) for every candidate and for the
+ * final run, their pending files too.  For each candidate: the stages that
+ * depend on the tuned one are reset, the value is set and the score stage's
+ * ancestors run; a failure there (or a NaN score) only drops the candidate.
+ * On return (0) the best value is set, the stages that depend on it are
+ * reset and `needed` is the final run's set again.
+ */
+int tune_search(g_run_t *r, char *err, size_t errsize)
+{
+	const graph_t *g = r->g;
+	const g_tune_t *t = &g->tune;
+	const g_stage_t *ts = &g->stages[t->stage];
+	rt_stage_t *tst = r->rs[t->stage].st;
+	size_t n = (size_t)g->nstages;
+	signed char *memo = malloc(n);
+	char *down = calloc(n, 1), *fin = calloc(n, 1), *cand = calloc(n, 1);
+	int rc = 0, any = 0, nshared = 0, nper = 0, nok = 0, best = -1;
+	free(r->rows);
+	r->rows = calloc((size_t)t->nvalues, sizeof *r->rows);
+	r->nrows = 0;
+	r->best = -1;
+	if (!memo || !down || !fin || !cand || !r->rows) {
+		snprintf(err, errsize, "[tune] out of memory");
+		rc = ARMSTG_ENOMEM;
+		goto out;
+	}
+	memset(memo, -1, n);
+	for (int i = 0; i < g->nstages; i++) {
+		down[i] = (char)g_depends_on(g, i, t->stage, memo);
+		fin[i] = (char)r->rs[i].needed;
+		any |= fin[i] && down[i];
+		r->rs[i].needed = 0;
+	}
+	if (!any) {
+		rt_log(NULL, LOG_INFO, "tune: no stage to run depends on stage "
+		       "'%s': no search", ts->name);
+		goto out;
+	}
+	sched_mark_needed(r, t->score);
+	for (int i = 0; i < g->nstages; i++) {
+		r_stage_t *x = &r->rs[i];
+		cand[i] = (char)x->needed;
+		x->needed = x->keep = cand[i] && !down[i];
+		nshared += x->needed;
+		nper += cand[i] && down[i];
+	}
+	char sel[256];
+	snprintf(sel, sizeof sel, "%s%s%s", t->metric,
+		 t->structure ? " " : "", t->structure ? t->structure : "");
+	rt_log(NULL, LOG_INFO, "tune %s.%s: %d values, %s %s of %s.%s; %d "
+	       "stages run once, %d for each value", ts->name, t->key,
+	       t->nvalues, t->goal_max ? "max" : "min", sel,
+	       g->stages[t->score].name,
+	       g->stages[t->score].plug.desc->outputs[t->score_port].name,
+	       nshared, nper);
+	rc = sched_pass(r, err, errsize);
+	if (rc)
+		goto out;
+	for (int k = 0; k < t->nvalues && !rt_interrupted; k++) {
+		tune_row_t *row = &r->rows[k];
+		tune_reset(r, down);
+		rc = stage_set_param(tst, t->key, t->values[k], row->err,
+				     sizeof row->err);
+		if (rc) { /* checked at load: cannot happen */
+			snprintf(err, errsize, "[tune] %s", row->err);
+			goto out;
+		}
+		for (int i = 0; i < g->nstages; i++)
+			r->rs[i].needed = cand[i];
+		double t0 = sched_now();
+		row->rc = sched_pass(r, row->err, sizeof row->err);
+		row->wall_s = sched_now() - t0;
+		row->score = NAN;
+		if (rt_interrupted)
+			break;
+		r->nrows = k + 1;
+		if (!row->rc) {
+			rc = tune_score(r, &row->score, err, errsize);
+			if (rc)
+				goto out;
+			int req = isfinite(row->score)
+					  ? tune_require(r, row->err,
+							 sizeof row->err, err,
+							 errsize)
+					  : 1;
+			if (req < 0) {
+				rc = req;
+				goto out;
+			}
+			if (!req) {
+				row->rc = ARMSTG_ENUMERIC;
+			} else if (isfinite(row->score)) {
+				row->ok = 1;
+			} else {
+				row->rc = ARMSTG_ENUMERIC;
+				snprintf(row->err, sizeof row->err,
+					 "score %s is %s", sel,
+					 isnan(row->score) ? "NaN"
+					 : row->score > 0 ? "inf" : "-inf");
+			}
+		}
+		if (row->ok) {
+			nok++;
+			rt_log(NULL, LOG_INFO, "tune %s.%s = %s: %s %.6g "
+			       "(%.1f s)", ts->name, t->key, t->values[k], sel,
+			       row->score, row->wall_s);
+			const tune_row_t *b = best >= 0 ? &r->rows[best] : NULL;
+			/* ties: the earlier value stays */
+			if (!b || (t->goal_max ? row->score > b->score
+					       : row->score < b->score))
+				best = k;
+		} else {
+			rt_log(NULL, LOG_WARN, "tune %s.%s = %s: failed "
+			       "(%.1f s): %s", ts->name, t->key, t->values[k],
+			       row->wall_s, row->err);
+		}
+	}
+	tune_reset(r, down);
+	if (rt_interrupted) {
+		snprintf(err, errsize, "interrupted");
+		rc = ARMSTG_ECANCELLED;
+		goto out;
+	}
+	/* within the tolerance of the best score: the earliest candidate
+	 * (the first one that qualifies; best itself always does) */
+	for (int k = 0; best >= 0 && t->tol > 0 && k < best; k++) {
+		const tune_row_t *row = &r->rows[k];
+		double bs = r->rows[best].score;
+		if (!row->ok || (t->goal_max ? row->score < bs - t->tol
+					     : row->score > bs + t->tol))
+			continue;
+		rt_log(NULL, LOG_INFO, "tune %s.%s = %s: within tolerance %g "
+		       "of the best (%s, %s %.6g)", ts->name, t->key,
+		       t->values[k], t->tol, t->values[best], sel, bs);
+		best = k;
+		break;
+	}
+	if (best < 0) {
+		size_t w = (size_t)snprintf(err, errsize, "[tune] every value "
+					    "of %s.%s failed", ts->name,
+					    t->key);
+		for (int k = 0; k < r->nrows && w < errsize; k++)
+			w += (size_t)snprintf(err + w, errsize - w, "%s %s: %s",
+					      k ? ";" : ":", t->values[k],
+					      r->rows[k].err);
+		rc = r->rows[0].rc ? r->rows[0].rc : ARMSTG_EINVAL;
+		goto out;
+	}
+	rc = stage_set_param(tst, t->key, t->values[best], err, errsize);
+	if (rc)
+		goto out;
+	r->best = best;
+	rt_log(NULL, LOG_INFO, "tune %s.%s = %s chosen (%s %s %.6g; %d of %d "
+	       "values scored)", ts->name, t->key, t->values[best],
+	       t->goal_max ? "max" : "min", sel, r->rows[best].score, nok,
+	       t->nvalues);
+out:
+	/* the final run's stages again (run.tsv shows those and the ones
+	 * that ran for the tuning only) */
+	for (int i = 0; fin && i < g->nstages; i++) {
+		r->rs[i].needed = fin[i];
+		r->rs[i].keep = 0;
+	}
+	free(memo);
+	free(down);
+	free(fin);
+	free(cand);
+	return rc;
+}
+
+/* tune.tsv: one row per candidate tried (value, score, wall_s, status,
+ * chosen, error), written to path (a temporary name). */
+int tune_table_write(const g_run_t *run, const char *path)
+{
+	const g_tune_t *t = &run->g->tune;
+	char e[1024];
+	tab_t *tab = tab_new();
+	int bad = !tab || !tab_add_col(tab, "value", TAB_STR) ||
+		  !tab_add_col(tab, "score", TAB_NUM) ||
+		  !tab_add_col(tab, "wall_s", TAB_NUM) ||
+		  !tab_add_col(tab, "status", TAB_STR) ||
+		  !tab_add_col(tab, "chosen", TAB_NUM) ||
+		  !tab_add_col(tab, "error", TAB_STR);
+	for (int k = 0; !bad && k < run->nrows; k++) {
+		const tune_row_t *r = &run->rows[k];
+		int64_t row = tab_add_row(tab);
+		bad = row < 0 || tab_set_str(tab, row, "value", t->values[k]) ||
+		      tab_set_num(tab, row, "score", r->score) ||
+		      tab_set_num(tab, row, "wall_s", r->wall_s) ||
+		      tab_set_str(tab, row, "status",
+				  r->ok ? "ok" : "failed") ||
+		      tab_set_num(tab, row, "chosen", k == run->best) ||
+		      (!r->ok && tab_set_str(tab, row, "error", r->err));
+	}
+	if (!bad && tab_write_file(path, tab, e, sizeof e)) {
+		rt_log(NULL, LOG_WARN, "cannot write %s: %s", path, e);
+		bad = 1;
+	}
+	if (tab)
+		msg_unref(&tab->base);
+	return bad ? -1 : 0;
+}
