@@ -100,7 +100,7 @@ typedef struct run_opts {
  * the output folder's lock (outdir.c), then commit every file they wrote
  * and run.tsv (tune.tsv) all or nothing.  0 on success: every output is
  * under its final name.  A negative code, with err, when something was
- * refused before any stage ran (graph_run_refused() says so: an unknown
+ * refused before any stage ran (*refused is set to 1 then: an unknown
  * target, an output folder that is a file, cannot be created or is in use
  * by another run, two outputs that are one file, a folder where an output
  * file goes), a stage failed (its message is logged and copied to err),
@@ -108,13 +108,14 @@ typedef struct run_opts {
  * set before the commit point (ARMSTG_ECANCELLED).  After any failure no
  * output of the run is there and files that were there before are as they
  * were; a run that ran stages leaves its tables as run.failed.tsv (and
- * tune.failed.tsv). */
-int graph_run(graph_t *g, const run_opts_t *o, char *err, size_t errsize);
-/* (graph_run reads the graph as const: each run makes its own stage
- * instances and state, so one loaded graph can run again unchanged; the
- * only thing it writes in g is what graph_run_refused reads.) */
-/* 1 when the last graph_run stopped before any stage ran */
-int graph_run_refused(const graph_t *g);
+ * tune.failed.tsv).  The graph is not changed: each run makes its own
+ * stage instances and state, so one loaded graph can run again, or in
+ * several threads at once. */
+int graph_run_ex(const graph_t *g, const run_opts_t *o, int *refused,
+		 char *err, size_t errsize);
+/* graph_run_ex without the refused flag */
+int graph_run(const graph_t *g, const run_opts_t *o, char *err,
+	      size_t errsize);
 
 const char *graph_name(const graph_t *g);
 int graph_nstages(const graph_t *g);

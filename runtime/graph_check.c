@@ -530,8 +530,3 @@ int graph_nstages(const graph_t *g)
 {
 	return g->nstages;
 }
-
-int graph_run_refused(const graph_t *g)
-{
-	return g->last_refused;
-}

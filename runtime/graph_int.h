@@ -111,9 +111,6 @@ struct graph {
 	const char *const *vars;
 	int nvars;
 	int plugin_failed;          /* a plugin could not be loaded */
-	/* written by graph_run, read by graph_run_refused: the one thing a
-	 * run leaves in the graph */
-	int last_refused;
 	/* parse state (graph_parse.c) */
 	int cur_kind;               /* 0 none, 1 graph, 2 stage, 3 node,
 				       4 tune */

@@ -199,7 +199,8 @@ static int cmd_run(int argc, char **argv, int check_only)
 	run_opts_t o = { .outdir = c.out ? c.out : ".", .jobs = c.jobs,
 			 .targets = c.targets, .ntargets = c.ntargets,
 			 .quiet = c.quiet };
-	int rc = graph_run(g, &o, err, 65536);
+	int refused = 0;
+	int rc = graph_run_ex(g, &o, &refused, err, 65536);
 	int code = 0;
 	char shown[4096];
 	rt_escape_ctl(err, shown, sizeof shown);
@@ -208,7 +209,7 @@ static int cmd_run(int argc, char **argv, int check_only)
 			"in %s%s\n", graph_name(g), o.outdir,
 			rt_interrupted ? " (the interrupt came after every "
 					 "output was written)" : "");
-	} else if (graph_run_refused(g)) {
+	} else if (refused) {
 		fprintf(stderr, "armstg: %s\n", shown);
 		code = EXIT_USAGE;
 	} else if (rc == ARMSTG_ECANCELLED) {

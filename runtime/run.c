@@ -6,7 +6,7 @@
  *      read);
  *   2. checks that need the output folder (run_check): the targets, the
  *      folder itself, the declared outputs resolved on disk; a refusal
- *      here runs nothing and leaves nothing (graph_run_refused);
+ *      here runs nothing and leaves nothing (*refused);
  *   3. the output folder opened: made, locked, what dead runs left cleaned,
  *      a staging folder (outdir.c);
  *   4. the run's state (g_run_t): a fresh instance of every stage with the
@@ -15,8 +15,7 @@
  *   5. the commit: every file of the needed stages and run.tsv (tune.tsv)
  *      renamed all or nothing (outdir_commit); after a failure, the run's
  *      tables as run.failed.tsv (tune.failed.tsv).
- * The graph itself is not changed (const), but for the flag that
- * graph_run_refused reads.
+ * The graph itself is not changed (const): a run's state is its g_run_t.
  */
 #include <errno.h>
 #include <stdlib.h>
@@ -224,12 +223,15 @@ static void write_failed_tables(const g_run_t *r, outdir_t *od, double total)
 		rt_log(NULL, LOG_WARN, "cannot write %s", path);
 }
 
-int graph_run(graph_t *gw, const run_opts_t *o, char *err, size_t errsize)
+int graph_run_ex(const graph_t *g, const run_opts_t *o, int *refused,
+		 char *err, size_t errsize)
 {
-	const graph_t *g = gw;
 	const g_tune_t *t = &g->tune;
 	outdir_t *od = NULL;
-	gw->last_refused = 1;
+	int dummy;
+	if (!refused)
+		refused = &dummy;
+	*refused = 1;
 	g_run_t *r = run_new(g, o, err, errsize);
 	if (!r)
 		return ARMSTG_ENOMEM;
@@ -256,7 +258,7 @@ int graph_run(graph_t *gw, const run_opts_t *o, char *err, size_t errsize)
 	rc = outdir_open(r->o.outdir, g->file, &od, err, errsize);
 	if (rc)
 		goto out;
-	gw->last_refused = 0;
+	*refused = 0;
 	for (int i = 0; i < g->nstages; i++) {
 		stage_set_outdir(r->rs[i].st, r->o.outdir);
 		stage_set_staging(r->rs[i].st, outdir_staging(od));
@@ -294,4 +296,10 @@ int graph_run(graph_t *gw, const run_opts_t *o, char *err, size_t errsize)
 out:
 	run_free(r);
 	return rc;
+}
+
+int graph_run(const graph_t *g, const run_opts_t *o, char *err,
+	      size_t errsize)
+{
+	return graph_run_ex(g, o, NULL, err, errsize);
 }

@@ -170,8 +170,10 @@ static void test_commit_all_or_nothing(void **state)
 	if (!g)
 		fail_msg("%s", err);
 	run_opts_t o = { .outdir = out, .jobs = 1, .quiet = 1 };
-	assert_int_equal(graph_run(g, &o, err, sizeof err), ARMSTG_EIO);
-	assert_false(graph_run_refused(g));
+	int refused = 1;
+	assert_int_equal(graph_run_ex(g, &o, &refused, err, sizeof err),
+			 ARMSTG_EIO);
+	assert_false(refused);
 	char want[1024];
 	snprintf(want, sizeof want, "cannot commit the outputs (none was "
 		 "written): cannot write '%s/blocker.txt': a folder of that "

@@ -422,8 +422,10 @@ static void test_outputs_checked_before_running(void **state)
 	if (!g)
 		fail_msg("%s", err);
 	run_opts_t o = { .outdir = out, .jobs = 1, .quiet = 1 };
-	assert_int_equal(graph_run(g, &o, err, sizeof err), ARMSTG_EINVAL);
-	assert_true(graph_run_refused(g));
+	int refused = 0;
+	assert_int_equal(graph_run_ex(g, &o, &refused, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_true(refused);
 	char want[2048];
 	snprintf(want, sizeof want, "%s:14: stage 'b': key 'path': "
 		 "'%s/./sub//x.txt' is also written by stage 'a' (key 'path', "
@@ -440,15 +442,20 @@ static void test_outputs_checked_before_running(void **state)
 	g = graph_load(gp, sets, 1, err, sizeof err);
 	assert_non_null(g);
 	run_opts_t o2 = { .outdir = f, .jobs = 1, .quiet = 1 };
-	assert_int_equal(graph_run(g, &o2, err, sizeof err), ARMSTG_EINVAL);
-	assert_true(graph_run_refused(g));
+	refused = 0;
+	assert_int_equal(graph_run_ex(g, &o2, &refused, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_true(refused);
 	snprintf(want, sizeof want, "output folder '%s' is a file, not a "
 		 "folder", f);
 	assert_string_equal(err, want);
 	assert_false(tu_exists(cnt));
 	/* --out "" */
 	run_opts_t o3 = { .outdir = "", .jobs = 1, .quiet = 1 };
-	assert_int_equal(graph_run(g, &o3, err, sizeof err), ARMSTG_EINVAL);
+	refused = 0;
+	assert_int_equal(graph_run_ex(g, &o3, &refused, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_true(refused);
 	assert_string_equal(err, "the output folder name is empty (give --out "
 			    "DIR; '.' for the current folder)");
 	assert_false(tu_exists(cnt));
@@ -463,8 +470,10 @@ static void test_outputs_checked_before_running(void **state)
 	const char *sets2[] = { "b.path=dir/y.txt" };
 	g = graph_load(gp, sets2, 1, err, sizeof err);
 	assert_non_null(g);
-	assert_int_equal(graph_run(g, &o, err, sizeof err), ARMSTG_EINVAL);
-	assert_true(graph_run_refused(g));
+	refused = 0;
+	assert_int_equal(graph_run_ex(g, &o, &refused, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_true(refused);
 	snprintf(want, sizeof want, "%s: --set: stage 'b': key 'path': "
 		 "'dir/y.txt' is a folder on disk (%s): the output file cannot "
 		 "replace it", gp, sub);
