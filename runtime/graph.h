@@ -113,6 +113,13 @@ typedef struct run_opts {
  * several threads at once. */
 int graph_run_ex(const graph_t *g, const run_opts_t *o, int *refused,
 		 char *err, size_t errsize);
+/* What graph_run checks before any stage runs, without running or
+ * making anything (`armstg check`): the targets, the output folder ("" or
+ * a file refused; it can be made), the declared outputs resolved under it
+ * (two that are one file, a folder where a file goes).  0, or
+ * ARMSTG_EINVAL with err. */
+int graph_check_run(const graph_t *g, const run_opts_t *o, char *err,
+		    size_t errsize);
 /* graph_run_ex without the refused flag */
 int graph_run(const graph_t *g, const run_opts_t *o, char *err,
 	      size_t errsize);

@@ -4,7 +4,7 @@
  *
  *   armstg run GRAPH [--set stage.key=value]... [--out DIR] [--jobs N]
  *              [--target STAGE]... [-v] [-q]
- *   armstg check GRAPH [--set ...]...
+ *   armstg check GRAPH [--set ...]... [--out DIR] [--target STAGE]...
  *   armstg worker [--bind EP] [--plugins DIR] [--keys DIR] ...  (worker.c)
  *   armstg keygen DIR NAME
  *   armstg batch GRAPH --cases FILE --workers EP,... --out DIR  (batch.c)
@@ -25,7 +25,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include "graph.h"
@@ -48,8 +47,11 @@ static void usage(FILE *f)
 "      --jobs N                stages run at the same time (default 1)\n"
 "      --target STAGE          run only what STAGE needs (repeatable)\n"
 "      -v / -q                 more / less logging (ARMSTG_LOG=debug,stage=trace)\n"
-"  check GRAPH [--set ...] validate only: plugins, ports, types, parameters,\n"
-"                          cycles; prints every error with file:line\n"
+"  check GRAPH [--set ...] [--out DIR] [--target STAGE]\n"
+"                          validate only: plugins, ports, types, parameters,\n"
+"                          cycles, outputs, targets, the output folder (as\n"
+"                          run would, nothing run or made); every error\n"
+"                          with file:line\n"
 "  plugins                 list the plugins found (ARMSTG_PLUGIN_PATH, then\n"
 "                          build/plugins beside the executable)\n"
 "  describe PLUGIN         ports, parameters (default, range, unit, help)\n"
@@ -172,11 +174,15 @@ static int cmd_run(int argc, char **argv, int check_only)
 		return plugin_failed ? EXIT_PLUGIN : EXIT_USAGE;
 	}
 	if (check_only) {
-		struct stat sb;
+		/* what run checks before any stage, nothing made */
+		run_opts_t o = { .outdir = c.out ? c.out : ".", .jobs = c.jobs,
+				 .targets = c.targets, .ntargets = c.ntargets,
+				 .quiet = 1 };
 		int code = 0;
-		if (c.out && !stat(c.out, &sb) && !S_ISDIR(sb.st_mode)) {
-			fprintf(stderr, "armstg: output folder '%s' is a file, "
-				"not a folder\n", c.out);
+		if (graph_check_run(g, &o, err, 65536)) {
+			char shown[4096];
+			rt_escape_ctl(err, shown, sizeof shown);
+			fprintf(stderr, "armstg: %s\n", shown);
 			code = EXIT_USAGE;
 		} else {
 			printf("%s: ok (%d stages)\n", c.graph,

@@ -5,8 +5,9 @@
  *   1. which stages: --target, [graph] targets, or all (and what they
  *      read);
  *   2. checks that need the output folder (run_check): the targets, the
- *      folder itself, the declared outputs resolved on disk; a refusal
- *      here runs nothing and leaves nothing (*refused);
+ *      folder itself (it can be made), the declared outputs resolved on
+ *      disk; a refusal here runs nothing and leaves nothing (*refused);
+ *      graph_check_run (`armstg check`) stops here;
  *   3. the output folder opened: made, locked, what dead runs left cleaned,
  *      a staging folder (outdir.c);
  *   4. the run's state (g_run_t): a fresh instance of every stage with the
@@ -87,10 +88,58 @@ void run_free(g_run_t *r)
 	free(r);
 }
 
+/* The output folder can be made without making it: the nearest part of
+ * the path that exists is a folder we may write in (path_mkdirs would
+ * fail on a file there, with ENOTDIR).  0, or -1 with err. */
+static int outdir_makeable(const char *dir, char *err, size_t errsize)
+{
+	char p[PATH_MAX];
+	if (snprintf(p, sizeof p, "%s", dir) >= (int)sizeof p) {
+		snprintf(err, errsize, "cannot create output folder '%s': %s",
+			 dir, strerror(ENAMETOOLONG));
+		return -1;
+	}
+	for (;;) {
+		struct stat sb;
+		if (!stat(p, &sb)) {
+			if (!S_ISDIR(sb.st_mode)) {
+				snprintf(err, errsize, "cannot create output "
+					 "folder '%s': %s", dir,
+					 strerror(ENOTDIR));
+				return -1;
+			}
+			if (access(p, W_OK | X_OK)) {
+				snprintf(err, errsize, "cannot create output "
+					 "folder '%s': '%s': %s", dir, p,
+					 strerror(errno));
+				return -1;
+			}
+			return 0;
+		}
+		if (errno != ENOENT) {
+			snprintf(err, errsize, "cannot create output folder "
+				 "'%s': %s", dir, strerror(errno));
+			return -1;
+		}
+		/* up one part: "a/b/c" -> "a/b", "a" -> ".", "/a" -> "/" */
+		char *slash = strrchr(p, '/');
+		while (slash && slash > p && slash[1] == 0) {
+			*slash = 0;
+			slash = strrchr(p, '/');
+		}
+		if (!slash)
+			snprintf(p, sizeof p, ".");
+		else if (slash == p)
+			p[1] = 0;
+		else
+			*slash = 0;
+	}
+}
+
 /* Everything checked before a stage runs that needs the options: the
- * targets, the output folder, the declared outputs (not twice the same
- * file once relative and absolute paths are resolved; no folder in the
- * way).  0, or -1 with err. */
+ * targets, the output folder (not "", not a file, can be made), the
+ * declared outputs (not twice the same file once relative and absolute
+ * paths are resolved; no folder in the way).  0, or -1 with err. */
 static int run_check(const g_run_t *r, char *err, size_t errsize)
 {
 	const graph_t *g = r->g;
@@ -112,6 +161,8 @@ static int run_check(const g_run_t *r, char *err, size_t errsize)
 			 "folder", o->outdir);
 		return -1;
 	}
+	if (outdir_makeable(o->outdir, err, errsize))
+		return -1;
 	char *needed = calloc((size_t)(g->nstages ? g->nstages : 1), 1);
 	if (!needed) {
 		snprintf(err, errsize, "out of memory");
@@ -223,19 +274,11 @@ static void write_failed_tables(const g_run_t *r, outdir_t *od, double total)
 		rt_log(NULL, LOG_WARN, "cannot write %s", path);
 }
 
-int graph_run_ex(const graph_t *g, const run_opts_t *o, int *refused,
-		 char *err, size_t errsize)
+/* which stages: explicit targets, [graph] targets, or all (and what they
+ * read) */
+static void mark_targets(g_run_t *r)
 {
-	const g_tune_t *t = &g->tune;
-	outdir_t *od = NULL;
-	int dummy;
-	if (!refused)
-		refused = &dummy;
-	*refused = 1;
-	g_run_t *r = run_new(g, o, err, errsize);
-	if (!r)
-		return ARMSTG_ENOMEM;
-	/* which stages: explicit targets, [graph] targets, or all */
+	const graph_t *g = r->g;
 	if (r->o.ntargets > 0) {
 		for (int k = 0; k < r->o.ntargets; k++) {
 			int i = g_stage_index(g, r->o.targets[k]);
@@ -252,6 +295,33 @@ int graph_run_ex(const graph_t *g, const run_opts_t *o, int *refused,
 		for (int i = 0; i < g->nstages; i++)
 			sched_mark_needed(r, i);
 	}
+}
+
+int graph_check_run(const graph_t *g, const run_opts_t *o, char *err,
+		    size_t errsize)
+{
+	g_run_t *r = run_new(g, o, err, errsize);
+	if (!r)
+		return ARMSTG_ENOMEM;
+	mark_targets(r);
+	int rc = run_check(r, err, errsize) ? ARMSTG_EINVAL : 0;
+	run_free(r);
+	return rc;
+}
+
+int graph_run_ex(const graph_t *g, const run_opts_t *o, int *refused,
+		 char *err, size_t errsize)
+{
+	const g_tune_t *t = &g->tune;
+	outdir_t *od = NULL;
+	int dummy;
+	if (!refused)
+		refused = &dummy;
+	*refused = 1;
+	g_run_t *r = run_new(g, o, err, errsize);
+	if (!r)
+		return ARMSTG_ENOMEM;
+	mark_targets(r);
 	int rc = ARMSTG_EINVAL;
 	if (run_check(r, err, errsize))
 		goto out;

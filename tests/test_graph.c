@@ -563,6 +563,24 @@ static void test_exit_codes(void **state)
 	e = cli_err(args, NULL, &code);
 	assert_int_equal(code, 2);
 	assert_non_null(strstr(e, "cannot create output folder"));
+	/* check refuses what run would refuse before its first stage, and
+	 * makes nothing */
+	snprintf(args, sizeof args, "check %s --target nosuch", gp);
+	e = cli_err(args, NULL, &code);
+	assert_int_equal(code, 2);
+	assert_non_null(strstr(e, "unknown target stage 'nosuch'"));
+	snprintf(args, sizeof args, "check %s --out %s/plugins/tp_gen.so/sub",
+		 gp, out);
+	e = cli_err(args, NULL, &code);
+	assert_int_equal(code, 2);
+	snprintf(so, sizeof so, "armstg: cannot create output folder "
+		 "'%s/plugins/tp_gen.so/sub': Not a directory\n", out);
+	assert_string_equal(e, so);
+	snprintf(args, sizeof args, "check %s --out %s/o3/deeper", gp, out);
+	e = cli_err(args, NULL, &code);
+	assert_int_equal(code, 0);
+	snprintf(so, sizeof so, "%s/o3", out);
+	assert_false(tu_exists(so));
 	unlink(gp);
 	tu_cleanup(out);
 }
