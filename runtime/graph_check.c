@@ -518,6 +518,7 @@ void graph_free(graph_t *g)
 		free(g->tune.values[k]);
 	free(g->tune.values);
 	free(g->stages);
+	free(g->nodes);
 	free(g);
 }
 

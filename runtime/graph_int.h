@@ -28,6 +28,7 @@
 #include "remote.h"
 
 #define G_MAX_STAGES 256
+#define G_MAX_NODES 16
 #define G_MAX_PORTS 32
 #define G_NAME 64
 /* longest line of a graph file, '\n' included (libinih's buffer, see
@@ -101,10 +102,12 @@ struct graph {
 	char name[G_NAME];
 	char targets[1024];
 	int targets_line;
+	/* grown as the file names them (a fuzzed parse allocates only
+	 * what it uses) */
 	g_stage_t *stages;
-	int nstages;
-	g_node_t nodes[16];
-	int nnodes;
+	int nstages, cap_stages;
+	g_node_t *nodes;
+	int nnodes, cap_nodes;
 	g_tune_t tune;
 	/* variables that win over the environment ("NAME=value"; a batch
 	 * case's row; the caller's, used only while loading) */

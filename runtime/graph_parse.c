@@ -271,6 +271,22 @@ static int add_kv(graph_t *g, g_stage_t *s, const char *key, const char *val,
 
 /* Section headers are tracked by the reader so that empty sections and
  * their line numbers are known (inih only reports key lines). */
+/* Room for one more element in *arr (n used of *cap): doubled when full,
+ * the new part zeroed.  0, or -1 (out of memory; *arr unchanged). */
+static int g_grow(void **arr, int *cap, int n, size_t elem)
+{
+	if (n < *cap)
+		return 0;
+	int nc = *cap ? 2 * *cap : 8;
+	char *p = realloc(*arr, (size_t)nc * elem);
+	if (!p)
+		return -1;
+	memset(p + (size_t)*cap * elem, 0, (size_t)(nc - *cap) * elem);
+	*arr = p;
+	*cap = nc;
+	return 0;
+}
+
 static void on_section(graph_t *g, const char *raw)
 {
 	char sec[256];
@@ -354,6 +370,12 @@ static void on_section(graph_t *g, const char *raw)
 				g->cur_kind = -1;
 				return;
 			}
+			if (g_grow((void **)&g->stages, &g->cap_stages,
+				   g->nstages, sizeof *g->stages)) {
+				g_err(g, g->lineno, name, NULL, "out of memory");
+				g->cur_kind = -1;
+				return;
+			}
 			g_stage_t *st = &g->stages[g->nstages];
 			memset(st, 0, sizeof *st);
 			snprintf(st->name, sizeof st->name, "%s", name);
@@ -371,9 +393,15 @@ static void on_section(graph_t *g, const char *raw)
 					g->cur_kind = -1;
 					return;
 				}
-			if (g->nnodes >= 16) {
+			if (g->nnodes >= G_MAX_NODES) {
 				g_err(g, g->lineno, NULL, NULL,
-				     "too many nodes (max 16)");
+				     "too many nodes (max %d)", G_MAX_NODES);
+				g->cur_kind = -1;
+				return;
+			}
+			if (g_grow((void **)&g->nodes, &g->cap_nodes,
+				   g->nnodes, sizeof *g->nodes)) {
+				g_err(g, g->lineno, NULL, NULL, "out of memory");
 				g->cur_kind = -1;
 				return;
 			}
@@ -541,11 +569,6 @@ graph_t *g_alloc(const char *fname, char *err, size_t errsize)
 	graph_t *g = calloc(1, sizeof *g);
 	if (!g)
 		return NULL;
-	g->stages = calloc(G_MAX_STAGES, sizeof *g->stages);
-	if (!g->stages) {
-		free(g);
-		return NULL;
-	}
 	snprintf(g->file, sizeof g->file, "%s", fname);
 	g->err = err;
 	g->errsize = errsize;
