@@ -9,10 +9,14 @@
 #   FUZZ_RUNS=N         instead: N executions per target (no time limit),
 #                       e.g. FUZZ_RUNS=10000000 for bench/fuzz/results.md
 #   FUZZ_TARGETS="msgpack graph wire nifti"
+#   FUZZ_BUILD_ONLY=1   build the targets and their seeds, run nothing
 #   CLANG=clang
 #
 # Corpora and crash artifacts live in build-fuzz/ (kept between runs, so
-# later runs start from what earlier ones found).  Exit status: 0 when every
+# later runs start from what earlier ones found).  build-fuzz/ is also
+# self-contained for a campaign on another machine (no compiler needed
+# there): the targets, seeds/, corpus/, dict/, COMMIT and run.sh
+# (bench/fuzz/run.sh: `sh build-fuzz/run.sh -n 10000000 -j 4 -p`).  Exit status: 0 when every
 # target ran its time without a crash, 1 on a crash (the input is saved as
 # build-fuzz/artifacts/<target>-crash-*; replay it with
 # `build-fuzz/fuzz_<target> FILE`), 2 when clang/libFuzzer is missing.
@@ -21,6 +25,7 @@ CLANG=${CLANG:-clang}
 SECS=${FUZZ_SECONDS:-60}
 TARGETS=${FUZZ_TARGETS:-msgpack graph wire nifti}
 RUNS=${FUZZ_RUNS:-}
+BUILD_ONLY=${FUZZ_BUILD_ONLY:-}
 B=build-fuzz
 cd "$(dirname "$0")/.." || exit 2
 
@@ -47,7 +52,12 @@ CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -fopenmp \
 LIBS="-lniftiio -lznz -lz $HDF5_LIBS -lmsgpackc -linih -lpng -lczmq -lzmq -ldl \
  -lpthread -lm"
 
-mkdir -p "$B/obj" "$B/artifacts" "$B/corpus" || exit 2
+mkdir -p "$B/obj" "$B/artifacts" "$B/corpus" "$B/dict" || exit 2
+cp bench/fuzz/run.sh "$B/run.sh" || exit 2
+# the commit the targets are built from (+changes: with uncommitted ones)
+c=$(git rev-parse --short HEAD 2>/dev/null || echo unknown)
+git diff --quiet HEAD -- runtime tests/fuzz 2>/dev/null || c="$c+changes"
+echo "$c" >"$B/COMMIT"
 
 # the runtime, instrumented for coverage (fuzzer-no-link) and sanitizers
 objs=""
@@ -96,6 +106,11 @@ for t in $TARGETS; do
         for f in graphs/*.ini tests/graphs/*/*.ini tests/graphs/*.ini; do
             [ -f "$f" ] && cp "$f" "$seeds/" 2>/dev/null
         done
+    fi
+    cp "tests/fuzz/$t.dict" "$B/dict/$t.dict" || exit 2
+    if [ -n "$BUILD_ONLY" ]; then
+        echo "fuzz: built $bin (seeds $(ls "$seeds" | wc -l), corpus $(ls "$corpus" | wc -l))"
+        continue
     fi
     log="$B/fuzz_$t.log"
     if [ -n "$RUNS" ]; then

@@ -1,30 +1,142 @@
 #!/bin/sh
 # The fuzzing campaign of bench/fuzz/results.md: every `make fuzz` target
-# to N executions (default 10 million), one after the other, on one core at
-# low priority (a shared machine), then one line per target appended to
-# bench/fuzz/results.txt (date, commit, machine, target, executions,
-# seconds, executions/s, coverage, corpus, crash or not).
+# to N executions (default 10 million), then one line per target appended
+# to results.tsv (date, commit, machine, target, executions, wall seconds,
+# executions/s, CPU seconds, coverage, features, corpus, crashes).
 #
-#   sh bench/fuzz/run.sh [N] [TARGETS]      e.g. sh bench/fuzz/run.sh 10000000
+#   sh bench/fuzz/run.sh [-n N] [-j J] [-p] [-b DIR] [TARGETS]
 #
-# Crashes stop a target: the input is in build-fuzz/artifacts/ (replay with
-# build-fuzz/fuzz_<target> FILE) and becomes a regression test.
+#   -n N     executions per target, in all (default 10000000)
+#   -j J     processes per target (default 1), each N/J executions on the
+#            shared corpus (libFuzzer reloads it, so they learn from each
+#            other); on a shared machine leave 1
+#   -p       the targets at the same time (default: one after the other)
+#   -b DIR   the folder of the targets (default: build-fuzz beside this
+#            script's repository, or this script's own folder when it is
+#            the copy that `make fuzz` puts in build-fuzz/)
+#   TARGETS  default: the targets found in DIR (graph nifti msgpack wire)
+#
+# Self-contained: DIR holds what it needs (fuzz_<target>, seeds/, corpus/,
+# dict/, COMMIT; built by `FUZZ_BUILD_ONLY=1 make fuzz`), so the folder can
+# be copied to another machine with the same libraries and run there
+# without a compiler or the sources: `sh build-fuzz/run.sh -n 10000000 -j 4
+# -p` on 16 cores.  Every process runs at nice 19.  Logs:
+# DIR/campaign/<target>-<k>.log; results: DIR/campaign/results.tsv (and,
+# in a repository, bench/fuzz/results.tsv).  A crash stops its process: the
+# input is in DIR/artifacts/ (replay: DIR/fuzz_<target> FILE) and becomes a
+# regression test.  Exit status: 1 when any process crashed, else 0.
 set -u
-cd "$(dirname "$0")/../.." || exit 2
-N=${1:-10000000}
-TARGETS=${2:-graph nifti msgpack}
-CPU=${FUZZ_CPU:-$(($(nproc) - 1))}
-commit=${FUZZ_COMMIT:-$(git rev-parse --short HEAD 2>/dev/null || echo unknown)}
-machine="$(nproc) cores, $(sed -n 's/^model name[^:]*: //p' /proc/cpuinfo | head -1)"
-for t in $TARGETS; do
+N=10000000
+J=1
+PAR=
+D=
+while [ $# -gt 0 ]; do
+    case $1 in
+    -n) N=$2; shift 2 ;;
+    -j) J=$2; shift 2 ;;
+    -p) PAR=1; shift ;;
+    -b) D=$2; shift 2 ;;
+    -h|--help) sed -n '2,28p' "$0"; exit 0 ;;
+    -*) echo "run.sh: unknown option $1" >&2; exit 2 ;;
+    *) break ;;
+    esac
+done
+here=$(cd "$(dirname "$0")" && pwd)
+if [ -z "$D" ]; then
+    if [ -f "$here/COMMIT" ]; then D=$here; else D=$here/../../build-fuzz; fi
+fi
+D=$(cd "$D" 2>/dev/null && pwd) || { echo "run.sh: no folder $D" >&2; exit 2; }
+TARGETS=${*:-}
+if [ -z "$TARGETS" ]; then
+    for t in graph nifti msgpack wire; do
+        [ -x "$D/fuzz_$t" ] && TARGETS="$TARGETS $t"
+    done
+fi
+[ -n "$TARGETS" ] || { echo "run.sh: no fuzz_* in $D (FUZZ_BUILD_ONLY=1 make fuzz)" >&2; exit 2; }
+case $N$J in *[!0-9]*) echo "run.sh: -n and -j take numbers" >&2; exit 2 ;; esac
+commit=${FUZZ_COMMIT:-$(cat "$D/COMMIT" 2>/dev/null || echo unknown)}
+machine="$(nproc) cores, $(sed -n 's/^model name[^:]*: //p' /proc/cpuinfo | head -1), load $(cut -d' ' -f1 /proc/loadavg) at start"
+mkdir -p "$D/campaign" "$D/artifacts"
+out=$D/campaign/results.tsv
+[ -f "$out" ] || printf 'date\tcommit\tmachine\ttarget\tprocesses\texecutions\twall_s\texec_per_s\tcpu_s\tcov\tft\tcorpus\tcrashes\n' >"$out"
+
+# one target: J processes on its corpus, then its line
+campaign() {
+    t=$1
+    bin=$D/fuzz_$t
+    [ -x "$bin" ] || { echo "run.sh: no $bin" >&2; return 2; }
+    mkdir -p "$D/corpus/$t" "$D/seeds/$t"
     start=$(date -u +%Y-%m-%dT%H:%MZ)
     t0=$(date +%s)
-    FUZZ_RUNS=$N FUZZ_TARGETS=$t taskset -c "$CPU" nice -n 19 \
-        sh scripts/fuzz.sh >"build-fuzz/campaign_$t.out" 2>&1
-    rc=$?
+    per=$(( (N + J - 1) / J ))
+    k=0
+    pids=""
+    while [ $k -lt "$J" ]; do
+        # the nifti target writes its scratch file under /dev/shm or /tmp
+        # (a subshell, so that `times` gives the process's CPU time)
+        (
+            ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1} nice -n 19 \
+                "$bin" -runs=$per -timeout=10 -rss_limit_mb=2048 \
+                -max_len=4096 -dict="$D/dict/$t.dict" -print_final_stats=1 \
+                -artifact_prefix="$D/artifacts/$t-" \
+                "$D/corpus/$t" "$D/seeds/$t" >"$D/campaign/$t-$k.log" 2>&1
+            rc=$?
+            times >"$D/campaign/$t-$k.times"
+            exit $rc
+        ) &
+        pids="$pids $!"
+        k=$((k + 1))
+    done
+    crashes=0
+    for p in $pids; do
+        wait "$p" || crashes=$((crashes + 1))
+    done
     t1=$(date +%s)
-    line=$(grep "^fuzz_$t:" "build-fuzz/campaign_$t.out" | tail -1)
-    printf '%s\t%s\t%s\t%s\t%s\t%s s\t%s\n' "$start" "$commit" "$machine" \
-        "$t" "rc $rc" "$((t1 - t0))" "$line" >>bench/fuzz/results.txt
-    echo "$line"
-done
+    runs=0 cpu=0 cov=0 ft=0
+    k=0
+    while [ $k -lt "$J" ]; do
+        log=$D/campaign/$t-$k.log
+        # times' second line: the children's user and system time, as
+        # 1m2.50s 0m0.20s
+        cpu=$(sed -n 2p "$D/campaign/$t-$k.times" | tr 'ms' '  ' |
+              awk -v c="$cpu" '{ print c + 60 * $1 + $2 + 60 * $3 + $4 }')
+        r=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
+        runs=$((runs + ${r:-0}))
+        # coverage and features of the last status line (each process
+        # sees the shared corpus; the largest is the campaign's)
+        c=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
+        f=$(grep -o 'ft: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
+        [ "${c:-0}" -gt "$cov" ] && cov=$c
+        [ "${f:-0}" -gt "$ft" ] && ft=$f
+        k=$((k + 1))
+    done
+    wall=$((t1 - t0))
+    [ $wall -gt 0 ] || wall=1
+    cpu=$(printf '%.0f' "$cpu")
+    corpus=$(ls "$D/corpus/$t" | wc -l)
+    line=$(printf '%s\t%s\t%s\t%s\t%d\t%d\t%d\t%d\t%d\t%d\t%d\t%d\t%d' \
+        "$start" "$commit" "$machine" "$t" "$J" "$runs" "$wall" \
+        $((runs / wall)) "$cpu" "$cov" "$ft" "$corpus" "$crashes")
+    echo "$line" >>"$out"
+    echo "$t: $runs executions in $wall s ($((runs / wall))/s, $J process(es), $cpu CPU s), cov $cov, ft $ft, corpus $corpus, crashes $crashes"
+    [ $crashes -eq 0 ]
+}
+
+status=0
+if [ -n "$PAR" ]; then
+    cpids=""
+    for t in $TARGETS; do
+        campaign "$t" &
+        cpids="$cpids $!"
+    done
+    for p in $cpids; do wait "$p" || status=1; done
+else
+    for t in $TARGETS; do campaign "$t" || status=1; done
+fi
+# in a repository, the lines go to bench/fuzz/results.tsv too
+if [ -d "$here/../../bench/fuzz" ] && [ ! -f "$here/COMMIT" ]; then
+    tail -n +2 "$out" | while IFS= read -r l; do
+        grep -qxF "$l" "$here/results.tsv" 2>/dev/null || echo "$l" >>"$here/results.tsv"
+    done
+fi
+exit $status
