@@ -58,7 +58,9 @@ commit=${FUZZ_COMMIT:-$(cat "$D/COMMIT" 2>/dev/null || echo unknown)}
 machine="$(nproc) cores, $(sed -n 's/^model name[^:]*: //p' /proc/cpuinfo | head -1), load $(cut -d' ' -f1 /proc/loadavg) at start"
 mkdir -p "$D/campaign" "$D/artifacts"
 out=$D/campaign/results.tsv
-[ -f "$out" ] || printf 'date\tcommit\tmachine\ttarget\tprocesses\texecutions\twall_s\texec_per_s\tcpu_s\tcov\tft\tcorpus\tcrashes\n' >"$out"
+header='date\tcommit\tmachine\ttarget\tprocesses\texecutions\twall_s\texec_per_s\tcpu_s\tcov\tft\tcorpus\tcrashes\n'
+[ -f "$out" ] || printf "$header" >"$out"
+before=$(wc -l <"$out")
 
 # one target: J processes on its corpus, then its line
 campaign() {
@@ -133,10 +135,9 @@ if [ -n "$PAR" ]; then
 else
     for t in $TARGETS; do campaign "$t" || status=1; done
 fi
-# in a repository, the lines go to bench/fuzz/results.tsv too
+# in a repository, this campaign's lines go to bench/fuzz/results.tsv too
 if [ -d "$here/../../bench/fuzz" ] && [ ! -f "$here/COMMIT" ]; then
-    tail -n +2 "$out" | while IFS= read -r l; do
-        grep -qxF "$l" "$here/results.tsv" 2>/dev/null || echo "$l" >>"$here/results.tsv"
-    done
+    [ -f "$here/results.tsv" ] || printf "$header" >"$here/results.tsv"
+    tail -n +$((before + 1)) "$out" >>"$here/results.tsv"
 fi
 exit $status
