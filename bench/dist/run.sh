@@ -79,6 +79,7 @@ HDF5_LIBS=$(pkg-config --libs hdf5 2>/dev/null || true)
 # ROUNDTRIP=FILE: a roundtrip binary built elsewhere (a host without the
 # -dev packages, e.g. the GPU host with a carried build)
 if [ -n "${ROUNDTRIP:-}" ]; then
+    [ -x "$ROUNDTRIP" ] || { echo "bench/dist: ROUNDTRIP=$ROUNDTRIP is not an executable file" >&2; exit 2; }
     cp "$ROUNDTRIP" "$TMP/roundtrip"
 else
 # shellcheck disable=SC2086

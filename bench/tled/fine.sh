@@ -20,6 +20,12 @@ BUILD=$1 OUT=$2 CASES=$3 SPACINGS=$4 VARIANTS=$5 PUSH=${6:-6}
 TO=${TLED_FINE_TIMEOUT:-600}
 DATA=${DATA:-../shared/data}
 export ARMSTG_PLUGIN_PATH="$BUILD/plugins" TLED="${TLED:-tled_cuda}"
+for c in $CASES; do
+    case $c in default|lobulated|irregular|pat[0-9][0-9][0-9][0-9]) ;;
+    *) echo "fine.sh: unknown case '$c' (default, lobulated, irregular or patNNNN)" >&2; exit 2 ;;
+    esac
+done
+[ -x "$BUILD/armstg" ] || { echo "fine.sh: no $BUILD/armstg (build first)" >&2; exit 2; }
 [ -f "$OUT" ] || printf 'case\tspacing_mm\tvariant\tpush_mm\tstatus\tnodes\tbuild_s\titerations\tgrowth_s\tsubsteps\tjmin\terror\n' >"$OUT"
 for c in $CASES; do
     for sp in $SPACINGS; do
