@@ -33,7 +33,9 @@ Metrics: ventricle mean symmetric surface distance (mm) between the atlas's
 lateral ventricles (201-414) at T and the patient's semi-automatic mask
 (bench/pipeline/ventricles.py), the thesis's S (sum over the atlas
 ventricle boundary), tumour Dice (growth methods: the grown tumour, label
-1000, against the reference core), min det dT/dx in the brain, wall time.
+1000, against the reference core), min det dT/dx in the brain, wall and CPU time of the
+registration (s; CPU: user + system of all threads and child processes) and
+the 1-minute load average at its start and end (the machine is shared).
 Phantoms (SRI24 + a BraTS tumour, plugins/phantom, true field known): the
 mean displacement error within 15 mm outside the true tumour.
 
@@ -43,6 +45,7 @@ Rows go to OUT/real.tsv as they come (a rerun skips the rows present).
 """
 import argparse
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -62,7 +65,18 @@ PHANTOM_MASS = {"pat0001": 5, "pat0002": 3.5, "pat0003": 5}
 ALL_METHODS = ["direct", "direct_lncc", "armstg", "armstg_auto", "sphere", "affine_lncc",
                "ants_syn", "elastix", "greedy", "sitk_demons"]
 COLS = ["case", "method", "vent_msd_mm", "vent_S_mm", "vent_dice",
-        "tumour_dice", "jac_min", "err_band_mm", "wall_s", "note"]
+        "tumour_dice", "jac_min", "err_band_mm", "wall_s", "cpu_s", "load1",
+        "note"]
+
+
+def cpu_s():
+    """CPU seconds (user + system) of this process, all its threads, and its
+    finished children: the difference over a method is its CPU time"""
+    t = 0.0
+    for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN):
+        r = resource.getrusage(who)
+        t += r.ru_utime + r.ru_stime
+    return t
 
 
 def log(*a):
@@ -104,12 +118,12 @@ def run_armstg(args, graph, out, env, sets=(), extra=()):
     for s in sets:
         cmd += ["--set", s]
     cmd += list(extra)
-    t0 = time.time()
+    t0, c0 = time.time(), cpu_s()
     r = subprocess.run(cmd, env=dict(os.environ, **env), capture_output=True,
                        text=True)
     if r.returncode:
         raise RuntimeError("armstg failed: %s\n%s" % (" ".join(cmd), r.stderr[-3000:]))
-    return time.time() - t0
+    return time.time() - t0, cpu_s() - c0
 
 
 def prepare(args, c, d):
@@ -194,7 +208,8 @@ LNCC = ["register.metric=lncc", "register.radius=2", "register.normalize=minmax"
 
 
 def method_T(args, c, d, m, x):
-    """T(x) (X,Y,Z,3 RAS mm) of method m, its wall time, and its labels file
+    """T(x) (X,Y,Z,3 RAS mm) of method m, its wall and CPU time (s, the
+    registration alone), and its labels file
     (growth methods: with the grown tumour) or None"""
     fixed = c["t1c"]
     moving = c["atlas_t1"]
@@ -211,35 +226,35 @@ def method_T(args, c, d, m, x):
             sets.append("tune.values=%s" % os.environ["PUSH"])
         sets += [s for s in args.set if s.split(".")[0] in ("grow", "register", "affine", "tune")
                  and m in ("armstg", "armstg_auto", "sphere")]
-        t = run_armstg(args, GRAPH[m], o, env, sets)
+        t, cpu = run_armstg(args, GRAPH[m], o, env, sets)
         T = x + peers.itk_field_ras(os.path.join(o, "atlas_to_patient_warp.nii.gz"))
         lab = os.path.join(o, "atlas_labels_in_patient.nii.gz")
-        return T, t, lab if m in ("armstg", "armstg_auto", "sphere") else None
+        return T, t, cpu, lab if m in ("armstg", "armstg_auto", "sphere") else None
     os.makedirs(o, exist_ok=True)
     coords = peers.coord_images(moving, o)
     fm = c["fixed_mask"]
     if m == "ants_syn":
         import ants
-        t0 = time.time()
+        t0, c0 = time.time(), cpu_s()
         r = ants.registration(ants.image_read(fixed), ants.image_read(moving),
                               type_of_transform="SyN", mask=ants.image_read(fm))
-        t = time.time() - t0
-        return peers.ants_T(fixed, coords, r["fwdtransforms"]), t, None
+        t, cpu = time.time() - t0, cpu_s() - c0
+        return peers.ants_T(fixed, coords, r["fwdtransforms"]), t, cpu, None
     if m == "greedy":
         aff = os.path.join(o, "affine.mat")
         w = os.path.join(o, "warp.nii.gz")
-        t0 = time.time()
+        t0, c0 = time.time(), cpu_s()
         peers.greedy("-d 3 -a -dof 12 -i %s %s -o %s -n 100x50x10 -m MI "
                      "-ia-image-centers -gm %s" % (fixed, moving, aff, fm))
         peers.greedy("-d 3 -i %s %s -it %s -o %s -n 100x50x20 -m NCC 2x2x2 "
                      "-s 3vox 1.5vox -gm %s" % (fixed, moving, aff, w, fm))
-        t = time.time() - t0
-        return peers.greedy_T(fixed, coords, o, [w, aff]), t, None
+        t, cpu = time.time() - t0, cpu_s() - c0
+        return peers.greedy_T(fixed, coords, o, [w, aff]), t, cpu, None
     if m == "sitk_demons":
-        t0 = time.time()
+        t0, c0 = time.time(), cpu_s()
         tf = peers.sitk_demons(fixed, moving)
-        t = time.time() - t0
-        return peers.sitk_T(fixed, coords, tf), t, None
+        t, cpu = time.time() - t0, cpu_s() - c0
+        return peers.sitk_T(fixed, coords, tf), t, cpu, None
     if m == "elastix":
         pa = os.path.join(o, "affine.txt")
         pb = os.path.join(o, "bspline.txt")
@@ -270,11 +285,11 @@ def method_T(args, c, d, m, x):
             f.write(common + '(Transform "BSplineTransform")\n'
                     '(FinalGridSpacingInPhysicalUnits 10)\n'
                     '(MaximumNumberOfIterations 500)\n')
-        t0 = time.time()
+        t0, c0 = time.time(), cpu_s()
         r = subprocess.run(["elastix", "-f", fixed, "-m", moving, "-fMask", fm,
                             "-p", pa, "-p", pb, "-out", o, "-threads", str(THREADS)],
                            capture_output=True, text=True)
-        t = time.time() - t0
+        t, cpu = time.time() - t0, cpu_s() - c0
         if r.returncode:
             raise RuntimeError("elastix failed: %s" % (r.stdout + r.stderr)[-2000:])
         tp = os.path.join(o, "TransformParameters.1.txt")
@@ -287,7 +302,7 @@ def method_T(args, c, d, m, x):
             if r.returncode:
                 raise RuntimeError("transformix failed: %s" % r.stdout[-2000:])
             cs.append(peers.vol3(nib.load(os.path.join(ok, "result.nii.gz"))).astype(np.float64))
-        return np.stack(cs, -1), t, None
+        return np.stack(cs, -1), t, cpu, None
     raise SystemExit("unknown method %s" % m)
 
 
@@ -373,11 +388,18 @@ def main():
                 continue
             if m == "armstg" and c.get("labels_note"):
                 continue  # no labels: armstg_auto is the ARMSTG row
+            # the machine's load while the method ran: 1-minute load average
+            # at its start and end (the box is shared; wall time is the
+            # method's share of it, CPU time its work)
+            l0 = os.getloadavg()[0]
             try:
-                T, t, labfile = method_T(args, c, d, m, x)
+                T, t, cpu, labfile = method_T(args, c, d, m, x)
             except Exception as e:  # noqa: BLE001
                 log("%s %s: FAILED: %s" % (cn, name, str(e)[-800:]))
+                with open(os.path.join(args.out, "failed.txt"), "a") as f:
+                    f.write("%s\t%s\t%s\n" % (cn, name, " ".join(str(e)[-800:].split())))
                 continue
+            load = "%.1f-%.1f" % (l0, os.getloadavg()[0])
             ijk = np.rint(T @ inv[:3, :3].T + inv[:3, 3]).astype(int)
             ok = np.all((ijk >= 0) & (ijk < np.array(AL.shape)), -1)
             lab = np.zeros(ok.shape, AL.dtype)
@@ -395,7 +417,7 @@ def main():
                 eb = float(np.linalg.norm(T - Ttrue, axis=-1)[band].mean())
             note = c.get("labels_note", "")
             row = [cn, name, "%.3f" % msd, "%.0f" % S, "%.3f" % dv, "%.3f" % td,
-                   "%.3f" % jm, "%.3f" % eb, "%.1f" % t, note]
+                   "%.3f" % jm, "%.3f" % eb, "%.1f" % t, "%.1f" % cpu, load, note]
             with open(tsv, "a") as f:
                 f.write("\t".join(row) + "\n")
             log("\t".join(row))
