@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: MIT
 """The table and the figure of bench/peers/real.py's rows (real.tsv):
-a markdown table on stdout (ventricle MSD / tumour Dice / min det J / wall
-per case and method) and one PNG: ventricle MSD per real case and the
+a markdown table on stdout (one row per case and method: ventricle MSD, S,
+Dice, tumour Dice, min det J, error near the tumour, wall and CPU time,
+load; a later file's row replaces an earlier one's) and one PNG: ventricle MSD per real case and the
 displacement error near the tumour per phantom, one bar per method.
 
     python3 bench/peers/plot_real.py OUT/real.tsv [more.tsv...] --png FIG.png
@@ -44,24 +45,24 @@ def main():
             cases.append(c)
     methods = [m for m in ORDER if any(k[1] == m for k in rows)]
     methods += sorted({k[1] for k in rows} - set(methods))
-    print("| case | " + " | ".join(methods) + " |")
-    print("|---|" + "---|" * len(methods))
+    # one row per case and method (cases in the order of the rows)
+    print("| case | method | ventricle MSD mm | S mm | ventricle Dice | tumour Dice "
+          "| min det J | error near tumour mm | wall s | CPU s | load |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+
+    def f(r, k, fmt):
+        v = num(r, k)
+        return "" if math.isnan(v) else fmt % v
     for c in cases:
-        ph = c.startswith("phantom")
-        cells = []
         for m in methods:
             r = rows.get((c, m))
             if not r:
-                cells.append("")
                 continue
-            main_ = num(r, "err_band_mm") if ph else num(r, "vent_msd_mm")
-            s = "%.2f" % main_
-            td = num(r, "tumour_dice")
-            if not math.isnan(td):
-                s += " / D %.2f" % td
-            s += " / J %.2f / %.0f s" % (num(r, "jac_min"), num(r, "wall_s"))
-            cells.append(s)
-        print("| %s | %s |" % (c, " | ".join(cells)))
+            print("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
+                c, m, f(r, "vent_msd_mm", "%.3f"), f(r, "vent_S_mm", "%.0f"),
+                f(r, "vent_dice", "%.3f"), f(r, "tumour_dice", "%.3f"),
+                f(r, "jac_min", "%.3f"), f(r, "err_band_mm", "%.3f"),
+                f(r, "wall_s", "%.0f"), f(r, "cpu_s", "%.0f"), r.get("load1") or ""))
     if not a.png:
         return
     import matplotlib

@@ -217,6 +217,12 @@ int sts_reconstruct(const sts_grid_t *g, const uint8_t *marker,
 		    const uint8_t *mask, uint8_t *out);
 /* Fill the background components (6-connected) not reaching the border. */
 int sts_fill_holes(const sts_grid_t *g, const uint8_t *m, uint8_t *out);
+/* The same, plus the background enclosed within any plane normal to one of
+ * the three axes (4-connected there): a cavity a rim encloses on the slices
+ * of one orientation although it opens in 3-D (the necrosis inside an
+ * enhancing rim that is open on one side).  out may be m. */
+int sts_fill_holes_planes(const sts_grid_t *g, const uint8_t *m,
+			  uint8_t *out);
 /* 6-connected labelling: lab[i] in 1..n (0 background), sizes[l] voxels
  * (caller frees *sizes).  Returns the number of components or < 0. */
 int sts_label_cc(const sts_grid_t *g, const uint8_t *m, int32_t *lab,

@@ -35,9 +35,11 @@ int sts_erode(const sts_grid_t *g, const uint8_t *m, double r_mm,
 }
 
 /* Breadth-first flood of `in` (values 1) through voxels where allow != 0;
- * queue holds seeds on entry (nq of them). */
-static void flood(const sts_grid_t *g, uint8_t *in, const uint8_t *allow,
-		  int64_t *queue, int64_t nq)
+ * queue holds seeds on entry (nq of them).  No step is taken along axis
+ * `fixed` (0 i, 1 j, 2 k; -1: all six neighbours), so with a fixed axis
+ * the flood stays in each seed's plane (4-connected there). */
+static void flood_axes(const sts_grid_t *g, uint8_t *in, const uint8_t *allow,
+		       int64_t *queue, int64_t nq, int fixed)
 {
 	int64_t head = 0, sx = 1, sy = g->nx, sz = (int64_t)g->nx * g->ny;
 	while (head < nq) {
@@ -46,12 +48,12 @@ static void flood(const sts_grid_t *g, uint8_t *in, const uint8_t *allow,
 		    k = (int)(p / sz);
 		int64_t nb[6];
 		int c = 0;
-		if (i > 0) nb[c++] = p - sx;
-		if (i < g->nx - 1) nb[c++] = p + sx;
-		if (j > 0) nb[c++] = p - sy;
-		if (j < g->ny - 1) nb[c++] = p + sy;
-		if (k > 0) nb[c++] = p - sz;
-		if (k < g->nz - 1) nb[c++] = p + sz;
+		if (fixed != 0 && i > 0) nb[c++] = p - sx;
+		if (fixed != 0 && i < g->nx - 1) nb[c++] = p + sx;
+		if (fixed != 1 && j > 0) nb[c++] = p - sy;
+		if (fixed != 1 && j < g->ny - 1) nb[c++] = p + sy;
+		if (fixed != 2 && k > 0) nb[c++] = p - sz;
+		if (fixed != 2 && k < g->nz - 1) nb[c++] = p + sz;
 		for (int t = 0; t < c; t++) {
 			int64_t q = nb[t];
 			if (!in[q] && allow[q]) {
@@ -60,6 +62,12 @@ static void flood(const sts_grid_t *g, uint8_t *in, const uint8_t *allow,
 			}
 		}
 	}
+}
+
+static void flood(const sts_grid_t *g, uint8_t *in, const uint8_t *allow,
+		  int64_t *queue, int64_t nq)
+{
+	flood_axes(g, in, allow, queue, nq, -1);
 }
 
 int sts_reconstruct(const sts_grid_t *g, const uint8_t *marker,
@@ -85,7 +93,11 @@ int sts_reconstruct(const sts_grid_t *g, const uint8_t *marker,
 	return 0;
 }
 
-int sts_fill_holes(const sts_grid_t *g, const uint8_t *m, uint8_t *out)
+/* Background voxels not connected to the grid's border: 6-connected in 3-D
+ * (fixed = -1), or 4-connected within each plane normal to axis `fixed`,
+ * whose border is the plane's four edges. */
+static int fill_holes_axes(const sts_grid_t *g, const uint8_t *m,
+			   uint8_t *out, int fixed)
 {
 	int64_t n = gnvox(g), nq = 0;
 	uint8_t *bg = calloc((size_t)n, 1), *outside = calloc((size_t)n, 1);
@@ -98,13 +110,15 @@ int sts_fill_holes(const sts_grid_t *g, const uint8_t *m, uint8_t *out)
 	}
 	for (int64_t i = 0; i < n; i++)
 		bg[i] = !m[i];
-	/* seeds: background voxels on the grid's faces */
+	/* seeds: background voxels on the faces (of the volume, or of each
+	 * plane: the faces along the fixed axis do not count) */
 	for (int k = 0; k < g->nz; k++)
 		for (int j = 0; j < g->ny; j++)
 			for (int i = 0; i < g->nx; i++) {
-				if (!(i == 0 || j == 0 || k == 0 ||
-				      i == g->nx - 1 || j == g->ny - 1 ||
-				      k == g->nz - 1))
+				int face = (fixed != 0 && (i == 0 || i == g->nx - 1)) ||
+					   (fixed != 1 && (j == 0 || j == g->ny - 1)) ||
+					   (fixed != 2 && (k == 0 || k == g->nz - 1));
+				if (!face)
 					continue;
 				int64_t p = gidx(g, i, j, k);
 				if (bg[p] && !outside[p]) {
@@ -112,13 +126,41 @@ int sts_fill_holes(const sts_grid_t *g, const uint8_t *m, uint8_t *out)
 					queue[nq++] = p;
 				}
 			}
-	flood(g, outside, bg, queue, nq);
+	flood_axes(g, outside, bg, queue, nq, fixed);
 	for (int64_t i = 0; i < n; i++)
 		out[i] = !outside[i];
 	free(bg);
 	free(outside);
 	free(queue);
 	return 0;
+}
+
+int sts_fill_holes(const sts_grid_t *g, const uint8_t *m, uint8_t *out)
+{
+	return fill_holes_axes(g, m, out, -1);
+}
+
+int sts_fill_holes_planes(const sts_grid_t *g, const uint8_t *m,
+			  uint8_t *out)
+{
+	int64_t n = gnvox(g);
+	uint8_t *acc = malloc((size_t)n), *f = malloc((size_t)n);
+	int rc = -2;
+	if (!acc || !f)
+		goto out;
+	if ((rc = fill_holes_axes(g, m, acc, -1)))
+		goto out;
+	for (int a = 0; a < 3; a++) {
+		if ((rc = fill_holes_axes(g, m, f, a)))
+			goto out;
+		for (int64_t i = 0; i < n; i++)
+			acc[i] |= f[i];
+	}
+	memcpy(out, acc, (size_t)n);
+out:
+	free(acc);
+	free(f);
+	return rc;
 }
 
 int sts_label_cc(const sts_grid_t *g, const uint8_t *m, int32_t *lab,

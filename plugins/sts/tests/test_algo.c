@@ -393,6 +393,48 @@ static void test_morphology(void **state)
 	for (int64_t i = 0; i < n; i++)
 		c += o[i];
 	assert_int_equal(c, 11 * 11 * 11 - 9 * 9 * 9 - 1);
+	/* in planes: the same opened shell is closed on every slice but the
+	 * two through the hole in planes normal to k and j, and on every
+	 * slice normal to i (the hole itself is enclosed within the face
+	 * i = 5): the whole cube */
+	assert_int_equal(sts_fill_holes_planes(&g, m, o), 0);
+	c = 0;
+	for (int64_t i = 0; i < n; i++)
+		c += o[i];
+	assert_int_equal(c, 11 * 11 * 11);
+	/* a box without its face i = 5 (a cup, the ring of that face kept):
+	 * in 3-D its 9x9x10 inside reaches the outside, nothing is filled;
+	 * every slice normal to i is a closed square ring (the open face's
+	 * too), so the planes fill the whole cube */
+	memset(m, 0, n);
+	for (int k = 5; k <= 15; k++)
+		for (int j = 5; j <= 15; j++)
+			for (int i = 5; i <= 15; i++)
+				m[(k * 21 + j) * 21 + i] =
+					(i == 15 || j == 5 || j == 15 ||
+					 k == 5 || k == 15);
+	assert_int_equal(sts_fill_holes(&g, m, o), 0);
+	c = 0;
+	for (int64_t i = 0; i < n; i++)
+		c += o[i];
+	assert_int_equal(c, 11 * 11 * 11 - 9 * 9 * 10);
+	assert_int_equal(sts_fill_holes_planes(&g, m, o), 0);
+	c = 0;
+	for (int64_t i = 0; i < n; i++)
+		c += o[i];
+	assert_int_equal(c, 11 * 11 * 11);
+	/* two parallel plates enclose nothing in any plane */
+	memset(m, 0, n);
+	for (int k = 5; k <= 15; k++)
+		for (int j = 5; j <= 15; j++) {
+			m[(k * 21 + j) * 21 + 5] = 1;
+			m[(k * 21 + j) * 21 + 15] = 1;
+		}
+	assert_int_equal(sts_fill_holes_planes(&g, m, o), 0);
+	c = 0;
+	for (int64_t i = 0; i < n; i++)
+		c += o[i];
+	assert_int_equal(c, 2 * 11 * 11);
 	free(m);
 	free(o);
 }
