@@ -174,6 +174,21 @@ static int header_check(const char *path, char *err, size_t errsize)
 	if (!nifti_is_valid_datatype(dt))
 		return ferr(err, errsize, ARMSTG_EUNSUPPORTED,
 			    "'%s': unknown NIfTI datatype code %d", path, dt);
+	/* niftilib converts vox_offset to int: a NaN, negative or huge one
+	 * would be undefined there and point the data anywhere */
+	{
+		uint32_t bits;
+		float vo;
+		memcpy(&bits, &h.vox_offset, 4);
+		if (swap)
+			bits = bswap32(bits);
+		memcpy(&vo, &bits, 4);
+		if (!(vo >= 0 && vo < 2147483648.0f))
+			return ferr(err, errsize, ARMSTG_EIO,
+				    "'%s': bad header: vox_offset = %g (the "
+				    "byte where the data starts must be 0 .. "
+				    "2147483647)", path, (double)vo);
+	}
 	/* niftilib replaces a NaN or infinite transform field by 0, which
 	 * would move the image silently: refuse the transform that will be
 	 * used (see nifti_affine) when it is not finite */
@@ -412,29 +427,63 @@ static int fits_i32(const void *src, int ndt, size_t n)
  * gzip error or bad gzip check value (CRC) is an error, and the data is
  * kept bit for bit (byte-swapped when the file's order differs).  zlib is
  * used directly so its error state (gzerror, gzclose_r) can be checked.
+ *
+ * The buffer (*out, nbytes when read) is allocated here.  A plain file was
+ * checked to hold the data (stat, in vol_read_nifti), so it gets nbytes at
+ * once; for a compressed one only the header's word says how much comes,
+ * so the buffer starts at 64 KiB and doubles as data arrives: a truncated
+ * or corrupt .nii.gz that claims gigabytes costs what it holds (glibc grows
+ * large blocks with mremap, without copying).  zlib's buffer is 256 KiB for
+ * large files and the file's size (at least 8 KiB) for small ones.
  */
-static int read_raw(const char *path, const nifti_image *nim, void *buf,
-		    size_t nbytes, char *err, size_t errsize)
+static int read_raw(const char *path, const nifti_image *nim, size_t nbytes,
+		    void **out, char *err, size_t errsize)
 {
 	const char *iname = nim->iname ? nim->iname : path;
+	struct stat ib;
 	errno = 0;
 	/* zlib reads uncompressed files transparently too */
 	gzFile g = gzopen(iname, "rb");
 	if (!g)
 		return ferr(err, errsize, ARMSTG_EIO, "cannot open '%s': %s",
 			    iname, strerror(errno ? errno : EIO));
-	gzbuffer(g, 1u << 18);
+	unsigned zbuf = 1u << 18;
+	if (stat(iname, &ib) == 0 && ib.st_size < (off_t)zbuf)
+		zbuf = ib.st_size > 8192 ? (unsigned)ib.st_size : 8192;
+	gzbuffer(g, zbuf);
 	int bad = gzseek(g, (z_off_t)nim->iname_offset, SEEK_SET) !=
 		  (z_off_t)nim->iname_offset;
-	char *p = buf;
-	size_t left = nbytes;
-	while (!bad && left) {
-		unsigned want = left > (1u << 30) ? (1u << 30) : (unsigned)left;
-		int got = gzread(g, p, want);
-		if (got < 0 || (unsigned)got != want)
+	size_t cap = nbytes, have = 0;
+	if ((bad || !gzdirect(g)) && cap > ((size_t)1 << 16))
+		cap = (size_t)1 << 16;
+	char *buf = malloc(cap ? cap : 1);
+	if (!buf) {
+		gzclose_r(g);
+		return ferr(err, errsize, ARMSTG_ENOMEM,
+			    "'%s': out of memory for %zu bytes", path, nbytes);
+	}
+	while (!bad && have < nbytes) {
+		if (have == cap) {
+			size_t ncap = cap > nbytes / 2 ? nbytes : 2 * cap;
+			char *nb = realloc(buf, ncap);
+			if (!nb) {
+				free(buf);
+				gzclose_r(g);
+				return ferr(err, errsize, ARMSTG_ENOMEM,
+					    "'%s': out of memory for %zu bytes",
+					    path, nbytes);
+			}
+			buf = nb;
+			cap = ncap;
+		}
+		size_t want = cap - have;
+		if (want > (1u << 30))
+			want = 1u << 30;
+		int got = gzread(g, buf + have, (unsigned)want);
+		if (got < 0 || (size_t)got != want)
 			bad = 1;
-		p += want;
-		left -= want;
+		if (got > 0)
+			have += (size_t)got;
 	}
 	if (!bad) {
 		/* read to the end so zlib checks the gzip CRC and length;
@@ -450,15 +499,26 @@ static int read_raw(const char *path, const nifti_image *nim, void *buf,
 	}
 	if (gzclose_r(g) != Z_OK)
 		bad = 1;
-	if (bad)
+	if (bad) {
+		free(buf);
+		if (have < nbytes)
+			return ferr(err, errsize, ARMSTG_EIO,
+				    "'%s': image data truncated or corrupt "
+				    "(expected %zu bytes of %s after byte %d; "
+				    "%zu could be read)", path, nbytes,
+				    nifti_datatype_string(nim->datatype),
+				    nim->iname_offset, have);
 		return ferr(err, errsize, ARMSTG_EIO,
 			    "'%s': image data truncated or corrupt (expected "
-			    "%zu bytes of %s after byte %d)", path, nbytes,
-			    nifti_datatype_string(nim->datatype),
+			    "%zu bytes of %s after byte %d; the gzip stream "
+			    "ends badly: corrupt, or wrong CRC or length)",
+			    path, nbytes, nifti_datatype_string(nim->datatype),
 			    nim->iname_offset);
+	}
 	if (nim->byteorder != nifti_short_order() && nim->swapsize > 1)
 		nifti_swap_Nbytes(nbytes / (size_t)nim->swapsize, nim->swapsize,
 				  buf);
+	*out = buf;
 	return 0;
 }
 
@@ -592,6 +652,11 @@ int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize)
 		goto out;
 	}
 	size_t nbytes = n * (size_t)nim->nbyper;
+	if (nim->iname_offset < 0) { /* header_check refused such a file */
+		rc = ferr(err, errsize, ARMSTG_EIO, "'%s': bad header: the data "
+			  "starts at byte %d", path, nim->iname_offset);
+		goto out;
+	}
 	/* before allocating what the header claims: a plain file must hold
 	 * it, and gzip cannot compress by more than about 1032:1 */
 	struct stat ib;
@@ -610,13 +675,7 @@ int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize)
 			goto out;
 		}
 	}
-	raw = malloc(nbytes ? nbytes : 1);
-	if (!raw) {
-		rc = ferr(err, errsize, ARMSTG_ENOMEM,
-			  "'%s': out of memory for %zu bytes", path, nbytes);
-		goto out;
-	}
-	rc = read_raw(path, nim, raw, nbytes, err, errsize);
+	rc = read_raw(path, nim, nbytes, &raw, err, errsize);
 	if (rc)
 		goto out;
 	if (vdt == DT_I32 && !scaled && !fits_i32(raw, ndt, n))

@@ -645,7 +645,38 @@ static void test_hostile_files(void **state)
 			  "has 16700 bytes");
 	copy_prefix(tmp("h.nii.gz"), tmp("h_cut.nii.gz"), gsz * 2 / 3);
 	expect_read_error(tmp("h_cut.nii.gz"), "image data truncated or corrupt "
-			  "(expected 16384 bytes of FLOAT32 after byte 416)");
+			  "(expected 16384 bytes of FLOAT32 after byte 416; ");
+	expect_read_error(tmp("h_cut.nii.gz"), " could be read)");
+	/* a compressed volume larger than the reader's first buffer (64 KiB,
+	 * doubled as data arrives, up to 907,680 bytes, not a power of two):
+	 * read exactly; cut, it is refused with what could be read */
+	vol_t *lv = rand_vol(60, 61, 62, 1, DT_F32, SHEAR), *lr;
+	write_ok(tmp("h_large.nii.gz"), lv);
+	read_ok(tmp("h_large.nii.gz"), &lr);
+	assert_true(msg_equal(&lv->base, &lr->base));
+	msg_unref(&lr->base);
+	long lsz = file_size(tmp("h_large.nii.gz"));
+	copy_prefix(tmp("h_large.nii.gz"), tmp("h_large_cut.nii.gz"), lsz / 2);
+	expect_read_error(tmp("h_large_cut.nii.gz"), "image data truncated or "
+			  "corrupt (expected 907680 bytes of FLOAT32 after byte");
+	char msg[512];
+	assert_int_equal(vol_read_nifti(tmp("h_large_cut.nii.gz"), &lr, msg,
+					sizeof msg), ARMSTG_EIO);
+	const char *cr = strstr(msg, "; ");
+	assert_non_null(cr);
+	long got = atol(cr + 2); /* about half of the data, never all */
+	assert_true(got > 907680 / 4 && got < 907680);
+	msg_unref(&lv->base);
+	/* a vox_offset that is negative, huge or NaN (niftilib would convert
+	 * it to int: undefined, and a negative one passed the size check) */
+	const float vo_bad[3] = { -1e10f, 3e9f, NAN };
+	const char *vo_text[3] = { "vox_offset = -1e+10", "vox_offset = 3e+09",
+				   "vox_offset = nan" };
+	for (int k = 0; k < 3; k++) {
+		copy_prefix(tmp("h.nii"), tmp("h_vo.nii"), sz);
+		patch(tmp("h_vo.nii"), 108, &vo_bad[k], 4);
+		expect_read_error(tmp("h_vo.nii"), vo_text[k]);
+	}
 	/* corrupt gzip: a flipped byte in the deflate stream */
 	copy_prefix(tmp("h.nii.gz"), tmp("h_bad.nii.gz"), gsz);
 	unsigned char x = 0xff;
