@@ -14,9 +14,15 @@
 #
 # Corpora and crash artifacts live in build-fuzz/ (kept between runs, so
 # later runs start from what earlier ones found).  build-fuzz/ is also
-# self-contained for a campaign on another machine (no compiler needed
-# there): the targets, seeds/, corpus/, dict/, COMMIT and run.sh
-# (bench/fuzz/run.sh: `sh build-fuzz/run.sh -n 10000000 -j 4 -p`).  Exit status: 0 when every
+# self-contained for a campaign on another machine with no compiler and
+# none of the project's libraries (any x86-64 Linux with glibc >= 2.34):
+# the targets link niftilib, zlib, HDF5, msgpack-c, libinih, libpng and
+# czmq/libzmq statically (their Debian .a files, with lld's section garbage
+# collection: a target keeps only what its code can reach) and find the
+# OpenMP runtime in build-fuzz/lib/ (rpath $ORIGIN/lib); then seeds/,
+# corpus/, dict/, COMMIT and run.sh (bench/fuzz/run.sh: `sh
+# build-fuzz/run.sh -n 10000000 -j 8 -p graph nifti`).  Objects and the
+# seed makers stay in build/fuzz-obj/.  Exit status: 0 when every
 # target ran its time without a crash, 1 on a crash (the input is saved as
 # build-fuzz/artifacts/<target>-crash-*; replay it with
 # `build-fuzz/fuzz_<target> FILE`), 2 when clang/libFuzzer is missing.
@@ -51,8 +57,26 @@ CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -fopenmp \
  $HDF5_CFLAGS"
 LIBS="-lniftiio -lznz -lz $HDF5_LIBS -lmsgpackc -linih -lpng -lczmq -lzmq -ldl \
  -lpthread -lm"
+# the targets: the same libraries, static where Debian has the .a (the
+# HDF5 one as libhdf5_serial.a), so that build-fuzz/ runs where they are
+# not installed; sections of code no target reaches are dropped, and with
+# them the libraries only that code needs (HDF5's S3 driver and curl,
+# libzmq's transports).  Falls back to LIBS when this link fails.
+HDF5_LIBDIR=$(pkg-config --variable=libdir hdf5 2>/dev/null)
+TLINK="-Wl,--gc-sections -Wl,--as-needed -Wl,--compress-debug-sections=zlib \
+ -Wl,-rpath,\$ORIGIN/lib"
+if "$CLANG" -fuse-ld=lld -Wl,--version >/dev/null 2>&1; then
+    TLINK="-fuse-ld=lld $TLINK"
+fi
+TLIBS="${HDF5_LIBDIR:+-L$HDF5_LIBDIR} -Wl,-Bstatic -lniftiio -lznz \
+ -lhdf5_serial -lsz -laec -lmsgpackc -linih -lpng16 -lczmq -lzmq -lz \
+ -Wl,-Bdynamic -static-libstdc++ -ldl -lpthread -lm"
+O=build/fuzz-obj
 
-mkdir -p "$B/obj" "$B/artifacts" "$B/corpus" "$B/dict" || exit 2
+mkdir -p "$O" "$B/artifacts" "$B/corpus" "$B/dict" "$B/lib" || exit 2
+# what earlier versions of this script left in build-fuzz/ but a campaign
+# elsewhere does not need
+rm -rf "$B/obj" "$B"/mkseeds*
 cp bench/fuzz/run.sh "$B/run.sh" || exit 2
 # the commit the targets are built from (+changes: with uncommitted ones)
 c=$(git rev-parse --short HEAD 2>/dev/null || echo unknown)
@@ -63,15 +87,22 @@ echo "$c" >"$B/COMMIT"
 objs=""
 for src in runtime/*.c; do
     [ "$src" = runtime/main.c ] && continue
-    o="$B/obj/$(basename "$src" .c).o"
-    if [ ! -f "$o" ] || [ "$src" -nt "$o" ] ||
+    o="$O/$(basename "$src" .c).o"
+    if [ ! -f "$o" ] || [ "$src" -nt "$o" ] || [ "$0" -nt "$o" ] ||
        [ -n "$(find runtime -name '*.h' -newer "$o" 2>/dev/null)" ]; then
         # shellcheck disable=SC2086
-        "$CLANG" $CFLAGS $SAN -fsanitize=fuzzer-no-link -c "$src" -o "$o" ||
-            exit 2
+        "$CLANG" $CFLAGS $SAN -fsanitize=fuzzer-no-link -ffunction-sections \
+            -fdata-sections -c "$src" -o "$o" || exit 2
     fi
     objs="$objs $o"
 done
+
+# the targets link the runtime as an archive: only the objects a target
+# reaches come in (each ASan-instrumented object registers its globals at
+# start, so one linked as .o stays whole, with every library it calls)
+rm -f "$O/libfuzzrt.a"
+# shellcheck disable=SC2086
+ar rcs "$O/libfuzzrt.a" $objs || exit 2
 
 status=0
 summary=""
@@ -84,23 +115,39 @@ for t in $TARGETS; do
     fi
     bin="$B/fuzz_$t"
     # shellcheck disable=SC2086
-    "$CLANG" $CFLAGS $SAN -fsanitize=fuzzer "$src" $objs -o "$bin" $LIBS ||
-        exit 2
+    if ! "$CLANG" $CFLAGS $SAN -fsanitize=fuzzer "$src" "$O/libfuzzrt.a" \
+            -o "$bin" $TLINK $TLIBS 2>"$O/link_$t.log"; then
+        echo "fuzz: static link of fuzz_$t failed (see $O/link_$t.log);" \
+             "linking the shared libraries: build-fuzz/ then needs them installed"
+        # shellcheck disable=SC2086
+        "$CLANG" $CFLAGS $SAN -fsanitize=fuzzer "$src" $objs -o "$bin" \
+            $LIBS || exit 2
+    fi
+    # shared libraries beyond glibc and libgcc (the OpenMP runtime) go to
+    # lib/, where the rpath finds them on another machine
+    ldd "$bin" 2>/dev/null | awk '$3 ~ /^\// {print $3}' |
+    while read -r so; do
+        case $(basename "$so") in
+        libc.so*|libm.so*|libdl.so*|libpthread.so*|librt.so*|libgcc_s.so*|\
+        ld-linux*) ;;
+        *) [ -f "$B/lib/$(basename "$so")" ] || cp -L "$so" "$B/lib/" ;;
+        esac
+    done
     corpus="$B/corpus/$t"
     seeds="$B/seeds/$t"
     mkdir -p "$corpus" "$seeds"
     if [ "$t" = msgpack ]; then
         # shellcheck disable=SC2086
-        "$CLANG" $CFLAGS $SAN tests/fuzz/mkseeds.c $objs -o "$B/mkseeds" \
-            $LIBS && "$B/mkseeds" "$seeds" || exit 2
+        "$CLANG" $CFLAGS $SAN tests/fuzz/mkseeds.c $objs -o "$O/mkseeds" \
+            $LIBS && "$O/mkseeds" "$seeds" || exit 2
     elif [ "$t" = wire ]; then
         # shellcheck disable=SC2086
         "$CLANG" $CFLAGS $SAN tests/fuzz/mkseeds_wire.c $objs \
-            -o "$B/mkseeds_wire" $LIBS && "$B/mkseeds_wire" "$seeds" || exit 2
+            -o "$O/mkseeds_wire" $LIBS && "$O/mkseeds_wire" "$seeds" || exit 2
     elif [ "$t" = nifti ]; then
         # shellcheck disable=SC2086
         "$CLANG" $CFLAGS $SAN tests/fuzz/mkseeds_nifti.c $objs \
-            -o "$B/mkseeds_nifti" $LIBS && "$B/mkseeds_nifti" "$seeds" ||
+            -o "$O/mkseeds_nifti" $LIBS && "$O/mkseeds_nifti" "$seeds" ||
             exit 2
     else
         for f in graphs/*.ini tests/graphs/*/*.ini tests/graphs/*.ini; do
