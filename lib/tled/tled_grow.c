@@ -335,6 +335,10 @@ static int cmp_layer(const void *a, const void *b)
  * ramp). */
 #define TLED_SUBSTEP_DEPTH 4
 
+/* the `iterations` output's rows per growth: above it, every 2nd, 4th, ...
+ * iteration (tled_iter_log_thin; each step's last is always kept) */
+#define TLED_ITER_ROWS 20000
+
 /* Saturation: an increment of 1/2^TLED_SUBSTEP_DEPTH that still inverts a
  * point cannot be taken: the tissue between the front and what holds it
  * (the fixed brain boundary, nodes stuck to it) is compressed as far as it
@@ -347,9 +351,17 @@ static int relax_sub(tled_solver_t *s, const tled_solver_opts_t *so,
 		     char *err, size_t errsize, int depth, int *nsub,
 		     double *done)
 {
+	tled_iter_log_t *lg = so->itlog;
+	int64_t mark = lg ? lg->nrow : 0;
 	int r = tled_relax(s, so, tgt, tag, rs, err, errsize);
 	if (!r)
 		*done += 1.0 / (double)(1 << depth);
+	/* the iteration log keeps the calls whose result stands (a failed
+	 * call is undone below): rs->iters sums the same calls */
+	if (lg && !r)
+		lg->it0 += rs->iters;
+	else if (lg)
+		lg->nrow = mark;
 	if (r != -1 || !tgt || s->m->ebc ||
 	    (!strstr(err, "inverted material") && !strstr(err, "non-finite")))
 		return r;
@@ -404,6 +416,8 @@ static int relax_step(armstg_stage_t *st, tled_solver_t *s,
 	memset(rs, 0, sizeof *rs);
 	int nsub = 0;
 	double done = 0;
+	if (so->itlog)
+		so->itlog->it0 = 0;
 	int r = relax_sub(s, so, tgt, tag, rs, err, errsize, 0, &nsub, &done);
 	if (nsub > 0 && !r)
 		H->log(st, LOG_INFO, "%s: an integration point inverted; "
@@ -432,7 +446,28 @@ static int relax_step(armstg_stage_t *st, tled_solver_t *s,
 		H->log(st, LOG_WARN, "%s: not converged after %d iterations "
 		       "(estimated error %.3g mm)", tag, rs->iters,
 		       rs->err_est / TLED_MM);
+	if (so->itlog)
+		tled_iter_log_thin(so->itlog, TLED_ITER_ROWS);
 	return 0;
+}
+
+/* the `iterations` output: the log of tled_relax, one row per recorded
+ * iteration (tled_solve.h); NULL when out of memory */
+static tab_t *iter_table(const armstg_host_t *H, const tled_iter_log_t *lg)
+{
+	tab_t *t = H->tab_new();
+	for (int64_t r = 0; t && r < lg->nrow; r++) {
+		int64_t row = H->tab_add_row(t);
+		for (int k = 0; k < TLED_IT_NCOL && row >= 0; k++)
+			if (H->tab_set_num(t, row, tled_itcol_name[k],
+					   lg->row[r * TLED_IT_NCOL + k]))
+				row = -1;
+		if (row < 0) {
+			H->msg_unref(&t->base);
+			t = NULL;
+		}
+	}
+	return t;
 }
 
 /* the relaxation's columns of a stats row (units in the column names) */
@@ -527,7 +562,8 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	int32_t *dcomp = NULL, *dstep = NULL, *seedc = NULL, *att = NULL;
 	double *uh = NULL, *sely = NULL;
 	int64_t *selid = NULL;
-	tab_t *tab = NULL;
+	tab_t *tab = NULL, *itab = NULL;
+	tled_iter_log_t itl = { .every = 1 };
 	ps_t *on = NULL, *ot = NULL;
 	if (!Xin)
 		return H->fail(st, ARMSTG_ENOMEM, "out of memory (%lld nodes)",
@@ -878,6 +914,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	so.progress = on_progress;
 	so.hook_ctx = &hk;
 	so.ops = ops;
+	so.itlog = &itl;
 	double h = m.h_mean;
 	double margin = pv->sweep_margin * h;
 	int64_t ndriven = 0;
@@ -1084,6 +1121,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 			}
 			double ts = now_s();
 			hk.step = step;
+			itl.step = step + 1;
 			for (int64_t p = 0; p < m.nip; p++) {
 				gto[p] = ipc[p] >= 0 ? gcur[ipc[p]] : 1;
 				if (gto[p] > gshow)
@@ -1146,6 +1184,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 		int l = lmax - step;
 		double ts = now_s();
 		hk.step = step;
+		itl.step = step + 1;
 		int moved = 0;
 		int64_t created = 0;
 		for (int64_t a = 0; a < m.n; a++)
@@ -1469,9 +1508,13 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	H->log(st, LOG_INFO, "%d growth steps, %lld tumour nodes, %.2f s, "
 	       "min det F %.4f", lmax + 1, (long long)ndriven, now_s() - t0,
 	       jmin_all);
+	itab = itl.oom ? NULL : iter_table(H, &itl);
+	if (!itab)
+		goto oom;
 	st->out[0] = &on->base;
 	st->out[1] = &ot->base;
 	st->out[2] = &tab->base;
+	st->out[3] = &itab->base;
 	on = ot = NULL;
 	tab = NULL;
 	goto out;
@@ -1485,6 +1528,7 @@ out:
 		H->msg_unref(&ot->base);
 	if (tab)
 		H->msg_unref(&tab->base);
+	tled_iter_log_free(&itl);
 	for (int j = 0; j < nl; j++)
 		layer_free(&L[j]);
 	free(L);

@@ -47,6 +47,14 @@
  *                swept, collocated, contacts, integration_points, wall_s
  *                (front = expand: growth_stretch and core_volume_fraction,
  *                the core's deformed volume / the tumour's)
+ *      iterations one row per relaxation iteration of every growth step
+ *                (tled_iter_log_t, tled_solve.h): step, iteration (1, 2,
+ *                ... within the step, over the relax calls whose result
+ *                stands, so a step's last is its stats row's
+ *                `iterations`), err_est_mm, kinetic_energy_J,
+ *                strain_energy_J, jmin, omega_min_per_s, damping_per_s,
+ *                dt_s; above 20000 rows only every 2nd, 4th, ... iteration
+ *                (and each step's last)
  *
  * Growth replay (thesis section 3.6, in 3-D).  Layers are replayed from the
  * innermost to layer 0.  At the innermost layer of a component the tumour
@@ -115,8 +123,8 @@ typedef struct tled_grow_params {
 } tled_grow_params_t;
 
 /* Run the stage: inputs st->in[0..2] (nodes, contours, labels), outputs
- * st->out[0..2] (nodes, tumour, stats); ops: the backend (NULL = the CPU
- * reference).  Returns 0 or the host's failure code (message set through
+ * st->out[0..3] (nodes, tumour, stats, iterations); ops: the backend
+ * (NULL = the CPU reference).  Returns 0 or the host's failure code (message set through
  * st->host->fail). */
 int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 		      const tled_ops_t *ops);

@@ -3,6 +3,7 @@
 #include "tled_solve.h"
 
 #include <float.h>
+#include <limits.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -53,6 +54,67 @@ void tled_solver_opts_default(tled_solver_opts_t *o)
 	o->contact = 1;
 	o->blowup = 100;
 	o->lanczos_iter = 80;
+}
+
+const char *const tled_itcol_name[TLED_IT_NCOL] = {
+	"step", "iteration", "err_est_mm", "kinetic_energy_J",
+	"strain_energy_J", "jmin", "omega_min_per_s", "damping_per_s", "dt_s",
+};
+
+void tled_iter_log_free(tled_iter_log_t *l)
+{
+	free(l->row);
+	memset(l, 0, sizeof *l);
+}
+
+void tled_iter_log_thin(tled_iter_log_t *l, int64_t max_rows)
+{
+	if (l->every < 1)
+		l->every = 1;
+	while (l->nrow > max_rows && l->every <= INT_MAX / 2) {
+		l->every *= 2;
+		int64_t k = 0;
+		for (int64_t r = 0; r < l->nrow; r++) {
+			const double *q = l->row + r * TLED_IT_NCOL;
+			int last = r + 1 == l->nrow ||
+				   q[TLED_IT_NCOL + TLED_IT_STEP] != q[TLED_IT_STEP];
+			if (!last && fmod(q[TLED_IT_ITER], l->every) != 0)
+				continue;
+			memmove(l->row + k * TLED_IT_NCOL, q,
+				TLED_IT_NCOL * sizeof *q);
+			k++;
+		}
+		l->nrow = k;
+	}
+}
+
+/* one row of tled_iter_log_t (the loop's scalars, SI -> column units) */
+static void iter_log_add(tled_iter_log_t *l, int it, double err_m, double ke,
+			 double W, double jmin, double omega, double c,
+			 double dt)
+{
+	if (l->oom)
+		return;
+	if (l->nrow == l->cap) {
+		int64_t cap = l->cap ? 2 * l->cap : 4096;
+		double *t = realloc(l->row, (size_t)cap * TLED_IT_NCOL * sizeof *t);
+		if (!t) {
+			l->oom = 1;
+			return;
+		}
+		l->row = t;
+		l->cap = cap;
+	}
+	double *q = l->row + l->nrow++ * TLED_IT_NCOL;
+	q[TLED_IT_STEP] = l->step;
+	q[TLED_IT_ITER] = (double)(l->it0 + it);
+	q[TLED_IT_ERR] = err_m / TLED_MM;
+	q[TLED_IT_KE] = ke;
+	q[TLED_IT_W] = W;
+	q[TLED_IT_JMIN] = jmin;
+	q[TLED_IT_OMEGA] = omega;
+	q[TLED_IT_DAMP] = c;
+	q[TLED_IT_DT] = dt;
 }
 
 void tled_solver_free(tled_solver_t *s)
@@ -1178,7 +1240,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		}
 		L = fmax(L, hi - lo);
 	}
-	int have_prev = 0, nconv = 0;
+	int have_prev = 0, nconv = 0, logged = 0;
 	double lam_old = -1, lam_mid = -1, jmin_est = 1;
 	tled_force_info_t fi = { 0 };
 	tled_cd_info_t ci = { 0 };
@@ -1386,6 +1448,11 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			nconv++;
 		else
 			nconv = 0;
+		if (o->itlog && (o->itlog->it0 + it) % o->itlog->every == 0) {
+			iter_log_add(o->itlog, it, err_est, ci.ke, fi.W, fi.Jmin,
+				     om, c, dt);
+			logged = it;
+		}
 		if (o->progress && it % 500 == 0)
 			o->progress(o->hook_ctx, it, o->max_iter, err_est);
 		if (o->cancelled && it % 100 == 0 && o->cancelled(o->hook_ctx)) {
@@ -1398,6 +1465,11 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	}
 	if (it > o->max_iter)
 		it = o->max_iter;
+	/* the last iteration is always in the log (its error estimate is
+	 * st->err_est) */
+	if (o->itlog && it > 0 && logged != it)
+		iter_log_add(o->itlog, it, err_est, ci.ke, fi.W, fi.Jmin,
+			     sqrt(lam > 0 ? lam : 1e-300), c, dt);
 	if (o->contact) {
 		int64_t nc = 0;
 		double vm = 0;

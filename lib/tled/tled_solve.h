@@ -74,6 +74,42 @@ enum tled_dt_estimate { TLED_DTE_EIGEN = 0, TLED_DTE_WAVE = 1 };
  */
 typedef struct tled_solver tled_solver_t;
 typedef struct tled_solver_opts tled_solver_opts_t;
+
+/*
+ * Convergence per relaxation iteration (the stage's `iterations` table, the
+ * report's growth_iterations).  tled_relax appends one row of the scalars
+ * its control loop already holds on the host (a resident backend returns
+ * them each step anyway: recording reads nothing more from it).  An
+ * iteration is numbered it0 + it within the growth step (it0: iterations
+ * of the step's earlier relax calls, kept by the caller); those divisible
+ * by `every` are recorded, and always the last one of a relax call.
+ * Row layout: enum tled_itcol, values in the units of the column names.
+ */
+enum tled_itcol {
+	TLED_IT_STEP,   /* growth step (the caller's `step`) */
+	TLED_IT_ITER,   /* it0 + it */
+	TLED_IT_ERR,    /* estimated distance to equilibrium max|v|/omega_min, mm */
+	TLED_IT_KE,     /* kinetic energy, J */
+	TLED_IT_W,      /* strain energy, J */
+	TLED_IT_JMIN,   /* smallest det F over active ips */
+	TLED_IT_OMEGA,  /* omega_min estimate, 1/s */
+	TLED_IT_DAMP,   /* damping c, 1/s */
+	TLED_IT_DT,     /* time step, s */
+	TLED_IT_NCOL
+};
+extern const char *const tled_itcol_name[TLED_IT_NCOL];
+typedef struct tled_iter_log {
+	double *row;      /* nrow x TLED_IT_NCOL */
+	int64_t nrow, cap;
+	int every;        /* >= 1 */
+	int step;
+	int64_t it0;
+	int oom;          /* a row could not be stored (the log stops) */
+} tled_iter_log_t;
+void tled_iter_log_free(tled_iter_log_t *l);
+/* while more than max_rows rows: double `every` and keep the rows whose
+ * iteration it divides, and the last row of every step */
+void tled_iter_log_thin(tled_iter_log_t *l, int64_t max_rows);
 typedef struct tled_ops {
 	const char *name; /* "cpu", "cuda": for messages */
 	void *ctx;          /* the backend's state, passed to every member */
@@ -142,6 +178,7 @@ struct tled_solver_opts {
 	 * m->ipg (NULL: no growth change).  The growth's work enters the
 	 * energy watchdog as the rise of the strain energy at fixed u. */
 	const double *ipg_to;
+	tled_iter_log_t *itlog; /* NULL: iterations not recorded */
 };
 
 void tled_solver_opts_default(tled_solver_opts_t *o);

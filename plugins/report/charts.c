@@ -6,10 +6,13 @@
  *   growth             one row per growth step (tled_cpu's stats: step,
  *                      iterations, err_est_mm, strain_energy_J,
  *                      kinetic_energy_J, ...): x = step
- *   growth_iterations  one row per relaxation iteration (step, iteration
- *                      and err_est_mm / residual_N / kinetic_energy_J):
- *                      x = the iterations of all steps in sequence, each
- *                      step's start marked
+ *   growth_iterations  one row per relaxation iteration (the TLED stage's
+ *                      `iterations`: step, iteration, err_est_mm,
+ *                      kinetic_energy_J, strain_energy_J, ...; a long
+ *                      growth keeps every 2nd, 4th, ... iteration):
+ *                      x = the iterations of all steps in sequence (gaps
+ *                      between recorded iterations kept), each step's
+ *                      start marked
  *   registration       one row per iteration (demons' table: level,
  *                      iteration, mse, mean_update_mm, max_update_mm):
  *                      x = the iterations of all levels in sequence, each
@@ -45,12 +48,13 @@ static const chart_def_t DEFS[] = {
 	  "energy (J)", { "strain_energy_J", "kinetic_energy_J" },
 	  { "strain energy", "kinetic energy" } },
 	{ IN_GROWTH_IT, "growit_err",
-	  "Growth: error estimate per relaxation iteration",
-	  "error estimate (mm)", { "err_est_mm" }, { "estimated error" } },
-	{ IN_GROWTH_IT, "growit_res", "Growth: residual force per iteration",
-	  "residual (N)", { "residual_N" }, { "residual force" } },
-	{ IN_GROWTH_IT, "growit_ke", "Growth: kinetic energy per iteration",
-	  "energy (J)", { "kinetic_energy_J" }, { "kinetic energy" } },
+	  "Growth: estimated distance to equilibrium per relaxation iteration",
+	  "error estimate (mm)", { "err_est_mm" },
+	  { "estimated error (max |v| / \xcf\x89min)" } },
+	{ IN_GROWTH_IT, "growit_energy",
+	  "Growth: energy per relaxation iteration", "energy (J)",
+	  { "strain_energy_J", "kinetic_energy_J" },
+	  { "strain energy", "kinetic energy" } },
 	{ IN_REG, "reg_mse", "Registration: image mismatch per iteration",
 	  "MSE (intensity\xc2\xb2)", { "mse" },
 	  { "mean squared difference" } },
@@ -119,10 +123,22 @@ static int setup_x(const tab_t *t, int k, double *x, sp_chart_t *c)
 {
 	const tab_col_t *g = num_col(t, INPUTS[k].group);
 	const tab_col_t *xc = num_col(t, INPUTS[k].xcol);
+	const tab_col_t *ic = g ? num_col(t, "iteration") : NULL;
 	if (!g && !xc)
 		xc = num_col(t, "iteration");
 	for (int64_t r = 0; r < t->nrows; r++)
 		x[r] = g || !xc ? (double)(r + 1) : xc->num[r];
+	/* segments in sequence: x advances by the iteration's increase
+	 * within a segment (rows of every k-th iteration keep their gaps)
+	 * and by the first iteration's number (at least 1) at a restart */
+	for (int64_t r = 0; ic && r < t->nrows; r++)
+		if (!isfinite(ic->num[r]))
+			ic = NULL;
+	for (int64_t r = 0; ic && r < t->nrows; r++) {
+		double i1 = ic->num[r], i0 = r ? ic->num[r - 1] : 0;
+		double d = r && i1 > i0 ? i1 - i0 : fmax(i1, 1);
+		x[r] = (r ? x[r - 1] : 0) + d;
+	}
 	c->x = x;
 	c->n = (int)t->nrows;
 	c->nmark = 0;
@@ -132,7 +148,7 @@ static int setup_x(const tab_t *t, int k, double *x, sp_chart_t *c)
 			      (isnan(g->num[r]) && isnan(g->num[r - 1]))))
 			continue;
 		sp_mark_t *m = &c->mark[c->nmark++];
-		m->x = (double)r + 0.5; /* between rows r and r + 1 (1-based) */
+		m->x = r ? x[r - 1] + 0.5 : x[0] - 0.5; /* just before row r */
 		snprintf(m->label, sizeof m->label, "%s %g", INPUTS[k].group,
 			 g->num[r]);
 	}

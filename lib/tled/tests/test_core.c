@@ -239,12 +239,34 @@ static void test_patch(void **state)
 	so.tol = 1e-12;
 	so.max_iter = 20000;
 	so.contact = 0;
+	/* the iteration log: every 7th iteration and the last */
+	tled_iter_log_t lg = { .every = 7, .step = 3, .it0 = 100 };
+	so.itlog = &lg;
 	tled_relax_stats_t st;
 	int rc = tled_relax(&s, &so, tgt, "patch test", &st, err, sizeof err);
 	if (rc)
 		print_message("%s\n", err);
 	assert_int_equal(rc, 0);
 	assert_true(st.converged);
+	/* iterations 100 + it with 7 | 100 + it (it = 5, 12, ...), and it =
+	 * st.iters when not among them */
+	int64_t nlog = (100 + st.iters) / 7 - 100 / 7 + ((100 + st.iters) % 7 != 0);
+	assert_int_equal(lg.oom, 0);
+	assert_int_equal(lg.nrow, nlog);
+	for (int64_t r = 0; r < lg.nrow; r++) {
+		const double *q = lg.row + r * TLED_IT_NCOL;
+		assert_true(q[TLED_IT_STEP] == 3);
+		assert_true(q[TLED_IT_ITER] == (r + 1 < lg.nrow ? 105 + 7 * r
+						 : 100 + st.iters));
+		assert_true(q[TLED_IT_KE] >= 0 && isfinite(q[TLED_IT_W]));
+		assert_true(q[TLED_IT_JMIN] > 0.9 && q[TLED_IT_DT] > 0);
+	}
+	const double *ql = lg.row + (lg.nrow - 1) * TLED_IT_NCOL;
+	assert_true(ql[TLED_IT_ERR] == st.err_est / TLED_MM);
+	assert_true(ql[TLED_IT_DT] == st.dt);
+	assert_true(ql[TLED_IT_ERR] < so.tol / TLED_MM);
+	assert_true(ql[TLED_IT_OMEGA] == st.omega_min);
+	tled_iter_log_free(&lg);
 	double emax = 0, umax = 0;
 	for (int64_t a = 0; a < m.n; a++)
 		for (int i = 0; i < 3; i++) {
@@ -262,6 +284,48 @@ static void test_patch(void **state)
 	tled_solver_free(&s);
 	tled_model_free(&m);
 	synth_free(&c);
+}
+
+/* tled_iter_log_thin: steps of 9000, 15000 and 7 iterations (24007 rows)
+ * thinned to at most 20000: every 2nd iteration, and each step's last */
+static void test_iter_log_thin(void **state)
+{
+	(void)state;
+	tled_iter_log_t lg = { .every = 1 };
+	const int nit[3] = { 9000, 15000, 7 };
+	lg.cap = 24007;
+	lg.row = calloc((size_t)lg.cap * TLED_IT_NCOL, sizeof *lg.row);
+	assert_non_null(lg.row);
+	for (int k = 0; k < 3; k++)
+		for (int i = 1; i <= nit[k]; i++) {
+			double *q = lg.row + lg.nrow++ * TLED_IT_NCOL;
+			q[TLED_IT_STEP] = k + 1;
+			q[TLED_IT_ITER] = i;
+			q[TLED_IT_ERR] = 1000 * (k + 1) + i;
+		}
+	tled_iter_log_thin(&lg, 40000); /* below: unchanged */
+	assert_int_equal(lg.nrow, 24007);
+	assert_int_equal(lg.every, 1);
+	tled_iter_log_thin(&lg, 20000);
+	/* 4500 + 7500 + (2, 4, 6 and the last, 7) */
+	assert_int_equal(lg.every, 2);
+	assert_int_equal(lg.nrow, 4500 + 7500 + 4);
+	const double *q = lg.row + 4499 * TLED_IT_NCOL;
+	assert_true(q[TLED_IT_STEP] == 1 && q[TLED_IT_ITER] == 9000);
+	assert_true(q[TLED_IT_ERR] == 10000 && q[TLED_IT_NCOL] == 2);
+	q = lg.row + (lg.nrow - 1) * TLED_IT_NCOL;
+	assert_true(q[TLED_IT_STEP] == 3 && q[TLED_IT_ITER] == 7);
+	assert_true(q[TLED_IT_ERR] == 3007);
+	q -= TLED_IT_NCOL;
+	assert_true(q[TLED_IT_ITER] == 6);
+	/* 12004 rows thinned to at most 5000: every 4th (2250 + 3750 + 1
+	 * (4) + 1 (7)) is still 6002 rows; every 8th: 1125 + 1875 + 1 */
+	tled_iter_log_thin(&lg, 5000);
+	assert_int_equal(lg.every, 8);
+	assert_int_equal(lg.nrow, 1125 + 1875 + 1);
+	tled_iter_log_free(&lg);
+	assert_null(lg.row);
+	assert_int_equal(lg.nrow, 0);
 }
 
 /* small model: faces fixed, a random initial displacement inside */
@@ -410,6 +474,7 @@ int main(void)
 		cmocka_unit_test(test_mls_linear),
 		cmocka_unit_test(test_mls_nodal),
 		cmocka_unit_test(test_patch),
+		cmocka_unit_test(test_iter_log_thin),
 		cmocka_unit_test(test_dt_critical),
 		cmocka_unit_test(test_coincident),
 	};

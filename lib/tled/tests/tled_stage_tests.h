@@ -118,7 +118,8 @@ typedef struct grow_out {
 	ps_t *nodes;          /* input */
 	const ps_t *on, *ot;  /* outputs */
 	const tab_t *tb;
-	msg_t *out[3];
+	const tab_t *it;      /* the iterations output */
+	msg_t *out[4];
 	const ps_attr_t *u;
 } grow_out_t;
 
@@ -135,13 +136,14 @@ static int grow(double Rb, double h, double Rt, int L, const char *const *par,
 	msg_freeze(&co->base);
 	const msg_t *in[3] = { &g->nodes->base, &co->base, NULL };
 	int rc = tu_run(TU_PLUGIN(), par, in, g->out, err, errsize);
-	for (int o = 0; o < 3; o++)
+	for (int o = 0; o < 4; o++)
 		keep(g->out[o]);
 	if (rc)
 		return rc;
 	g->on = (const ps_t *)g->out[0];
 	g->ot = (const ps_t *)g->out[1];
 	g->tb = (const tab_t *)g->out[2];
+	g->it = (const tab_t *)g->out[3];
 	g->u = attr(g->on, "u");
 	return 0;
 }
@@ -155,6 +157,38 @@ static void grow_ok(double Rb, double h, double Rt, int L,
 	if (rc)
 		print_message("error: %s\n", err);
 	assert_int_equal(rc, 0);
+}
+
+/* the iterations output against the stats: per step as many rows as the
+ * step's `iterations` (a small growth: no thinning), numbered 1, 2, ...;
+ * the last row's error estimate and time step are the step's */
+static void check_iterations(const grow_out_t *g)
+{
+	const tab_t *it = g->it;
+	assert_non_null(it);
+	int64_t r = 0, total = 0;
+	for (int64_t s = 0; s < g->tb->nrows; s++) {
+		double step = tab_num(g->tb, "step", s);
+		int64_t n = (int64_t)tab_num(g->tb, "iterations", s);
+		total += n;
+		for (int64_t i = 1; i <= n; i++, r++) {
+			assert_true(r < it->nrows);
+			assert_true(tab_num(it, "step", r) == step);
+			assert_true(tab_num(it, "iteration", r) == (double)i);
+			assert_true(tab_num(it, "kinetic_energy_J", r) >= 0);
+			assert_true(isfinite(tab_num(it, "err_est_mm", r)));
+			assert_true(tab_num(it, "dt_s", r) > 0);
+		}
+		/* a saturated step reports the undone call's (zero) error */
+		if (n > 0 && tab_num(g->tb, "err_est_mm", s) > 0) {
+			assert_true(tab_num(it, "err_est_mm", r - 1) ==
+				    tab_num(g->tb, "err_est_mm", s));
+			assert_true(tab_num(it, "dt_s", r - 1) ==
+				    tab_num(g->tb, "dt_s", s));
+		}
+	}
+	assert_int_equal(it->nrows, total);
+	assert_true(total > 0);
 }
 
 /* every node finite, boundary fixed, every node inside the brain */
@@ -192,6 +226,7 @@ static void check_common(const grow_out_t *g, double Rb, int L)
 		assert_true(tab_num(g->tb, "dt_s", r) > 0);
 		assert_true(tab_num(g->tb, "jmin", r) > 0);
 	}
+	check_iterations(g);
 }
 
 /*
@@ -883,7 +918,7 @@ static void test_labels_domain(void **state)
 	char err[1024] = "";
 	const char *params[] = { "tol=0.005", NULL };
 	int rc = tu_run(TU_PLUGIN(), params, in, g.out, err, sizeof err);
-	for (int o = 0; o < 3; o++)
+	for (int o = 0; o < 4; o++)
 		keep(g.out[o]);
 	if (rc)
 		print_message("error: %s\n", err);
@@ -891,6 +926,7 @@ static void test_labels_domain(void **state)
 	g.on = (const ps_t *)g.out[0];
 	g.ot = (const ps_t *)g.out[1];
 	g.tb = (const tab_t *)g.out[2];
+	g.it = (const tab_t *)g.out[3];
 	g.u = attr(g.on, "u");
 	check_common(&g, Rb, L);
 	/* the stage integrated over the labels domain built above */
@@ -966,11 +1002,11 @@ static void test_wrong_normals(void **state)
 	msg_freeze(&nodes->base);
 	msg_freeze(&co->base);
 	const msg_t *in[3] = { &nodes->base, &co->base, NULL };
-	msg_t *out[3] = { NULL, NULL, NULL };
+	msg_t *out[4] = { NULL, NULL, NULL, NULL };
 	char err[1024] = "";
 	const char *params[] = { "tol=0.005", NULL };
 	int rc = tu_run(TU_PLUGIN(), params, in, out, err, sizeof err);
-	for (int o = 0; o < 3; o++)
+	for (int o = 0; o < 4; o++)
 		keep(out[o]);
 	if (rc)
 		print_message("error: %s\n", err);

@@ -609,6 +609,77 @@ static void test_charts(void **state)
 				     "at iteration 24"));
 	assert_non_null(strstr(html, "Last: estimated error 0.49 mm at step "
 				     "7"));
+	/* growth_iterations not connected: no per-iteration chart */
+	assert_null(chart_svg(html, "growit_err"));
+	assert_null(strstr(html, "Growth, per relaxation iteration"));
+	free(html);
+	unref_all(in);
+}
+
+/*
+ * Per-iteration growth charts (input growth_iterations, the TLED stage's
+ * `iterations`): 3 steps, the second thinned to every 2nd iteration and its
+ * last (2, 4, 6, 7).  x runs over the steps in sequence keeping the gaps:
+ * 1..5, then 7, 9, 11, 12, then 13, 14, 15; the error falls 10x an
+ * iteration within a step (a log axis), every point read back through the
+ * ticks equals the table's; steps marked, the legend names both energies.
+ */
+static void test_charts_iterations(void **state)
+{
+	(void)state;
+	const int n[3] = { 8, 8, 8 };
+	const double h[3] = { 1, 1, 1 };
+	msg_t *in[NIN] = { 0 };
+	char err[1024] = "", path[512];
+	static const int step[12] = { 1, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3 };
+	static const int iter[12] = { 1, 2, 3, 4, 5, 2, 4, 6, 7, 1, 2, 3 };
+	static const double xw[12] = { 1, 2, 3, 4, 5, 7, 9, 11, 12, 13, 14, 15 };
+	double e[12], ke[12], w[12];
+	in[IMG] = &vol_fn("RAS", n, h, f_grad, DT_F32)->base;
+	tab_t *t = tab_new();
+	for (int k = 0; k < 12; k++) {
+		int64_t r = tab_add_row(t);
+		e[k] = 0.5 * pow(10, -iter[k] + 1) * step[k];
+		ke[k] = 1e-6 * e[k];
+		w[k] = 1e-4 * (step[k] + 0.1 * iter[k]);
+		tab_set_num(t, r, "step", step[k]);
+		tab_set_num(t, r, "iteration", iter[k]);
+		tab_set_num(t, r, "err_est_mm", e[k]);
+		tab_set_num(t, r, "kinetic_energy_J", ke[k]);
+		tab_set_num(t, r, "strain_energy_J", w[k]);
+		tab_set_num(t, r, "dt_s", 1e-4);
+	}
+	in[GROWIT] = &t->base;
+	const char *params[] = { "prefix=chartsit", NULL };
+	if (run(params, in, NULL, err, sizeof err))
+		fail_msg("report failed: %s", err);
+	snprintf(path, sizeof path, "%s/chartsit/index.html", outdir);
+	char *html = slurp(path);
+	assert_non_null(html);
+	assert_non_null(strstr(html, "<h3>Growth, per relaxation iteration"
+				     "</h3>"));
+	char *svg = chart_svg(html, "growit_err");
+	assert_non_null(svg);
+	assert_non_null(strstr(svg, ">relaxation iteration (all growth steps "
+				    "in sequence)</text>"));
+	assert_non_null(strstr(svg, ">error estimate (mm)</text>"));
+	assert_non_null(strstr(svg, "<tspan class=\"exp\""));  /* log axis */
+	check_series(svg, "err_est_mm", xw, e, 12, 3, 1, 0.002);
+	assert_non_null(strstr(svg, ">step 1</text>"));
+	assert_non_null(strstr(svg, ">step 2</text>"));
+	assert_non_null(strstr(svg, ">step 3</text>"));
+	free(svg);
+	svg = chart_svg(html, "growit_energy");
+	assert_non_null(svg);
+	assert_non_null(strstr(svg, ">energy (J)</text>"));
+	check_series(svg, "strain_energy_J", xw, w, 12, 3, 1, 0.002);
+	check_series(svg, "kinetic_energy_J", xw, ke, 12, 3, 1, 0.002);
+	assert_non_null(strstr(svg, ">strain energy</text>"));   /* legend */
+	assert_non_null(strstr(svg, ">kinetic energy</text>"));
+	free(svg);
+	/* dt_s is not charted when the known columns are there */
+	assert_null(chart_svg(html, "growth_iterations_5"));
+	assert_non_null(strstr(html, "at iteration 15"));
 	free(html);
 	unref_all(in);
 }
@@ -812,6 +883,7 @@ int main(void)
 		cmocka_unit_test(test_orientation),
 		cmocka_unit_test(test_html),
 		cmocka_unit_test(test_charts),
+		cmocka_unit_test(test_charts_iterations),
 		cmocka_unit_test(test_checker),
 		cmocka_unit_test(test_graph_drawing),
 		cmocka_unit_test(test_bad_inputs),
