@@ -36,31 +36,34 @@ typedef struct chart_def {
 	const char *ylabel;
 	const char *col[3];    /* series, in legend order; absent ones skipped */
 	const char *label[3];
+	int logpos;            /* log axis over the positive values when they
+	                          span more than two decades, zeros left out
+	                          (a growth step where nothing moves) */
 } chart_def_t;
 
 static const chart_def_t DEFS[] = {
 	{ IN_GROWTH, "growth_err",
 	  "Growth: estimated equilibrium error at the end of each step",
-	  "error estimate (mm)", { "err_est_mm" }, { "estimated error" } },
+	  "error estimate (mm)", { "err_est_mm" }, { "estimated error" }, 0 },
 	{ IN_GROWTH, "growth_iter", "Growth: relaxation iterations per step",
-	  "iterations", { "iterations" }, { "iterations to equilibrium" } },
+	  "iterations", { "iterations" }, { "iterations to equilibrium" }, 0 },
 	{ IN_GROWTH, "growth_energy", "Growth: energy at the end of each step",
 	  "energy (J)", { "strain_energy_J", "kinetic_energy_J" },
-	  { "strain energy", "kinetic energy" } },
+	  { "strain energy", "kinetic energy" }, 0 },
 	{ IN_GROWTH_IT, "growit_err",
 	  "Growth: estimated distance to equilibrium per relaxation iteration",
 	  "error estimate (mm)", { "err_est_mm" },
-	  { "estimated error (max |v| / \xcf\x89min)" } },
+	  { "estimated error (max |v| / \xcf\x89min)" }, 1 },
 	{ IN_GROWTH_IT, "growit_energy",
 	  "Growth: energy per relaxation iteration", "energy (J)",
 	  { "strain_energy_J", "kinetic_energy_J" },
-	  { "strain energy", "kinetic energy" } },
+	  { "strain energy", "kinetic energy" }, 1 },
 	{ IN_REG, "reg_mse", "Registration: image mismatch per iteration",
 	  "MSE (intensity\xc2\xb2)", { "mse" },
-	  { "mean squared difference" } },
+	  { "mean squared difference" }, 0 },
 	{ IN_REG, "reg_update", "Registration: size of each update",
 	  "update (mm)", { "max_update_mm", "mean_update_mm" },
-	  { "largest", "mean" } },
+	  { "largest", "mean" }, 0 },
 };
 
 static const struct {
@@ -163,7 +166,8 @@ static int setup_x(const tab_t *t, int k, double *x, sp_chart_t *c)
 }
 
 static void caption(FILE *f, const sp_chart_t *c, const tab_t *t,
-		    const char *port, const char *src, const char *xword)
+		    const char *port, const char *src, const char *xword,
+		    int64_t nzero)
 {
 	fputs("<figcaption>", f);
 	for (int s = 0; s < c->ns; s++) {
@@ -185,8 +189,12 @@ static void caption(FILE *f, const sp_chart_t *c, const tab_t *t,
 		rp_html_esc(f, src);
 		fputs("</code>", f);
 	}
-	fprintf(f, ", %lld rows%s.", (long long)t->nrows,
+	fprintf(f, ", %lld rows%s", (long long)t->nrows,
 		c->logy ? "; logarithmic y axis" : "");
+	if (nzero > 0)
+		fprintf(f, " (%lld zero value%s not drawn)", (long long)nzero,
+			nzero > 1 ? "s" : "");
+	fputc('.', f);
 	if (c->nmark > 1 && !strcmp(xword, "iteration") &&
 	    !strcmp(port, "registration"))
 		fputs(" Each level works on a finer copy of the images, so its "
@@ -196,13 +204,33 @@ static void caption(FILE *f, const sp_chart_t *c, const tab_t *t,
 }
 
 static int emit(FILE *f, sp_chart_t *c, const tab_t *t, const char *port,
-		const char *src, const char *xword)
+		const char *src, const char *xword, int logpos)
 {
+	int64_t nzero = 0;
 	c->logy = sp_want_log(c);
+	if (!c->logy && logpos) {
+		double lo = INFINITY, hi = -INFINITY;
+		int neg = 0;
+		for (int s = 0; s < c->ns; s++)
+			for (int i = 0; i < c->n; i++) {
+				double y = c->s[s].y[i];
+				if (!isfinite(y))
+					continue;
+				neg |= y < 0;
+				nzero += y == 0;
+				if (y > 0) {
+					lo = fmin(lo, y);
+					hi = fmax(hi, y);
+				}
+			}
+		c->logy = !neg && hi > 100 * lo;
+		if (!c->logy)
+			nzero = 0;
+	}
 	fputs("<figure class=\"chart\">\n", f);
 	int rc = sp_write_svg(f, c);
 	if (!rc)
-		caption(f, c, t, port, src, xword);
+		caption(f, c, t, port, src, xword, nzero);
 	fputs("</figure>\n", f);
 	return rc ? 0 : 1;
 }
@@ -244,7 +272,8 @@ int rp_write_charts(FILE *f, armstg_stage_t *st)
 			if (!c.ns)
 				continue;
 			known++;
-			nchart += emit(f, &c, t, port, src, INPUTS[k].xword);
+			nchart += emit(f, &c, t, port, src, INPUTS[k].xword,
+				       DEFS[d].logpos);
 		}
 		/* a table of another layout: every numeric column */
 		const char *skip[2] = { INPUTS[k].group, INPUTS[k].xcol };
@@ -272,7 +301,7 @@ int rp_write_charts(FILE *f, armstg_stage_t *st)
 			c.s[0].label = yc->name;
 			c.s[0].y = yc->num;
 			c.ns = 1;
-			nchart += emit(f, &c, t, port, src, INPUTS[k].xword);
+			nchart += emit(f, &c, t, port, src, INPUTS[k].xword, 0);
 		}
 		fputs("</div>\n", f);
 		free(x);
