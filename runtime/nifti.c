@@ -328,6 +328,24 @@ static int affine_ok(const double A[16])
 	return isfinite(det) && fabs(det) > 1e-12;
 }
 
+/* NIfTI-1 stores the affine as float32 (srow_x..z) and the voxel sizes as
+ * float32 column norms (pixdim[1..3]): 0 when an element or a column norm
+ * overflows float (a METER file's pixdim of 1e36 is 1e39 mm), which would
+ * be written as an infinity that no reader accepts */
+static int affine_fits_float(const double A[16])
+{
+	for (int i = 0; i < 12; i++)
+		if (!isfinite((float)A[i]))
+			return 0;
+	for (int c = 0; c < 3; c++) {
+		double n = sqrt(A[c] * A[c] + A[4 + c] * A[4 + c] +
+				A[8 + c] * A[8 + c]);
+		if (!isfinite((float)n))
+			return 0;
+	}
+	return 1;
+}
+
 static int nifti_affine(const char *path, const nifti_image *nim,
 			double A[16], char *err, size_t errsize)
 {
@@ -362,6 +380,12 @@ static int nifti_affine(const char *path, const nifti_image *nim,
 		return ferr(err, errsize, ARMSTG_EINVAL,
 			    "'%s': the %s affine is singular or not finite",
 			    path, which);
+	if (!affine_fits_float(A))
+		return ferr(err, errsize, ARMSTG_EINVAL,
+			    "'%s': the %s affine in mm is beyond float32 "
+			    "range (voxel sizes or offsets above %g mm): no "
+			    "NIfTI-1 file can hold it", path, which,
+			    (double)FLT_MAX);
 	return 0;
 }
 
@@ -812,6 +836,11 @@ int vol_write_nifti(const char *path, const vol_t *v, char *err,
 		return ferr(err, errsize, ARMSTG_EINVAL,
 			    "'%s': the volume's affine is singular or not "
 			    "finite", path);
+	if (!affine_fits_float(v->affine))
+		return ferr(err, errsize, ARMSTG_EINVAL,
+			    "'%s': the volume's affine is beyond float32 range "
+			    "(voxel sizes or offsets above %g mm): NIfTI-1 "
+			    "cannot hold it", path, (double)FLT_MAX);
 	pthread_once(&nifti_once, nifti_quiet);
 
 	nifti_1_header h;

@@ -667,6 +667,27 @@ static void test_hostile_files(void **state)
 	long got = atol(cr + 2); /* about half of the data, never all */
 	assert_true(got > 907680 / 4 && got < 907680);
 	msg_unref(&lv->base);
+	/* found by fuzz_nifti (2026-11-26): no qform or sform, pixdim[2] =
+	 * 2e38 in METER: 2e41 mm, finite as a double but not as the float
+	 * the writer would store (an infinite sform no reader accepts) */
+	copy_prefix(tmp("h.nii"), tmp("h_far.nii"), sz);
+	int16_t codes[2] = { 0, 0 };
+	patch(tmp("h_far.nii"), 252, codes, sizeof codes);
+	float far = 2e38f;
+	patch(tmp("h_far.nii"), 80 + 4, &far, 4);
+	unsigned char meter = NIFTI_UNITS_METER;
+	patch(tmp("h_far.nii"), 123, &meter, 1);
+	expect_read_error(tmp("h_far.nii"), "the pixdim (no qform or sform) "
+			  "affine in mm is beyond float32 range");
+	/* in mm that is also too far for a volume to be written */
+	double FAR[16] = { 1, 0, 0, 0, 0, 2e41, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
+	vol_t *fv = vol_new(2, 2, 2, 1, DT_F32, FAR);
+	char ferrm[512];
+	assert_int_equal(vol_write_nifti(tmp("h_far2.nii"), fv, ferrm,
+					 sizeof ferrm), ARMSTG_EINVAL);
+	assert_non_null(strstr(ferrm, "affine is beyond float32 range"));
+	assert_int_equal(access(tmp("h_far2.nii"), F_OK), -1);
+	msg_unref(&fv->base);
 	/* a vox_offset that is negative, huge or NaN (niftilib would convert
 	 * it to int: undefined, and a negative one passed the size check) */
 	const float vo_bad[3] = { -1e10f, 3e9f, NAN };
