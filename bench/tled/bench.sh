@@ -6,15 +6,19 @@
 # thread counts given.  One row per run appended to OUT (TSV):
 #   preset spacing_mm backend threads status nodes ips entries build_s
 #   iterations growth_s step_ms bytes_per_step_MB GBps jmin error
+#   forces_ms update_ms contact_ms hforces_s
 # step_ms: tled_cuda: device time per time step (the plugin's counter);
 # tled_cpu: (growth - model build) / iterations (Lanczos included).
+# forces_ms .. contact_ms: tled_cuda's step split (stresses + gather, the
+# update, the contact); hforces_s: its host-array force evaluations (the
+# time-step estimates, with their copies), seconds in all.
 # Usage: sh bench/tled/bench.sh BUILD OUT "default:6,4,3" "cuda cpu16 cpu1"
 # Each run is limited to TLED_BENCH_TIMEOUT seconds (default 300).
 set -u
 BUILD=$1 OUT=$2 CASES=$3 BACKENDS=$4
 TO=${TLED_BENCH_TIMEOUT:-300}
 export ARMSTG_PLUGIN_PATH="$BUILD/plugins"
-[ -f "$OUT" ] || printf 'preset\tspacing_mm\tbackend\tthreads\tstatus\tnodes\tips\tentries\tbuild_s\titerations\tgrowth_s\tstep_ms\tbytes_per_step_MB\tGBps\tjmin\terror\n' >"$OUT"
+[ -f "$OUT" ] || printf 'preset\tspacing_mm\tbackend\tthreads\tstatus\tnodes\tips\tentries\tbuild_s\titerations\tgrowth_s\tstep_ms\tbytes_per_step_MB\tGBps\tjmin\terror\tforces_ms\tupdate_ms\tcontact_ms\thforces_s\n' >"$OUT"
 for case in $CASES; do
     preset=${case%%:*}
     for sp in $(echo "${case#*:}" | tr ',' ' '); do
@@ -40,12 +44,17 @@ for case in $CASES; do
                 /\[grow@/ && /growth steps,/ { for (i = 1; i <= NF; i++) if ($(i+1) == "s") gs = $i }
                 /\[grow@/ && /device: / { for (i = 1; i <= NF; i++) {
                         if ($(i+1) == "ms" && $(i+2) == "per") sm = $i
-                        if ($(i+1) == "MB") mb = substr($i, 2)
-                        if ($(i+1) == "GB/s),") gb = $i } }
+                        if ($(i+1) == "MB") { mb = $i; gsub(/[(;]/, "", mb) }
+                        if ($(i+1) == "GB/s),") gb = $i
+                        if ($i == "(forces") { fm = $(i+1); gsub(/,/, "", fm) }
+                        if ($i == "update") { um = $(i+1); gsub(/,/, "", um) }
+                        if ($i == "contact") { cm = $(i+1); gsub(/,/, "", cm) }
+                        if ($(i+1) == "host-array") hf = "pending"
+                        if (hf == "pending" && $(i+1) == "s") hf = $i } }
                 /min det F|inverted|failed:|error/ && err == "" && /grow/ { err = $0; gsub(/\t/, " ", err); err = substr(err, 1, 200) }
                 END { if (sm == "" && gs != "" && it > 0) sm = sprintf("%.3f", (gs - bs) / it * 1000)
                       if (st == "failed" && gs == "" && err == "") err = "failed or timed out (" to " s)"
-                      printf "%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n", preset, sp, be, th, st, nodes, ips, ent, bs, it, gs, sm, mb, gb, "", err }' "$d/log" >>"$OUT"
+                      printf "%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n", preset, sp, be, th, st, nodes, ips, ent, bs, it, gs, sm, mb, gb, "", err, fm, um, cm, hf }' "$d/log" >>"$OUT"
             tail -1 "$OUT"
             [ "$st" = ok ] || tail -3 "$d/log" | cut -c1-300
             rm -rf "$d"

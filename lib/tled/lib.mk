@@ -1,2 +1,2 @@
 # lib/tled: users link OpenMP (already in LDFLAGS) and libm
-libtled_LDLIBS := -lm
+libtled_LDLIBS := -llapacke -lopenblas -lm

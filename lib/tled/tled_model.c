@@ -6,6 +6,7 @@
  * normals.  Pure C + OpenMP; no host calls.  SI units throughout.
  */
 #include "tled_model.h"
+#include "tled_corr.h"
 
 #include <float.h>
 #include <math.h>
@@ -54,6 +55,7 @@ void tled_model_opts_default(tled_model_opts_t *o)
 	o->ip_factor = 1.0;
 	o->merge_tol = 1e-3 * TLED_MM;
 	o->corr = TLED_CORR_ALL;
+	o->corr_coarse = 1;
 	o->ebc = 1;
 	o->ebc_fixed = 1;
 	o->support_nodal = 1;
@@ -234,7 +236,7 @@ int tled_grid_knn(const tled_grid_t *g, const double x[3], int k, int64_t skip,
 
 /* Inverse of a symmetric positive definite 4x4 by Gauss-Jordan with partial
  * pivoting; returns -1 when the smallest pivot is below tol * max diag. */
-static int inv4(const double A[16], double Ai[16])
+int tled_inv4(const double A[16], double Ai[16])
 {
 	double a[4][8];
 	double dmax = 0;
@@ -393,7 +395,7 @@ int tled_mls_nodal(const double *X, const int64_t *ids, int k,
 			}
 	}
 	double Mi[16];
-	if (inv4(M, Mi))
+	if (tled_inv4(M, Mi))
 		return -1;
 	double g[4], dg[3][4];
 	for (int r = 0; r < 4; r++)
@@ -785,286 +787,6 @@ int tled_model_interp(const tled_model_t *m, const tled_grid_t *ng, int K,
 	return 0;
 }
 
-/* ------------------------------------------------- consistency correction */
-
-/*
- * Least-norm correction delta of the derivatives (one scalar problem per
- * Cartesian component) such that
- *   (i)  sum_a delta_a(ip) [1, X_a] = 0 at every ip  (linear reproduction),
- *   (ii) sum_ip V_ip (dN_a + delta_a)(ip) = 0 for every constrained node a,
- * minimising sum_ip V_ip sum_a delta_a(ip)^2 / w_a(ip).  Lagrange multipliers
- * give delta_a(ip) = w_a (mu_a - p_a^T M^-1 sum_b w_b p_b mu_b) (mu = 0 on
- * unconstrained nodes): the residual of the ip's MLS linear fit of mu.  The
- * multipliers solve the SPD system Q mu = -g with
- *   (Q v)_a = sum_ip V_ip w_a (v_a - p_a^T M^-1 sum_b w_b p_b v_b),
- * by conjugate gradients (3 right-hand sides, Jacobi preconditioned).
- */
-typedef struct corr_ctx {
-	const tled_model_t *m;
-	const double *w;     /* per entry */
-	const double *P;     /* 4 per entry: p_a */
-	const double *Mi;    /* 16 per ip */
-	const uint8_t *con;  /* per node */
-	double *ev;          /* 3 per entry scratch */
-} corr_ctx_t;
-
-/* per-entry residual values  e = w_a (v_a - p_a^T c), c = M^-1 sum w p v */
-static void corr_resid(const corr_ctx_t *cx, const double *v, double *ev)
-{
-	const tled_model_t *m = cx->m;
-#pragma omp parallel for schedule(static) num_threads(m->nthreads)
-	for (int64_t p = 0; p < m->nip; p++) {
-		double b[4][3] = { { 0 } }, cc[4][3];
-		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
-			int64_t a = m->ipnode[e];
-			if (!cx->con[a])
-				continue;
-			for (int r = 0; r < 4; r++)
-				for (int c = 0; c < 3; c++)
-					b[r][c] += cx->w[e] * cx->P[4 * e + r] *
-						   v[3 * a + c];
-		}
-		const double *Mi = cx->Mi + 16 * p;
-		for (int r = 0; r < 4; r++)
-			for (int c = 0; c < 3; c++)
-				cc[r][c] = Mi[4 * r] * b[0][c] + Mi[4 * r + 1] * b[1][c] +
-					   Mi[4 * r + 2] * b[2][c] +
-					   Mi[4 * r + 3] * b[3][c];
-		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
-			int64_t a = m->ipnode[e];
-			const double *pa = cx->P + 4 * e;
-			for (int c = 0; c < 3; c++) {
-				double fit = pa[0] * cc[0][c] + pa[1] * cc[1][c] +
-					     pa[2] * cc[2][c] + pa[3] * cc[3][c];
-				double va = cx->con[a] ? v[3 * a + c] : 0;
-				ev[3 * e + c] = cx->w[e] * (va - fit);
-			}
-		}
-	}
-}
-
-static void corr_apply(const corr_ctx_t *cx, const double *v, double *out,
-		       const int64_t *ent_ip)
-{
-	const tled_model_t *m = cx->m;
-	corr_resid(cx, v, cx->ev);
-#pragma omp parallel for schedule(static) num_threads(m->nthreads)
-	for (int64_t a = 0; a < m->n; a++) {
-		double s[3] = { 0, 0, 0 };
-		if (cx->con[a])
-			for (int64_t t = m->nptr[a]; t < m->nptr[a + 1]; t++) {
-				int64_t e = m->nent[t];
-				double V = m->ipV[ent_ip[e]];
-				for (int c = 0; c < 3; c++)
-					s[c] += V * cx->ev[3 * e + c];
-			}
-		for (int c = 0; c < 3; c++)
-			out[3 * a + c] = s[c];
-	}
-}
-
-/* Remove from v (3n, per component) its least-squares fit by alpha +
- * beta . X over the nodes with con set: the null space of the correction
- * operator (a linear mu is reproduced exactly and gives no correction), so
- * that CG works on the consistent part of a singular system. */
-static void null_project(const tled_model_t *m, const uint8_t *con, double *v)
-{
-	double A[16] = { 0 }, b[4][3] = { { 0 } }, Ai[16];
-	double xc[3] = { 0, 0, 0 };
-	int64_t cnt = 0;
-	for (int64_t a = 0; a < m->n; a++)
-		if (con[a]) {
-			for (int c = 0; c < 3; c++)
-				xc[c] += m->X[3 * a + c];
-			cnt++;
-		}
-	if (cnt < 4)
-		return;
-	for (int c = 0; c < 3; c++)
-		xc[c] /= (double)cnt;
-	double L = m->h_mean > 0 ? m->h_mean : 1;
-	for (int64_t a = 0; a < m->n; a++) {
-		if (!con[a])
-			continue;
-		double p[4] = { 1, (m->X[3 * a] - xc[0]) / L,
-				(m->X[3 * a + 1] - xc[1]) / L,
-				(m->X[3 * a + 2] - xc[2]) / L };
-		for (int r = 0; r < 4; r++) {
-			for (int q = 0; q < 4; q++)
-				A[4 * r + q] += p[r] * p[q];
-			for (int c = 0; c < 3; c++)
-				b[r][c] += p[r] * v[3 * a + c];
-		}
-	}
-	if (inv4(A, Ai))
-		return;
-	double co[4][3];
-	for (int r = 0; r < 4; r++)
-		for (int c = 0; c < 3; c++) {
-			co[r][c] = 0;
-			for (int q = 0; q < 4; q++)
-				co[r][c] += Ai[4 * r + q] * b[q][c];
-		}
-	for (int64_t a = 0; a < m->n; a++) {
-		if (!con[a])
-			continue;
-		double p[4] = { 1, (m->X[3 * a] - xc[0]) / L,
-				(m->X[3 * a + 1] - xc[1]) / L,
-				(m->X[3 * a + 2] - xc[2]) / L };
-		for (int c = 0; c < 3; c++)
-			v[3 * a + c] -= co[0][c] * p[0] + co[1][c] * p[1] +
-					co[2][c] * p[2] + co[3][c] * p[3];
-	}
-}
-
-static int correct_gradients(tled_model_t *m, const double *w, const double *P,
-			     const double *Mi, const uint8_t *con,
-			     const int64_t *ent_ip, const double *G, char *err,
-			     size_t errsize)
-{
-	int64_t n = m->n, ne = m->ipptr[m->nip];
-	double *g = calloc((size_t)(3 * n), sizeof *g);
-	double *x = calloc((size_t)(3 * n), sizeof *x);
-	double *r = malloc((size_t)(3 * n) * sizeof *r);
-	double *d = malloc((size_t)(3 * n) * sizeof *d);
-	double *q = malloc((size_t)(3 * n) * sizeof *q);
-	double *ev = malloc((size_t)(3 * (ne ? ne : 1)) * sizeof *ev);
-	int rc = 0;
-	if (!g || !x || !r || !d || !q || !ev) {
-		rc = errf(err, errsize, "out of memory in the gradient "
-			  "correction");
-		goto out;
-	}
-	corr_ctx_t cx = { m, w, P, Mi, con, ev };
-	tled_model_gradsum(m, g);
-	double g0[3] = { 0, 0, 0 }, rr[3] = { 0, 0, 0 };
-	for (int64_t a = 0; a < n; a++)
-		for (int c = 0; c < 3; c++) {
-			double v = con[a] ? (G ? G[3 * a + c] : 0) -
-						    g[3 * a + c]
-					  : 0;
-			r[3 * a + c] = v;
-			d[3 * a + c] = v;
-			rr[c] += v * v;
-		}
-	/* every node constrained (ebc): the operator is singular with the
-	 * linear fields as null space; work on the consistent part */
-	int singular = 1;
-	for (int64_t a = 0; a < n && singular; a++)
-		if (!con[a] && m->nptr[a + 1] > m->nptr[a])
-			singular = 0;
-	if (singular) {
-		null_project(m, con, r);
-		memcpy(d, r, (size_t)(3 * n) * sizeof *d);
-		for (int c = 0; c < 3; c++)
-			rr[c] = 0;
-		for (int64_t a = 0; a < n; a++)
-			for (int c = 0; c < 3; c++)
-				rr[c] += r[3 * a + c] * r[3 * a + c];
-	}
-	for (int c = 0; c < 3; c++)
-		g0[c] = sqrt(rr[c]);
-	/* Jacobi preconditioner: the diagonal of Q,
-	 *   Q_aa = sum_ip V_ip w_a (1 - w_a p_a^T M^-1 p_a)
-	 * (the correction's coupling through one ip is strongest on its own
-	 * node; node volumes and weights vary by orders of magnitude between
-	 * the boundary and the interior, so scaling cuts the iterations) */
-	double *dg = malloc((size_t)n * sizeof *dg);
-	if (!dg) {
-		rc = errf(err, errsize, "out of memory in the gradient "
-			  "correction");
-		goto out;
-	}
-#pragma omp parallel for schedule(static) num_threads(m->nthreads)
-	for (int64_t a = 0; a < n; a++) {
-		double q = 0;
-		for (int64_t t = m->nptr[a]; t < m->nptr[a + 1]; t++) {
-			int64_t e = m->nent[t], p = ent_ip[e];
-			const double *pa = P + 4 * e, *Mp = Mi + 16 * p;
-			double pMp = 0;
-			for (int i = 0; i < 4; i++)
-				for (int j = 0; j < 4; j++)
-					pMp += pa[i] * Mp[4 * i + j] * pa[j];
-			q += m->ipV[p] * w[e] * (1 - w[e] * pMp);
-		}
-		dg[a] = con[a] && q > 0 ? 1 / q : 0;
-	}
-	/* z = D^-1 r, rz = r . z per component */
-	double rz[3] = { 0, 0, 0 };
-	for (int64_t a = 0; a < n; a++)
-		for (int c = 0; c < 3; c++) {
-			d[3 * a + c] = dg[a] * r[3 * a + c];
-			rz[c] += r[3 * a + c] * d[3 * a + c];
-		}
-	/* scale for the stopping test: sum |V dN| is O(h^2) per node */
-	int it;
-	for (it = 0; it < 5000; it++) {
-		int done = 1;
-		for (int c = 0; c < 3; c++)
-			if (sqrt(rr[c]) > 1e-13 * (g0[c] > 0 ? g0[c] : 1) &&
-			    g0[c] > 0)
-				done = 0;
-		if (done)
-			break;
-		corr_apply(&cx, d, q, ent_ip);
-		double dq[3] = { 0, 0, 0 };
-		for (int64_t a = 0; a < n; a++)
-			for (int c = 0; c < 3; c++)
-				dq[c] += d[3 * a + c] * q[3 * a + c];
-		double al[3], rn[3] = { 0, 0, 0 }, zn[3] = { 0, 0, 0 };
-		for (int c = 0; c < 3; c++)
-			al[c] = dq[c] > 0 ? rz[c] / dq[c] : 0;
-		for (int64_t a = 0; a < n; a++)
-			for (int c = 0; c < 3; c++) {
-				x[3 * a + c] += al[c] * d[3 * a + c];
-				r[3 * a + c] -= al[c] * q[3 * a + c];
-			}
-		if (singular && it % 20 == 19)
-			null_project(m, con, r);
-		for (int64_t a = 0; a < n; a++)
-			for (int c = 0; c < 3; c++) {
-				rn[c] += r[3 * a + c] * r[3 * a + c];
-				zn[c] += r[3 * a + c] * dg[a] * r[3 * a + c];
-			}
-		for (int64_t a = 0; a < n; a++)
-			for (int c = 0; c < 3; c++)
-				d[3 * a + c] = dg[a] * r[3 * a + c] +
-					       (rz[c] > 0 ? zn[c] / rz[c] : 0) *
-						       d[3 * a + c];
-		for (int c = 0; c < 3; c++) {
-			rr[c] = rn[c];
-			rz[c] = zn[c];
-		}
-	}
-	free(dg);
-	m->corr_iters = it;
-	/* apply: dN += w (mu - fit(mu)) */
-	corr_resid(&cx, x, ev);
-	for (int64_t e = 0; e < ne; e++)
-		for (int c = 0; c < 3; c++)
-			m->dN[3 * e + c] += ev[3 * e + c];
-	/* report the remaining constraint residual */
-	tled_model_gradsum(m, g);
-	double after = 0, before = 0;
-	for (int64_t a = 0; a < n; a++)
-		if (con[a])
-			for (int c = 0; c < 3; c++) {
-				double v = g[3 * a + c] - (G ? G[3 * a + c] : 0);
-				after += v * v;
-			}
-	for (int c = 0; c < 3; c++)
-		before += g0[c] * g0[c];
-	m->corr_rel = before > 0 ? sqrt(after / before) : 0;
-out:
-	free(g);
-	free(x);
-	free(r);
-	free(d);
-	free(q);
-	free(ev);
-	return rc;
-}
-
 /*
  * Boundary weights t_b ~ A_b n_b (m^2) of the brain-boundary nodes: the
  * surface integral of any smooth g over the boundary is ~ sum_b g(X_b) t_b.
@@ -1141,7 +863,7 @@ static int boundary_weights(tled_model_t *m, const double *Gfit)
 	for (int c = 0; c < 3; c++)
 		R[3 * (c + 1) + c] += V / L;
 	double Mi[16];
-	if (inv4(M, Mi)) {
+	if (tled_inv4(M, Mi)) {
 		free(A);
 		return -1;
 	}
@@ -1893,7 +1615,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 							M[4 * r + s2] += w[e0 + i] *
 									 pa[r] * pa[s2];
 				}
-				ok = !inv4(M, Mi + 16 * p);
+				ok = !tled_inv4(M, Mi + 16 * p);
 			}
 			for (int i = 0; i < k; i++)
 				ent_ip[e0 + i] = p;
@@ -2113,7 +1835,8 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		free(near);
 	}
 	if (o->corr != TLED_CORR_NONE &&
-	    correct_gradients(m, w, P, Mi, con, ent_ip, G, err, errsize)) {
+	    tled_correct_gradients(m, w, P, Mi, con, ent_ip, G, o->corr_coarse,
+				   err, errsize)) {
 		free(G);
 		goto fail;
 	}

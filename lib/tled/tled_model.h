@@ -119,6 +119,10 @@ typedef struct tled_model_opts {
 	double ip_factor;       /* ip grid spacing / mean node spacing */
 	double merge_tol;       /* m: nodes closer than this are merged */
 	int corr;               /* tled_corr: integration-constraint correction */
+	int corr_coarse;        /* 1 (default): the correction's conjugate
+	                           gradients are preconditioned on two levels
+	                           (Jacobi + a trilinear coarse grid solved by
+	                           LAPACK, tled_corr.c); 0: Jacobi only */
 	int ebc;                /* 1 (default): essential boundary conditions by
 	                           collocation u^h(X_c) = u_c (see tled_solve.h)
 	                           and the correction targets the boundary
@@ -250,6 +254,9 @@ typedef struct tled_model {
 	/* diagnostics of the setup */
 	double corr_rel;    /* |integration-constraint residual| after / before */
 	int corr_iters;     /* CG iterations of the correction */
+	int64_t corr_nc;    /* coarse unknowns of its preconditioner (0: none) */
+	double t_coarse;    /* s: coarse assembly + Cholesky, within the
+	                       correction's phase time */
 	double dt_wave;     /* h_min / c_max, s */
 	uint64_t gen;       /* build number, unique per process: a backend
 	                       that copies the model (tled_cuda) re-uploads

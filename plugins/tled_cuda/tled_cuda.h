@@ -65,6 +65,13 @@ void tled_cuda_ops(tled_cuda_t *c, tled_ops_t *ops);
 typedef struct tled_cuda_stats {
 	long long steps;
 	double step_ms;       /* device time of those steps, ms */
+	double forces_ms;     /* of which: stresses + gather (rforces) */
+	double update_ms;     /* central-difference update (rstep) */
+	double contact_ms;    /* contact (rcontact) */
+	double other_ms;      /* damping estimate (rayleigh) */
+	long long hforces;    /* host-array force calls (time-step estimates,
+	                         growth energy), with their copies */
+	double hforces_ms;
 	double bytes_per_step;
 	double upload_ms;     /* model upload, ms */
 } tled_cuda_stats_t;

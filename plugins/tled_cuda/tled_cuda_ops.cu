@@ -155,27 +155,33 @@ __device__ double d_neohooke(const double F[9], double mu, double kappa,
 
 /* stresses: VP = V F S per active ip; s0 = strain energy, max of -J (min
  * det F) and where, count and first of inverted / non-finite points.
- * One warp per integration point: the lanes share its support entries
- * (F = I + sum_a u_a (x) dN_a, reduced across the warp), lane 0 evaluates
- * the material.  (One thread per point left the H100 latency-bound: 12.6k
- * nodes ran at 134 GB/s.) */
+ * A group of SG lanes per integration point: the lanes share its support
+ * entries (F = I + sum_a u_a (x) dN_a, reduced across the group), the
+ * group's first lane evaluates the material.  (One thread per point left
+ * the H100 latency-bound: 12.6k nodes ran at 134 GB/s; a whole warp per
+ * point left 31 of 32 lanes idle in the material law, whose double pow
+ * and log dominate once the supports are read: 32 / SG points of a warp
+ * now evaluate it at once.  A support holds about 30 entries, so SG = 8
+ * lanes read about 4 each.) */
+#define SG 8
 __global__ void k_stress(dmod m, const unsigned char *ipact, const double *ipg,
 			 const double *u, double *VP, red *part)
 {
 	red r;
 	red_init(r);
-	int lane = threadIdx.x & 31;
-	int warps = gridDim.x * (blockDim.x >> 5);
-	for (int p = (blockIdx.x * blockDim.x + threadIdx.x) >> 5; p < m.nip;
-	     p += warps) {
+	int lane = threadIdx.x & (SG - 1);
+	unsigned gmask = (0xffffffffu >> (32 - SG)) << (threadIdx.x & 31 & ~(SG - 1));
+	int groups = gridDim.x * (blockDim.x / SG);
+	for (int p = (blockIdx.x * blockDim.x + threadIdx.x) / SG; p < m.nip;
+	     p += groups) {
 		double *P = VP + 9 * (size_t)p;
 		if (ipact && !ipact[p]) {
-			if (lane < 9)
-				P[lane] = 0;
+			for (int k = lane; k < 9; k += SG)
+				P[k] = 0;
 			continue;
 		}
 		double H[9] = { 0, 0, 0, 0, 0, 0, 0, 0, 0 };
-		for (int e = m.ipptr[p] + lane; e < m.ipptr[p + 1]; e += 32) {
+		for (int e = m.ipptr[p] + lane; e < m.ipptr[p + 1]; e += SG) {
 			const double *ua = u + 3 * (size_t)m.ipnode[e];
 			const double *d = m.dN + 3 * (size_t)e;
 			double d0 = d[0], d1 = d[1], d2 = d[2];
@@ -187,8 +193,8 @@ __global__ void k_stress(dmod m, const unsigned char *ipact, const double *ipg,
 			}
 		}
 		for (int k = 0; k < 9; k++)
-			for (int o = 16; o > 0; o >>= 1)
-				H[k] += __shfl_xor_sync(0xffffffffu, H[k], o);
+			for (int o = SG / 2; o > 0; o >>= 1)
+				H[k] += __shfl_xor_sync(gmask, H[k], o);
 		if (lane)
 			continue;
 		double F[9];
@@ -737,8 +743,8 @@ static int dev_forces(tled_cuda_t *c, const double *u, double *f,
 		      const unsigned char *ipact, const double *ipg,
 		      tled_force_info_t *fi)
 {
-	/* one warp per point / node: TPB / 32 of them per block */
-	int nb = nblk((int)((c->dm.nip + TPB / 32 - 1) / (TPB / 32)));
+	/* SG lanes per point, one warp per node */
+	int nb = nblk((int)((c->dm.nip + TPB / SG - 1) / (TPB / SG)));
 	k_stress<<<nb, TPB>>>(c->dm, ipact, ipg, u, c->VP, c->part);
 	CK(c, cudaGetLastError(), "stresses");
 	int ng = (int)((c->dm.n + TPB / 32 - 1) / (TPB / 32));
@@ -773,6 +779,7 @@ static void cu_forces(void *ctx, const tled_model_t *m, const uint8_t *ipact,
 {
 	tled_cuda_t *c = (tled_cuda_t *)ctx;
 	size_t n3 = (size_t)(3 * m->n) * sizeof(double);
+	double t0 = now_ms();
 	int bad = ensure_model(c, m) ||
 		  cerr(c, cudaMemcpy(c->hu, u, n3, cudaMemcpyHostToDevice), "forces") ||
 		  (ipact && cerr(c, cudaMemcpy(c->ipact, ipact, (size_t)m->nip,
@@ -782,6 +789,8 @@ static void cu_forces(void *ctx, const tled_model_t *m, const uint8_t *ipact,
 		  dev_forces(c, c->hu, c->hf, ipact ? c->ipact : NULL,
 			     m->ipg ? c->ipg : NULL, info) ||
 		  cerr(c, cudaMemcpy(f, c->hf, n3, cudaMemcpyDeviceToHost), "forces");
+	c->st.hforces++;
+	c->st.hforces_ms += now_ms() - t0;
 	if (bad) {
 		/* the caller's watchdog sees a non-finite stress */
 		for (int64_t i = 0; i < 3 * m->n; i++)
@@ -874,7 +883,9 @@ static int cu_rforces(void *ctx, tled_force_info_t *fi)
 	double t0 = now_ms();
 	int rc = dev_forces(c, c->u, c->f, c->ipact, c->growing ? c->ipg : NULL,
 			    fi);
-	c->st.step_ms += now_ms() - t0;
+	double dt = now_ms() - t0;
+	c->st.step_ms += dt;
+	c->st.forces_ms += dt;
 	return rc;
 }
 
@@ -890,7 +901,9 @@ static int cu_rayleigh(void *ctx, double dt, double *num, double *den)
 		return -1;
 	*num = c->hres->s0;
 	*den = c->hres->s1;
-	c->st.step_ms += now_ms() - t0;
+	double dtm = now_ms() - t0;
+	c->st.step_ms += dtm;
+	c->st.other_ms += dtm;
 	return 0;
 }
 
@@ -910,7 +923,9 @@ static int cu_rstep(void *ctx, double dt, double cdamp, tled_cd_info_t *ci)
 	ci->node_vmax = r.imx;
 	ci->node_nan = r.first == LLONG_MAX ? -1 : r.first;
 	c->st.steps++;
-	c->st.step_ms += now_ms() - t0;
+	double dtm = now_ms() - t0;
+	c->st.step_ms += dtm;
+	c->st.update_ms += dtm;
 	return 0;
 }
 
@@ -935,7 +950,9 @@ static int cu_rcontact(void *ctx, double stick_dt, int64_t *count, double *vmax)
 			return -1;
 		*vmax = sqrt(c->hres->mx > 0 ? c->hres->mx : 0);
 	}
-	c->st.step_ms += now_ms() - t0;
+	double dtm = now_ms() - t0;
+	c->st.step_ms += dtm;
+	c->st.contact_ms += dtm;
 	return 0;
 }
 

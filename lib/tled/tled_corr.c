@@ -1,0 +1,730 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The integration-constraint correction of the MLS derivatives (tled_corr.h):
+ * a least-norm correction whose Lagrange multipliers solve a symmetric
+ * positive (semi-)definite system by conjugate gradients with a two-level
+ * preconditioner.  Pure C + OpenMP + LAPACK; SI units (m).
+ */
+#include "tled_corr.h"
+
+#include <float.h>
+#include <lapacke.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifdef _OPENMP
+#include <omp.h>
+#else
+static double omp_get_wtime(void) { return 0; }
+#endif
+
+static int errf(char *err, size_t n, const char *fmt, ...)
+	__attribute__((format(printf, 3, 4)));
+static int errf(char *err, size_t n, const char *fmt, ...)
+{
+	if (err && n) {
+		va_list ap;
+		va_start(ap, fmt);
+		vsnprintf(err, n, fmt, ap);
+		va_end(ap);
+	}
+	return -1;
+}
+
+/* ------------------------------------------------- consistency correction */
+
+/*
+ * Least-norm correction delta of the derivatives (one scalar problem per
+ * Cartesian component) such that
+ *   (i)  sum_a delta_a(ip) [1, X_a] = 0 at every ip  (linear reproduction),
+ *   (ii) sum_ip V_ip (dN_a + delta_a)(ip) = 0 for every constrained node a,
+ * minimising sum_ip V_ip sum_a delta_a(ip)^2 / w_a(ip).  Lagrange multipliers
+ * give delta_a(ip) = w_a (mu_a - p_a^T M^-1 sum_b w_b p_b mu_b) (mu = 0 on
+ * unconstrained nodes): the residual of the ip's MLS linear fit of mu.  The
+ * multipliers solve the SPD system Q mu = -g with
+ *   (Q v)_a = sum_ip V_ip w_a (v_a - p_a^T M^-1 sum_b w_b p_b v_b),
+ * by conjugate gradients (3 right-hand sides), preconditioned on two levels
+ * (below).
+ */
+typedef struct corr_ctx {
+	const tled_model_t *m;
+	const double *w;     /* per entry */
+	const double *P;     /* 4 per entry: p_a */
+	const double *Mi;    /* 16 per ip */
+	const uint8_t *con;  /* per node */
+	double *ev;          /* 3 per entry scratch */
+} corr_ctx_t;
+
+/* per-entry residual values  e = w_a (v_a - p_a^T c), c = M^-1 sum w p v */
+static void corr_resid(const corr_ctx_t *cx, const double *v, double *ev)
+{
+	const tled_model_t *m = cx->m;
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t p = 0; p < m->nip; p++) {
+		double b[4][3] = { { 0 } }, cc[4][3];
+		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+			int64_t a = m->ipnode[e];
+			if (!cx->con[a])
+				continue;
+			for (int r = 0; r < 4; r++)
+				for (int c = 0; c < 3; c++)
+					b[r][c] += cx->w[e] * cx->P[4 * e + r] *
+						   v[3 * a + c];
+		}
+		const double *Mi = cx->Mi + 16 * p;
+		for (int r = 0; r < 4; r++)
+			for (int c = 0; c < 3; c++)
+				cc[r][c] = Mi[4 * r] * b[0][c] + Mi[4 * r + 1] * b[1][c] +
+					   Mi[4 * r + 2] * b[2][c] +
+					   Mi[4 * r + 3] * b[3][c];
+		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+			int64_t a = m->ipnode[e];
+			const double *pa = cx->P + 4 * e;
+			for (int c = 0; c < 3; c++) {
+				double fit = pa[0] * cc[0][c] + pa[1] * cc[1][c] +
+					     pa[2] * cc[2][c] + pa[3] * cc[3][c];
+				double va = cx->con[a] ? v[3 * a + c] : 0;
+				ev[3 * e + c] = cx->w[e] * (va - fit);
+			}
+		}
+	}
+}
+
+static void corr_apply(const corr_ctx_t *cx, const double *v, double *out,
+		       const int64_t *ent_ip)
+{
+	const tled_model_t *m = cx->m;
+	corr_resid(cx, v, cx->ev);
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t a = 0; a < m->n; a++) {
+		double s[3] = { 0, 0, 0 };
+		if (cx->con[a])
+			for (int64_t t = m->nptr[a]; t < m->nptr[a + 1]; t++) {
+				int64_t e = m->nent[t];
+				double V = m->ipV[ent_ip[e]];
+				for (int c = 0; c < 3; c++)
+					s[c] += V * cx->ev[3 * e + c];
+			}
+		for (int c = 0; c < 3; c++)
+			out[3 * a + c] = s[c];
+	}
+}
+
+/* Remove from v (3n, per component) its least-squares fit by alpha +
+ * beta . X over the nodes with con set: the null space of the correction
+ * operator (a linear mu is reproduced exactly and gives no correction), so
+ * that CG works on the consistent part of a singular system. */
+static void null_project(const tled_model_t *m, const uint8_t *con, double *v)
+{
+	double A[16] = { 0 }, b[4][3] = { { 0 } }, Ai[16];
+	double xc[3] = { 0, 0, 0 };
+	int64_t cnt = 0;
+	for (int64_t a = 0; a < m->n; a++)
+		if (con[a]) {
+			for (int c = 0; c < 3; c++)
+				xc[c] += m->X[3 * a + c];
+			cnt++;
+		}
+	if (cnt < 4)
+		return;
+	for (int c = 0; c < 3; c++)
+		xc[c] /= (double)cnt;
+	double L = m->h_mean > 0 ? m->h_mean : 1;
+	for (int64_t a = 0; a < m->n; a++) {
+		if (!con[a])
+			continue;
+		double p[4] = { 1, (m->X[3 * a] - xc[0]) / L,
+				(m->X[3 * a + 1] - xc[1]) / L,
+				(m->X[3 * a + 2] - xc[2]) / L };
+		for (int r = 0; r < 4; r++) {
+			for (int q = 0; q < 4; q++)
+				A[4 * r + q] += p[r] * p[q];
+			for (int c = 0; c < 3; c++)
+				b[r][c] += p[r] * v[3 * a + c];
+		}
+	}
+	if (tled_inv4(A, Ai))
+		return;
+	double co[4][3];
+	for (int r = 0; r < 4; r++)
+		for (int c = 0; c < 3; c++) {
+			co[r][c] = 0;
+			for (int q = 0; q < 4; q++)
+				co[r][c] += Ai[4 * r + q] * b[q][c];
+		}
+	for (int64_t a = 0; a < m->n; a++) {
+		if (!con[a])
+			continue;
+		double p[4] = { 1, (m->X[3 * a] - xc[0]) / L,
+				(m->X[3 * a + 1] - xc[1]) / L,
+				(m->X[3 * a + 2] - xc[2]) / L };
+		for (int c = 0; c < 3; c++)
+			v[3 * a + c] -= co[0][c] * p[0] + co[1][c] * p[1] +
+					co[2][c] * p[2] + co[3][c] * p[3];
+	}
+}
+
+/* ------------------------------------------------ two-level preconditioner */
+
+/*
+ * Q is a discrete second-derivative energy: v^T Q v sums, over the ips, the
+ * squared residual of each ip's MLS linear fit of v (O(h^2 v'') per
+ * entry), so its null space holds the linear fields and its condition grows
+ * like (L/h)^4: Jacobi-preconditioned CG needed 294, 980 and about 2 000
+ * iterations at 6, 3 and 2 mm nodes.  The coarse level removes the smooth
+ * error that Jacobi cannot: a regular grid of spacing H (3-12 node
+ * spacings, so that it has at most about TLED_COARSE_TARGET points) with
+ * trilinear prolongation R (which reproduces linear fields, the null
+ * space), the Galerkin operator A_c = R^T Q R assembled ip by ip, and
+ * A_c factored once by LAPACK (dpotrf).  The preconditioner is additive:
+ *     B r = D^-1 r + R A_c^-1 R^T r,
+ * symmetric positive definite, so CG keeps its guarantees (Toselli &
+ * Widlund 2005, Domain Decomposition Methods, ch. 2: the two-level
+ * additive Schwarz method with an exact coarse solve).
+ *
+ * Assembly per ip p (con entries e with node a = ipnode[e], R_e the 8
+ * trilinear weights of node a):
+ *     R^T Q_p R = V_p [ sum_e w_e R_e^T R_e - B^T M_p^-1 B ],
+ *     B = sum_e w_e p_e R_e  (4 x the ip's coarse points),
+ * added into the dense A_c.  The ips are processed in blocks of coarse
+ * (y, z) columns, four colours of blocks whose coarse rows never overlap,
+ * each block in ip order: the sum has the same order on any thread count
+ * (deterministic).
+ */
+#define TLED_COARSE_TARGET 2000.0
+
+typedef struct coarse {
+	int64_t nc;       /* coarse unknowns (0: no coarse level) */
+	int32_t *cid;     /* 8 per node: compact coarse index, -1 = none */
+	double *cw;       /* 8 per node: trilinear weights */
+	double *A;        /* nc * nc: Cholesky factor (lower, column-major) */
+	double *rc;       /* 3 * nc: coarse right-hand sides (column-major) */
+} coarse_t;
+
+static void coarse_free(coarse_t *C)
+{
+	free(C->cid);
+	free(C->cw);
+	free(C->A);
+	free(C->rc);
+	memset(C, 0, sizeof *C);
+}
+
+/* Returns 0 (C->nc = 0 when there is no coarse level: too few nodes, or
+ * A_c would not factor), -1 out of memory. */
+static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
+			coarse_t *C)
+{
+	const tled_model_t *m = cx->m;
+	int64_t n = m->n, nip = m->nip, ncon = 0;
+	double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX },
+	       hi[3] = { -DBL_MAX, -DBL_MAX, -DBL_MAX };
+	memset(C, 0, sizeof *C);
+	for (int64_t a = 0; a < n; a++)
+		if (cx->con[a]) {
+			ncon++;
+			for (int i = 0; i < 3; i++) {
+				lo[i] = fmin(lo[i], m->X[3 * a + i]);
+				hi[i] = fmax(hi[i], m->X[3 * a + i]);
+			}
+		}
+	if (ncon < 64 || !(m->h_mean > 0))
+		return 0; /* Jacobi CG is cheap enough */
+	/* H: about TLED_COARSE_TARGET interior grid points, 3..12 spacings */
+	double f = cbrt((double)ncon / TLED_COARSE_TARGET);
+	f = f < 3 ? 3 : f > 12 ? 12 : f;
+	double H = f * m->h_mean;
+	int g[3];
+	for (int i = 0; i < 3; i++) {
+		g[i] = (int)floor((hi[i] - lo[i]) / H) + 2;
+		lo[i] -= 1e-9 * H;
+	}
+	int64_t ng = (int64_t)g[0] * g[1] * g[2];
+	int64_t *map = malloc((size_t)ng * sizeof *map);
+	C->cid = malloc((size_t)(8 * n) * sizeof *C->cid);
+	C->cw = malloc((size_t)(8 * n) * sizeof *C->cw);
+	if (!map || !C->cid || !C->cw)
+		goto oom;
+	for (int64_t q = 0; q < ng; q++)
+		map[q] = -1;
+	for (int64_t a = 0; a < n; a++) {
+		int32_t *id = C->cid + 8 * a;
+		double *wt = C->cw + 8 * a;
+		if (!cx->con[a]) {
+			for (int k = 0; k < 8; k++) {
+				id[k] = -1;
+				wt[k] = 0;
+			}
+			continue;
+		}
+		int b[3];
+		double t[3];
+		for (int i = 0; i < 3; i++) {
+			double s = (m->X[3 * a + i] - lo[i]) / H;
+			b[i] = (int)floor(s);
+			if (b[i] > g[i] - 2)
+				b[i] = g[i] - 2;
+			if (b[i] < 0)
+				b[i] = 0;
+			t[i] = s - b[i];
+		}
+		for (int k = 0; k < 8; k++) {
+			int dx = k & 1, dy = (k >> 1) & 1, dz = k >> 2;
+			int64_t q = ((int64_t)(b[2] + dz) * g[1] + b[1] + dy) * g[0] +
+				    b[0] + dx;
+			wt[k] = (dx ? t[0] : 1 - t[0]) * (dy ? t[1] : 1 - t[1]) *
+				(dz ? t[2] : 1 - t[2]);
+			id[k] = (int32_t)q; /* grid index for now */
+			map[q] = 0;
+		}
+	}
+	int64_t nc = 0;
+	for (int64_t q = 0; q < ng; q++)
+		if (map[q] == 0)
+			map[q] = nc++;
+	/* each ip's (y, z) range of grid rows, in grid coordinates */
+	int32_t *ipblk = malloc((size_t)(nip > 0 ? nip : 1) * sizeof *ipblk);
+	int32_t *yz = malloc((size_t)(2 * (nip > 0 ? nip : 1)) * sizeof *yz);
+	if (!ipblk || !yz) {
+		free(ipblk);
+		free(yz);
+		goto oom;
+	}
+	int span = 1, kmax = 1;
+	for (int64_t p = 0; p < nip; p++) {
+		int y0 = INT32_MAX, y1 = -1, z0 = INT32_MAX, z1 = -1, k = 0;
+		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+			int64_t a = m->ipnode[e];
+			if (!cx->con[a])
+				continue;
+			k++;
+			for (int c = 0; c < 8; c += 7) { /* corners 0 and 7 */
+				int64_t q = C->cid[8 * a + c];
+				int y = (int)((q / g[0]) % g[1]), z = (int)(q / ((int64_t)g[0] * g[1]));
+				y0 = y < y0 ? y : y0;
+				y1 = y > y1 ? y : y1;
+				z0 = z < z0 ? z : z0;
+				z1 = z > z1 ? z : z1;
+			}
+		}
+		yz[2 * p] = y0;
+		yz[2 * p + 1] = z0;
+		if (!k) {
+			yz[2 * p] = -1;
+			continue;
+		}
+		kmax = k > kmax ? k : kmax;
+		span = y1 - y0 > span ? y1 - y0 : span;
+		span = z1 - z0 > span ? z1 - z0 : span;
+	}
+	/* blocks of span x span grid columns: two blocks of one colour are at
+	 * least 2 span apart, and an ip's rows reach span past its block's
+	 * start, so same-colour blocks never write the same row */
+	int nby = g[1] / span + 1, nbz = g[2] / span + 1;
+	int64_t nblk = (int64_t)nby * nbz;
+	int64_t *bstart = calloc((size_t)nblk + 1, sizeof *bstart);
+	int64_t *bip = malloc((size_t)(nip > 0 ? nip : 1) * sizeof *bip);
+	if (!bstart || !bip) {
+		free(ipblk);
+		free(yz);
+		free(bstart);
+		free(bip);
+		goto oom;
+	}
+	for (int64_t p = 0; p < nip; p++) {
+		ipblk[p] = yz[2 * p] < 0 ? -1
+					 : (int32_t)((yz[2 * p] / span) +
+						     (int64_t)nby * (yz[2 * p + 1] / span));
+		if (ipblk[p] >= 0)
+			bstart[ipblk[p] + 1]++;
+	}
+	for (int64_t b = 0; b < nblk; b++)
+		bstart[b + 1] += bstart[b];
+	{
+		int64_t *fill = malloc((size_t)nblk * sizeof *fill);
+		if (!fill) {
+			free(ipblk);
+			free(yz);
+			free(bstart);
+			free(bip);
+			goto oom;
+		}
+		memcpy(fill, bstart, (size_t)nblk * sizeof *fill);
+		for (int64_t p = 0; p < nip; p++) /* stable: ip order kept */
+			if (ipblk[p] >= 0)
+				bip[fill[ipblk[p]]++] = p;
+		free(fill);
+	}
+	free(yz);
+	free(ipblk);
+	/* compact indices for the nodes' corners */
+	for (int64_t a = 0; a < 8 * n; a++)
+		if (C->cid[a] >= 0)
+			C->cid[a] = (int32_t)map[C->cid[a]];
+	free(map);
+	map = NULL;
+	C->A = calloc((size_t)(nc * nc), sizeof *C->A);
+	C->rc = malloc((size_t)(3 * nc) * sizeof *C->rc);
+	if (!C->A || !C->rc) {
+		free(bstart);
+		free(bip);
+		goto oom;
+	}
+	double *A = C->A;
+	int mmax = 8 * kmax, fail = 0;
+	for (int colour = 0; colour < 4; colour++) {
+#pragma omp parallel num_threads(m->nthreads) reduction(| : fail)
+		{
+			int32_t *slot = malloc((size_t)nc * sizeof *slot);
+			int32_t *list = malloc((size_t)mmax * sizeof *list);
+			int *es = malloc((size_t)(8 * kmax) * sizeof *es);
+			double *Bv = malloc((size_t)(8 * mmax) * sizeof *Bv);
+			double *D = malloc((size_t)mmax * mmax * sizeof *D);
+			if (!slot || !list || !es || !Bv || !D)
+				fail = 1;
+			else
+				for (int64_t c = 0; c < nc; c++)
+					slot[c] = -1;
+#pragma omp for schedule(dynamic, 1)
+			for (int64_t b = 0; b < nblk; b++) {
+				int by = (int)(b % nby), bz = (int)(b / nby);
+				if (fail || (by & 1) + 2 * (bz & 1) != colour)
+					continue;
+				for (int64_t t = bstart[b]; t < bstart[b + 1]; t++) {
+					int64_t p = bip[t];
+					double V = m->ipV[p];
+					const double *Mp = cx->Mi + 16 * p;
+					int nl = 0, ne = 0;
+					/* the ip's coarse points */
+					for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+						int64_t a = m->ipnode[e];
+						if (!cx->con[a])
+							continue;
+						for (int k = 0; k < 8; k++) {
+							int32_t c = C->cid[8 * a + k];
+							if (slot[c] < 0) {
+								slot[c] = nl;
+								list[nl++] = c;
+							}
+							es[8 * ne + k] = slot[c];
+						}
+						ne++;
+					}
+					memset(D, 0, (size_t)nl * nl * sizeof *D);
+					memset(Bv, 0, (size_t)(4 * nl) * sizeof *Bv);
+					int j = 0;
+					for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+						int64_t a = m->ipnode[e];
+						if (!cx->con[a])
+							continue;
+						const double *wt = C->cw + 8 * a, *pe = cx->P + 4 * e;
+						const int *sl = es + 8 * j++;
+						double we = cx->w[e];
+						for (int k = 0; k < 8; k++) {
+							double f1 = we * wt[k];
+							if (f1 == 0)
+								continue;
+							double *bk = Bv + 4 * sl[k];
+							for (int r = 0; r < 4; r++)
+								bk[r] += f1 * pe[r];
+							double *Dk = D + (size_t)sl[k] * nl;
+							for (int l = 0; l < 8; l++)
+								Dk[sl[l]] += f1 * wt[l];
+						}
+					}
+					/* D -= B^T M^-1 B; Cv = M^-1 B in Bv's upper half */
+					double *Cv = Bv + 4 * nl;
+					for (int i = 0; i < nl; i++)
+						for (int r = 0; r < 4; r++)
+							Cv[4 * i + r] = Mp[4 * r] * Bv[4 * i] +
+									Mp[4 * r + 1] * Bv[4 * i + 1] +
+									Mp[4 * r + 2] * Bv[4 * i + 2] +
+									Mp[4 * r + 3] * Bv[4 * i + 3];
+					for (int i = 0; i < nl; i++) {
+						const double *bi = Bv + 4 * i;
+						double *Ai = A + (int64_t)list[i] * nc;
+						for (int l = 0; l < nl; l++) {
+							const double *cl = Cv + 4 * l;
+							double v = D[(size_t)i * nl + l] -
+								   (bi[0] * cl[0] + bi[1] * cl[1] +
+								    bi[2] * cl[2] + bi[3] * cl[3]);
+							Ai[list[l]] += V * v;
+						}
+					}
+					for (int i = 0; i < nl; i++)
+						slot[list[i]] = -1;
+				}
+			}
+			free(slot);
+			free(list);
+			free(es);
+			free(Bv);
+			free(D);
+		}
+		if (fail)
+			break;
+	}
+	free(bstart);
+	free(bip);
+	if (fail)
+		goto oom;
+	/* A_c is singular when every node is constrained (the linear fields);
+	 * a shift of 1e-10 of the largest diagonal keeps the factor defined,
+	 * raised tenfold until dpotrf succeeds (at most 1e-6) */
+	double dmax = 0;
+	for (int64_t c = 0; c < nc; c++)
+		dmax = fmax(dmax, A[c * nc + c]);
+	if (!(dmax > 0)) {
+		coarse_free(C);
+		return 0;
+	}
+	double *A0 = malloc((size_t)nc * sizeof *A0);
+	if (!A0)
+		goto oom;
+	for (int64_t c = 0; c < nc; c++)
+		A0[c] = A[c * nc + c];
+	lapack_int info = 1;
+	for (double sh = 1e-10; sh <= 1.01e-6 && info; sh *= 10) {
+		if (sh > 1e-10) /* restore the lower triangle from the upper */
+			for (int64_t i = 0; i < nc; i++)
+				for (int64_t j = i + 1; j < nc; j++)
+					A[i * nc + j] = A[j * nc + i];
+		for (int64_t c = 0; c < nc; c++)
+			A[c * nc + c] = A0[c] + sh * dmax;
+		/* column-major lower = row-major upper: A is symmetric */
+		info = LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)nc, A,
+				      (lapack_int)nc);
+	}
+	free(A0);
+	if (info) {
+		coarse_free(C);
+		return 0;
+	}
+	C->nc = nc;
+	return 0;
+oom:
+	free(map);
+	coarse_free(C);
+	return -1;
+}
+
+/* z = D^-1 r + R A_c^-1 R^T r (3 components); in the singular case the
+ * coarse part is projected off the null space like r */
+static void precond(const corr_ctx_t *cx, const coarse_t *C, const double *dg,
+		    int singular, const double *r, double *z)
+{
+	const tled_model_t *m = cx->m;
+	int64_t n = m->n, nc = C->nc;
+	if (nc > 0) {
+		memset(C->rc, 0, (size_t)(3 * nc) * sizeof *C->rc);
+		for (int64_t a = 0; a < n; a++) {
+			if (!cx->con[a])
+				continue;
+			for (int k = 0; k < 8; k++) {
+				double wt = C->cw[8 * a + k];
+				int64_t c = C->cid[8 * a + k];
+				for (int d = 0; d < 3; d++)
+					C->rc[d * nc + c] += wt * r[3 * a + d];
+			}
+		}
+		LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)nc, 3, C->A,
+			       (lapack_int)nc, C->rc, (lapack_int)nc);
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+		for (int64_t a = 0; a < n; a++) {
+			double s[3] = { 0, 0, 0 };
+			if (cx->con[a])
+				for (int k = 0; k < 8; k++) {
+					double wt = C->cw[8 * a + k];
+					int64_t c = C->cid[8 * a + k];
+					for (int d = 0; d < 3; d++)
+						s[d] += wt * C->rc[d * nc + c];
+				}
+			for (int d = 0; d < 3; d++)
+				z[3 * a + d] = s[d];
+		}
+		if (singular)
+			null_project(m, cx->con, z);
+	} else {
+		memset(z, 0, (size_t)(3 * n) * sizeof *z);
+	}
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t a = 0; a < n; a++)
+		for (int d = 0; d < 3; d++)
+			z[3 * a + d] += dg[a] * r[3 * a + d];
+}
+
+int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
+			   const double *Mi, const uint8_t *con,
+			   const int64_t *ent_ip, const double *G, int coarse,
+			   char *err, size_t errsize)
+{
+	int64_t n = m->n, ne = m->ipptr[m->nip];
+	double *g = calloc((size_t)(3 * n), sizeof *g);
+	double *x = calloc((size_t)(3 * n), sizeof *x);
+	double *r = malloc((size_t)(3 * n) * sizeof *r);
+	double *d = malloc((size_t)(3 * n) * sizeof *d);
+	double *q = malloc((size_t)(3 * n) * sizeof *q);
+	double *ev = malloc((size_t)(3 * (ne ? ne : 1)) * sizeof *ev);
+	int rc = 0;
+	if (!g || !x || !r || !d || !q || !ev) {
+		rc = errf(err, errsize, "out of memory in the gradient "
+			  "correction");
+		goto out;
+	}
+	corr_ctx_t cx = { m, w, P, Mi, con, ev };
+	tled_model_gradsum(m, g);
+	double g0[3] = { 0, 0, 0 }, rr[3] = { 0, 0, 0 };
+	for (int64_t a = 0; a < n; a++)
+		for (int c = 0; c < 3; c++) {
+			double v = con[a] ? (G ? G[3 * a + c] : 0) -
+						    g[3 * a + c]
+					  : 0;
+			r[3 * a + c] = v;
+			d[3 * a + c] = v;
+			rr[c] += v * v;
+		}
+	/* every node constrained (ebc): the operator is singular with the
+	 * linear fields as null space; work on the consistent part */
+	int singular = 1;
+	for (int64_t a = 0; a < n && singular; a++)
+		if (!con[a] && m->nptr[a + 1] > m->nptr[a])
+			singular = 0;
+	if (singular) {
+		null_project(m, con, r);
+		memcpy(d, r, (size_t)(3 * n) * sizeof *d);
+		for (int c = 0; c < 3; c++)
+			rr[c] = 0;
+		for (int64_t a = 0; a < n; a++)
+			for (int c = 0; c < 3; c++)
+				rr[c] += r[3 * a + c] * r[3 * a + c];
+	}
+	for (int c = 0; c < 3; c++)
+		g0[c] = sqrt(rr[c]);
+	/* Jacobi preconditioner: the diagonal of Q,
+	 *   Q_aa = sum_ip V_ip w_a (1 - w_a p_a^T M^-1 p_a)
+	 * (the correction's coupling through one ip is strongest on its own
+	 * node; node volumes and weights vary by orders of magnitude between
+	 * the boundary and the interior, so scaling cuts the iterations) */
+	double *dg = malloc((size_t)n * sizeof *dg);
+	if (!dg) {
+		rc = errf(err, errsize, "out of memory in the gradient "
+			  "correction");
+		goto out;
+	}
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t a = 0; a < n; a++) {
+		double q = 0;
+		for (int64_t t = m->nptr[a]; t < m->nptr[a + 1]; t++) {
+			int64_t e = m->nent[t], p = ent_ip[e];
+			const double *pa = P + 4 * e, *Mp = Mi + 16 * p;
+			double pMp = 0;
+			for (int i = 0; i < 4; i++)
+				for (int j = 0; j < 4; j++)
+					pMp += pa[i] * Mp[4 * i + j] * pa[j];
+			q += m->ipV[p] * w[e] * (1 - w[e] * pMp);
+		}
+		dg[a] = con[a] && q > 0 ? 1 / q : 0;
+	}
+	/* the coarse level (none for tiny models or when it fails to
+	 * factor: Jacobi alone is then the preconditioner) */
+	coarse_t C = { 0 };
+	double t0 = omp_get_wtime();
+	if (coarse && coarse_build(&cx, ent_ip, &C)) {
+		free(dg);
+		rc = errf(err, errsize, "out of memory in the gradient "
+			  "correction's coarse level");
+		goto out;
+	}
+	m->corr_nc = C.nc;
+	m->t_coarse = omp_get_wtime() - t0;
+	double *z = malloc((size_t)(3 * n) * sizeof *z);
+	if (!z) {
+		free(dg);
+		coarse_free(&C);
+		rc = errf(err, errsize, "out of memory in the gradient "
+			  "correction");
+		goto out;
+	}
+	/* z = B r, rz = r . z per component */
+	double rz[3] = { 0, 0, 0 };
+	precond(&cx, &C, dg, singular, r, z);
+	for (int64_t a = 0; a < n; a++)
+		for (int c = 0; c < 3; c++) {
+			d[3 * a + c] = z[3 * a + c];
+			rz[c] += r[3 * a + c] * z[3 * a + c];
+		}
+	/* scale for the stopping test: sum |V dN| is O(h^2) per node */
+	int it;
+	for (it = 0; it < 5000; it++) {
+		int done = 1;
+		for (int c = 0; c < 3; c++)
+			if (sqrt(rr[c]) > 1e-13 * (g0[c] > 0 ? g0[c] : 1) &&
+			    g0[c] > 0)
+				done = 0;
+		if (done)
+			break;
+		corr_apply(&cx, d, q, ent_ip);
+		double dq[3] = { 0, 0, 0 };
+		for (int64_t a = 0; a < n; a++)
+			for (int c = 0; c < 3; c++)
+				dq[c] += d[3 * a + c] * q[3 * a + c];
+		double al[3], rn[3] = { 0, 0, 0 }, zn[3] = { 0, 0, 0 };
+		for (int c = 0; c < 3; c++)
+			al[c] = dq[c] > 0 ? rz[c] / dq[c] : 0;
+		for (int64_t a = 0; a < n; a++)
+			for (int c = 0; c < 3; c++) {
+				x[3 * a + c] += al[c] * d[3 * a + c];
+				r[3 * a + c] -= al[c] * q[3 * a + c];
+			}
+		if (singular && it % 20 == 19)
+			null_project(m, con, r);
+		precond(&cx, &C, dg, singular, r, z);
+		for (int64_t a = 0; a < n; a++)
+			for (int c = 0; c < 3; c++) {
+				rn[c] += r[3 * a + c] * r[3 * a + c];
+				zn[c] += r[3 * a + c] * z[3 * a + c];
+			}
+		for (int64_t a = 0; a < n; a++)
+			for (int c = 0; c < 3; c++)
+				d[3 * a + c] = z[3 * a + c] +
+					       (rz[c] > 0 ? zn[c] / rz[c] : 0) *
+						       d[3 * a + c];
+		for (int c = 0; c < 3; c++) {
+			rr[c] = rn[c];
+			rz[c] = zn[c];
+		}
+	}
+	free(dg);
+	free(z);
+	coarse_free(&C);
+	m->corr_iters = it;
+	/* apply: dN += w (mu - fit(mu)) */
+	corr_resid(&cx, x, ev);
+	for (int64_t e = 0; e < ne; e++)
+		for (int c = 0; c < 3; c++)
+			m->dN[3 * e + c] += ev[3 * e + c];
+	/* report the remaining constraint residual */
+	tled_model_gradsum(m, g);
+	double after = 0, before = 0;
+	for (int64_t a = 0; a < n; a++)
+		if (con[a])
+			for (int c = 0; c < 3; c++) {
+				double v = g[3 * a + c] - (G ? G[3 * a + c] : 0);
+				after += v * v;
+			}
+	for (int c = 0; c < 3; c++)
+		before += g0[c] * g0[c];
+	m->corr_rel = before > 0 ? sqrt(after / before) : 0;
+out:
+	free(g);
+	free(x);
+	free(r);
+	free(d);
+	free(q);
+	free(ev);
+	return rc;
+}
+

@@ -1,0 +1,32 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The integration-constraint correction of the MLS derivatives (tled_corr.c;
+ * internal to lib/tled: called by tled_model_build).
+ */
+#ifndef TLED_CORR_H
+#define TLED_CORR_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "tled_model.h"
+
+/* Inverse of a symmetric positive definite 4x4 (tled_model.c); -1 when
+ * (numerically) singular. */
+int tled_inv4(const double A[16], double Ai[16]);
+
+/*
+ * Correct m->dN (per support entry) so that the discrete divergence theorem
+ * holds at every node with con[a] set (target G, 3n, or 0 when NULL) while
+ * linear fields stay exact.  w: MLS weight per entry; P: 4 per entry (the
+ * scaled basis p_a of the entry's ip); Mi: 16 per ip (the inverse moment
+ * matrix); ent_ip: the ip of every entry.  coarse: 1 for the two-level
+ * preconditioner, 0 for Jacobi only.  Sets m->corr_iters, corr_rel,
+ * corr_nc, t_coarse.  Returns 0, or -1 with a message (out of memory).
+ */
+int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
+			   const double *Mi, const uint8_t *con,
+			   const int64_t *ent_ip, const double *G, int coarse,
+			   char *err, size_t errsize);
+
+#endif
