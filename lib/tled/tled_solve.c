@@ -842,33 +842,52 @@ int tled_solver_pick_dt(tled_solver_t *s, const tled_solver_opts_t *o,
 /* ------------------------------------------------------------ contact */
 
 /* Nearest brain-boundary node of node a at y, with a per-node cache: the
- * last query point q_a, its nearest boundary node b_a and the gap between
- * its second and first nearest distances.  While 2 |y - q_a| < gap, b_a is
- * still the unique nearest (every distance moves by at most |y - q_a|), so
- * the answer is exactly that of tled_boundary_side without a grid search;
- * otherwise the grid is searched again (k = 2, the same first neighbour as
- * k = 1: ties keep the first found).  Deep nodes sat 40-60 mm from the
- * boundary: a fresh search walked up to ~2000 grid cells per node and
- * iteration (a quarter of tled_cpu's time, 2026-11-25 profile). */
+ * last query point q_a, its K = TLED_CT_K nearest boundary nodes (by
+ * distance from q_a) and the gap between the K-th and the first distance.
+ * While 2 |y - q_a| < gap, the nearest boundary node of y is among the K
+ * (every distance moves by at most |y - q_a|, and any other node was at
+ * least the K-th distance away), so it is found exactly among them, first
+ * in list order on a tie, as the search's own tie rule; otherwise the grid
+ * is searched again.  Deep nodes sat 40-60 mm from the boundary: a fresh
+ * search walked up to ~2000 grid cells per node and iteration (a quarter of
+ * tled_cpu's time, 2026-11-25 profile).  With the first two only (the gap
+ * between the second and the first distance), a node nearly equidistant to
+ * two boundary nodes searched again at almost every step: 1.6 of 2.6 ms per
+ * step went to the contact at 2 mm nodes on the H200 (2026-11-26). */
 static double side_cached(tled_solver_t *s, int64_t a, const double y[3],
 			  int64_t *bid)
 {
 	const tled_model_t *m = s->m;
 	double *q = s->ctq + 3 * a;
+	int64_t *cb = s->ctb + (int64_t)TLED_CT_K * a;
 	double dd = (y[0] - q[0]) * (y[0] - q[0]) + (y[1] - q[1]) * (y[1] - q[1]) +
 		    (y[2] - q[2]) * (y[2] - q[2]);
-	int64_t b = s->ctb[a];
-	if (!(b >= 0 && 4 * dd < s->ctgap[a] * s->ctgap[a])) {
-		int64_t ids[2];
-		double d2[2];
-		int k = tled_grid_knn(&m->bgrid, y, 2, -1, ids, d2);
+	int64_t b = -1;
+	if (cb[0] >= 0 && 4 * dd < s->ctgap[a] * s->ctgap[a]) {
+		double best = INFINITY;
+		for (int i = 0; i < TLED_CT_K && cb[i] >= 0; i++) {
+			const double *p = m->bX + 3 * cb[i];
+			double d = (y[0] - p[0]) * (y[0] - p[0]) +
+				   (y[1] - p[1]) * (y[1] - p[1]) +
+				   (y[2] - p[2]) * (y[2] - p[2]);
+			if (d < best) {
+				best = d;
+				b = cb[i];
+			}
+		}
+	} else {
+		int64_t ids[TLED_CT_K];
+		double d2[TLED_CT_K];
+		int k = tled_grid_knn(&m->bgrid, y, TLED_CT_K, -1, ids, d2);
 		if (k < 1) {
 			*bid = -1;
 			return -INFINITY;
 		}
 		b = ids[0];
-		s->ctb[a] = b;
-		s->ctgap[a] = k == 2 ? sqrt(d2[1]) - sqrt(d2[0]) : INFINITY;
+		for (int i = 0; i < TLED_CT_K; i++)
+			cb[i] = i < k ? ids[i] : -1;
+		s->ctgap[a] = k == TLED_CT_K ? sqrt(d2[k - 1]) - sqrt(d2[0])
+					     : INFINITY;
 		for (int i = 0; i < 3; i++)
 			q[i] = y[i];
 	}
@@ -884,7 +903,7 @@ int64_t tled_contact(tled_solver_t *s, double stick_dt)
 	if (m->nb == 0)
 		return 0;
 	if (!s->ctb) {
-		s->ctb = malloc((size_t)m->n * sizeof *s->ctb);
+		s->ctb = malloc((size_t)m->n * TLED_CT_K * sizeof *s->ctb);
 		s->ctq = calloc((size_t)(3 * m->n), sizeof *s->ctq);
 		s->ctgap = calloc((size_t)m->n, sizeof *s->ctgap);
 		if (!s->ctb || !s->ctq || !s->ctgap) {
@@ -895,7 +914,7 @@ int64_t tled_contact(tled_solver_t *s, double stick_dt)
 			s->ctq = s->ctgap = NULL;
 			return 0;
 		}
-		for (int64_t a = 0; a < m->n; a++)
+		for (int64_t a = 0; a < m->n * TLED_CT_K; a++)
 			s->ctb[a] = -1;
 	}
 	int64_t cnt = 0;

@@ -47,6 +47,10 @@
 #ifndef TLED_SOLVE_H
 #define TLED_SOLVE_H
 
+/* contact: boundary-node candidates cached per node (tled_solve.c,
+ * side_cached; the same in tled_cuda) */
+#define TLED_CT_K 8
+
 #include "tled_step.h"
 
 enum tled_dt_policy {
@@ -213,8 +217,10 @@ struct tled_solver {
 	int64_t nfree;
 	int64_t contacts;   /* projections in the last relax */
 	double *part;       /* chunked-reduction partials (tled_solve.c) */
-	int64_t *ctb;       /* contact: cached nearest boundary node per node */
-	double *ctq, *ctgap;/* its query point (3n, m) and distance gap (m) */
+	int64_t *ctb;       /* contact: TLED_CT_K cached candidate boundary
+	                       nodes per node (nearest first, -1 = none) */
+	double *ctq, *ctgap;/* their query point (3n, m) and the distance gap
+	                       between the K-th and the first (m) */
 };
 
 typedef struct tled_relax_stats {

@@ -346,10 +346,11 @@ __global__ void k_grow(int nip, const double *g0, const double *g1, double rr,
 		ipg[p] = g0[p] + rr * (g1[p] - g0[p]);
 }
 
-/* the two nearest brain-boundary nodes to y on its uniform grid: the
- * traversal, stopping rule and tie rule of tled_grid_knn with k = 2
- * (lib/tled/tled_model.c); *gap = second - first distance (INF with one) */
-__device__ int d_knn2(const dmod &m, const double y[3], double *gap)
+/* the K = TLED_CT_K nearest brain-boundary nodes to y on its uniform grid
+ * (ascending; ties: the first found): the traversal, insertion, stopping
+ * rule and tie rule of tled_grid_knn (lib/tled/tled_model.c); returns how
+ * many were found */
+__device__ int d_knnK(const dmod &m, const double y[3], int *ids, double *d2)
 {
 	int c0[3];
 	for (int c = 0; c < 3; c++) {
@@ -360,8 +361,8 @@ __device__ int d_knn2(const dmod &m, const double y[3], double *gap)
 			f = m.bnc[c] - 1;
 		c0[c] = (int)f;
 	}
-	int best = -1, cnt = 0;
-	double bd = 0, bd2 = 0;
+	const int K = TLED_CT_K;
+	int cnt = 0;
 	int rmax = max(m.bnc[0], max(m.bnc[1], m.bnc[2]));
 	for (int r = 0; r <= rmax; r++) {
 		for (int dz = -r; dz <= r; dz++) {
@@ -384,15 +385,16 @@ __device__ int d_knn2(const dmod &m, const double y[3], double *gap)
 							double d = (q[0] - y[0]) * (q[0] - y[0]) +
 								   (q[1] - y[1]) * (q[1] - y[1]) +
 								   (q[2] - y[2]) * (q[2] - y[2]);
-							if (cnt == 0 || d < bd) {
-								bd2 = bd;
-								best = i;
-								bd = d;
-								cnt = cnt < 2 ? cnt + 1 : 2;
-							} else if (cnt == 1 || d < bd2) {
-								bd2 = d;
-								cnt = 2;
+							if (cnt == K && d >= d2[K - 1])
+								continue;
+							int j = cnt < K ? cnt++ : K - 1;
+							while (j > 0 && d2[j - 1] > d) {
+								d2[j] = d2[j - 1];
+								ids[j] = ids[j - 1];
+								j--;
 							}
+							d2[j] = d;
+							ids[j] = i;
 						}
 					}
 					if (r == 0)
@@ -400,7 +402,7 @@ __device__ int d_knn2(const dmod &m, const double y[3], double *gap)
 				}
 			}
 		}
-		if (cnt == 2) {
+		if (cnt == K) {
 			double lb = DBL_MAX;
 			for (int c = 0; c < 3; c++) {
 				if (c0[c] - r > 0)
@@ -408,29 +410,47 @@ __device__ int d_knn2(const dmod &m, const double y[3], double *gap)
 				if (c0[c] + r < m.bnc[c] - 1)
 					lb = fmin(lb, m.blo[c] + (c0[c] + r + 1) * m.bcell - y[c]);
 			}
-			if (lb == DBL_MAX || (lb > 0 && lb * lb >= bd2))
+			if (lb == DBL_MAX || (lb > 0 && lb * lb >= d2[K - 1]))
 				break;
 		}
 	}
-	*gap = cnt == 2 ? sqrt(bd2) - sqrt(bd) : INFINITY;
-	return best;
+	return cnt;
 }
 
 /* side of y beyond the brain boundary for node a, with the per-node cache
- * of lib/tled/tled_solve.c (side_cached): exact, a grid search only when
- * the node has moved by half the gap since its last one */
+ * of lib/tled/tled_solve.c (side_cached): K candidates, exact, a grid
+ * search only when the node has moved by half the gap between the K-th and
+ * the first distance since its last one */
 __device__ double d_side(const dmod &m, int a, const double y[3], int *b,
 			 int *ctb, double *ctq, double *ctgap)
 {
 	double *q = ctq + 3 * (size_t)a;
+	int *cb = ctb + (size_t)TLED_CT_K * a;
 	double dd = (y[0] - q[0]) * (y[0] - q[0]) + (y[1] - q[1]) * (y[1] - q[1]) +
 		    (y[2] - q[2]) * (y[2] - q[2]);
-	*b = ctb[a];
-	if (!(*b >= 0 && 4 * dd < ctgap[a] * ctgap[a])) {
-		double gap;
-		*b = d_knn2(m, y, &gap);
-		ctb[a] = *b;
-		ctgap[a] = gap;
+	*b = -1;
+	if (cb[0] >= 0 && 4 * dd < ctgap[a] * ctgap[a]) {
+		double best = INFINITY;
+		for (int i = 0; i < TLED_CT_K && cb[i] >= 0; i++) {
+			const double *p = m.bX + 3 * (size_t)cb[i];
+			double d = (y[0] - p[0]) * (y[0] - p[0]) +
+				   (y[1] - p[1]) * (y[1] - p[1]) +
+				   (y[2] - p[2]) * (y[2] - p[2]);
+			if (d < best) {
+				best = d;
+				*b = cb[i];
+			}
+		}
+	} else {
+		int ids[TLED_CT_K];
+		double d2[TLED_CT_K];
+		int k = d_knnK(m, y, ids, d2);
+		if (k < 1)
+			return -INFINITY;
+		*b = ids[0];
+		for (int i = 0; i < TLED_CT_K; i++)
+			cb[i] = i < k ? ids[i] : -1;
+		ctgap[a] = k == TLED_CT_K ? sqrt(d2[k - 1]) - sqrt(d2[0]) : INFINITY;
 		for (int i = 0; i < 3; i++)
 			q[i] = y[i];
 	}
@@ -702,11 +722,11 @@ static int ensure_model(tled_cuda_t *c, const tled_model_t *m)
 	    dalloc(c, (void **)&c->ipact, (size_t)m->nip, "active points") ||
 	    dalloc(c, (void **)&c->part, MAXBLK * sizeof(red), "reductions") ||
 	    dalloc(c, (void **)&c->res, sizeof(red), "reductions") ||
-	    dalloc(c, (void **)&c->ctb, (size_t)m->n * sizeof(int), "contact") ||
+	    dalloc(c, (void **)&c->ctb, (size_t)m->n * TLED_CT_K * sizeof(int), "contact") ||
 	    dalloc(c, (void **)&c->ctq, n3 * sizeof(double), "contact") ||
 	    dalloc(c, (void **)&c->ctgap, (size_t)m->n * sizeof(double), "contact"))
 		return -1;
-	CK(c, cudaMemset(c->ctb, 0xff, (size_t)m->n * sizeof(int)), "contact");
+	CK(c, cudaMemset(c->ctb, 0xff, (size_t)m->n * TLED_CT_K * sizeof(int)), "contact");
 	CK(c, cudaMemset(c->ctq, 0, n3 * sizeof(double)), "contact");
 	c->nbl_n = (int)((m->n + TPB - 1) / TPB);
 	c->nbl_ip = (int)((m->nip + TPB - 1) / TPB);
