@@ -152,6 +152,7 @@ void tled_solver_free(tled_solver_t *s)
 	free(s->ctb);
 	free(s->ctq);
 	free(s->ctgap);
+	free(s->ctd);
 	memset(s, 0, sizeof *s);
 }
 
@@ -853,7 +854,13 @@ int tled_solver_pick_dt(tled_solver_t *s, const tled_solver_opts_t *o,
  * tled_cpu's time, 2026-11-25 profile).  With the first two only (the gap
  * between the second and the first distance), a node nearly equidistant to
  * two boundary nodes searched again at almost every step: 1.6 of 2.6 ms per
- * step went to the contact at 2 mm nodes on the H200 (2026-11-26). */
+ * step went to the contact at 2 mm nodes on the H200 (2026-11-26), and
+ * still 1.6 ms with K = 8: a deep node moves by far more than its small
+ * gap over a growth.  Hence the broad phase above: contact is looked for
+ * within TLED_CT_BAND node spacings of the boundary only (a node that far
+ * inside cannot be beyond the boundary's tangent plane at its nearest
+ * boundary node unless that normal is off by more than 90 degrees, and the
+ * reference allowance s0 covers what the geometry has there). */
 static double side_cached(tled_solver_t *s, int64_t a, const double y[3],
 			  int64_t *bid)
 {
@@ -863,6 +870,14 @@ static double side_cached(tled_solver_t *s, int64_t a, const double y[3],
 	double dd = (y[0] - q[0]) * (y[0] - q[0]) + (y[1] - q[1]) * (y[1] - q[1]) +
 		    (y[2] - q[2]) * (y[2] - q[2]);
 	int64_t b = -1;
+	/* broad phase: a node farther than TLED_CT_BAND node spacings from
+	 * every boundary node at its last search, less what it has moved since,
+	 * is not in contact (it is not searched again until it may be) */
+	double band = TLED_CT_BAND * m->h_mean;
+	if (cb[0] >= 0 && s->ctd[a] - sqrt(dd) > band) {
+		*bid = -1;
+		return -INFINITY;
+	}
 	if (cb[0] >= 0 && 4 * dd < s->ctgap[a] * s->ctgap[a]) {
 		double best = INFINITY;
 		for (int i = 0; i < TLED_CT_K && cb[i] >= 0; i++) {
@@ -888,6 +903,13 @@ static double side_cached(tled_solver_t *s, int64_t a, const double y[3],
 			cb[i] = i < k ? ids[i] : -1;
 		s->ctgap[a] = k == TLED_CT_K ? sqrt(d2[k - 1]) - sqrt(d2[0])
 					     : INFINITY;
+		s->ctd[a] = sqrt(d2[0]);
+		if (s->ctd[a] > band) {
+			for (int i = 0; i < 3; i++)
+				q[i] = y[i];
+			*bid = -1;
+			return -INFINITY;
+		}
 		for (int i = 0; i < 3; i++)
 			q[i] = y[i];
 	}
@@ -906,7 +928,10 @@ int64_t tled_contact(tled_solver_t *s, double stick_dt)
 		s->ctb = malloc((size_t)m->n * TLED_CT_K * sizeof *s->ctb);
 		s->ctq = calloc((size_t)(3 * m->n), sizeof *s->ctq);
 		s->ctgap = calloc((size_t)m->n, sizeof *s->ctgap);
-		if (!s->ctb || !s->ctq || !s->ctgap) {
+		s->ctd = calloc((size_t)m->n, sizeof *s->ctd);
+		if (!s->ctb || !s->ctq || !s->ctgap || !s->ctd) {
+			free(s->ctd);
+			s->ctd = NULL;
 			free(s->ctb);
 			free(s->ctq);
 			free(s->ctgap);

@@ -50,6 +50,9 @@
 /* contact: boundary-node candidates cached per node (tled_solve.c,
  * side_cached; the same in tled_cuda) */
 #define TLED_CT_K 8
+/* contact is looked for within this many mean node spacings of the brain
+ * boundary (tled_solve.c, side_cached) */
+#define TLED_CT_BAND 3.0
 
 #include "tled_step.h"
 
@@ -221,6 +224,7 @@ struct tled_solver {
 	                       nodes per node (nearest first, -1 = none) */
 	double *ctq, *ctgap;/* their query point (3n, m) and the distance gap
 	                       between the K-th and the first (m) */
+	double *ctd;        /* the first distance (m) */
 };
 
 typedef struct tled_relax_stats {

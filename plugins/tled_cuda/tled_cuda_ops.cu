@@ -105,6 +105,7 @@ struct dmod {
 	const int *bstart, *bidx;
 	double blo[3], bcell;
 	int bnc[3];
+	double cband; /* contact band, m (TLED_CT_BAND x mean spacing) */
 };
 
 /* neo-Hookean 2nd Piola-Kirchhoff stress, as tled_neohooke (tled_step.c):
@@ -422,13 +423,16 @@ __device__ int d_knnK(const dmod &m, const double y[3], int *ids, double *d2)
  * search only when the node has moved by half the gap between the K-th and
  * the first distance since its last one */
 __device__ double d_side(const dmod &m, int a, const double y[3], int *b,
-			 int *ctb, double *ctq, double *ctgap)
+			 int *ctb, double *ctq, double *ctgap, double *ctd)
 {
 	double *q = ctq + 3 * (size_t)a;
 	int *cb = ctb + (size_t)TLED_CT_K * a;
 	double dd = (y[0] - q[0]) * (y[0] - q[0]) + (y[1] - q[1]) * (y[1] - q[1]) +
 		    (y[2] - q[2]) * (y[2] - q[2]);
 	*b = -1;
+	/* broad phase (side_cached): beyond the band, no contact */
+	if (cb[0] >= 0 && ctd[a] - sqrt(dd) > m.cband)
+		return -INFINITY;
 	if (cb[0] >= 0 && 4 * dd < ctgap[a] * ctgap[a]) {
 		double best = INFINITY;
 		for (int i = 0; i < TLED_CT_K && cb[i] >= 0; i++) {
@@ -451,8 +455,13 @@ __device__ double d_side(const dmod &m, int a, const double y[3], int *b,
 		for (int i = 0; i < TLED_CT_K; i++)
 			cb[i] = i < k ? ids[i] : -1;
 		ctgap[a] = k == TLED_CT_K ? sqrt(d2[k - 1]) - sqrt(d2[0]) : INFINITY;
+		ctd[a] = sqrt(d2[0]);
 		for (int i = 0; i < 3; i++)
 			q[i] = y[i];
+		if (ctd[a] > m.cband) {
+			*b = -1;
+			return -INFINITY;
+		}
 	}
 	if (*b < 0)
 		return -INFINITY;
@@ -465,7 +474,7 @@ __device__ double d_side(const dmod &m, int a, const double y[3], int *b,
  * useh = 0): cnt = nodes in contact */
 __global__ void k_contact(dmod m, const unsigned char *kind, const double *s0,
 			  double *u, double *v, double stick_dt, int *ctb,
-			  double *ctq, double *ctgap, red *part)
+			  double *ctq, double *ctgap, double *ctd, red *part)
 {
 	red r;
 	red_init(r);
@@ -477,7 +486,7 @@ __global__ void k_contact(dmod m, const unsigned char *kind, const double *s0,
 		for (int i = 0; i < 3; i++)
 			y[i] = m.X[3 * (size_t)a + i] + u[3 * (size_t)a + i];
 		int b;
-		double side = d_side(m, a, y, &b, ctb, ctq, ctgap);
+		double side = d_side(m, a, y, &b, ctb, ctq, ctgap, ctd);
 		if (b < 0 || !(side > s0[a]))
 			continue;
 		if (stick_dt > 0) {
@@ -487,7 +496,7 @@ __global__ void k_contact(dmod m, const unsigned char *kind, const double *s0,
 				u[3 * a + i] -= du;
 				v[3 * a + i] = 0;
 			}
-			side = d_side(m, a, y, &b, ctb, ctq, ctgap);
+			side = d_side(m, a, y, &b, ctb, ctq, ctgap, ctd);
 			if (b < 0 || !(side > s0[a])) {
 				r.cnt++;
 				continue;
@@ -541,7 +550,7 @@ struct tled_cuda {
 		*ipg1, *hu, *hf;
 	unsigned char *kind, *dkind, *ipact;
 	int *ctb;            /* contact cache (d_side) */
-	double *ctq, *ctgap;
+	double *ctq, *ctgap, *ctd;
 	red *part, *res;
 	red *hres; /* pinned */
 	int nbl_n, nbl_ip;
@@ -594,7 +603,7 @@ static void free_state(tled_cuda_t *c)
 	void *bufs[] = { c->u, c->v, c->f, c->fprev, c->ustart, c->target,
 			 c->VP, c->s0, c->ipg, c->ipg0, c->ipg1, c->hu, c->hf,
 			 c->kind, c->dkind, c->ipact, c->part, c->res, c->ctb,
-			 c->ctq, c->ctgap };
+			 c->ctq, c->ctgap, c->ctd };
 	for (size_t i = 0; i < sizeof bufs / sizeof *bufs; i++)
 		if (bufs[i])
 			cudaFree(bufs[i]);
@@ -603,7 +612,7 @@ static void free_state(tled_cuda_t *c)
 	c->kind = c->dkind = c->ipact = NULL;
 	c->part = c->res = NULL;
 	c->ctb = NULL;
-	c->ctq = c->ctgap = NULL;
+	c->ctq = c->ctgap = c->ctd = NULL;
 	for (int i = 0; i < c->nbuf_model; i++)
 		cudaFree(c->buf_model[i]);
 	c->nbuf_model = 0;
@@ -703,6 +712,7 @@ static int ensure_model(tled_cuda_t *c, const tled_model_t *m)
 			d.bnc[i] = g->nc[i];
 		}
 		d.bcell = g->cell;
+		d.cband = TLED_CT_BAND * m->h_mean;
 	}
 	size_t n3 = (size_t)(3 * m->n);
 	void **pp[] = { (void **)&c->u, (void **)&c->v, (void **)&c->f,
@@ -724,7 +734,8 @@ static int ensure_model(tled_cuda_t *c, const tled_model_t *m)
 	    dalloc(c, (void **)&c->res, sizeof(red), "reductions") ||
 	    dalloc(c, (void **)&c->ctb, (size_t)m->n * TLED_CT_K * sizeof(int), "contact") ||
 	    dalloc(c, (void **)&c->ctq, n3 * sizeof(double), "contact") ||
-	    dalloc(c, (void **)&c->ctgap, (size_t)m->n * sizeof(double), "contact"))
+	    dalloc(c, (void **)&c->ctgap, (size_t)m->n * sizeof(double), "contact") ||
+	    dalloc(c, (void **)&c->ctd, (size_t)m->n * sizeof(double), "contact"))
 		return -1;
 	CK(c, cudaMemset(c->ctb, 0xff, (size_t)m->n * TLED_CT_K * sizeof(int)), "contact");
 	CK(c, cudaMemset(c->ctq, 0, n3 * sizeof(double)), "contact");
@@ -958,7 +969,7 @@ static int cu_rcontact(void *ctx, double stick_dt, int64_t *count, double *vmax)
 	double t0 = now_ms();
 	int nb = nblk(c->nbl_n);
 	k_contact<<<nb, TPB>>>(c->dm, c->dkind, c->s0, c->u, c->v, stick_dt,
-			       c->ctb, c->ctq, c->ctgap, c->part);
+			       c->ctb, c->ctq, c->ctgap, c->ctd, c->part);
 	CK(c, cudaGetLastError(), "contact");
 	if (fetch(c, nb, "contact"))
 		return -1;
