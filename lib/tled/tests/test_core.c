@@ -327,6 +327,8 @@ static void test_iter_log_thin(void **state)
 	tled_iter_log_free(&lg);
 	assert_null(lg.row);
 	assert_int_equal(lg.nrow, 0);
+}
+
 /* The correction's two-level preconditioner (tled_corr.c) gives the same
  * corrected derivatives as Jacobi alone, in fewer CG iterations:
  * all nodes constrained (singular system, linear null space) and, with
