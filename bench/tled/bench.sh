@@ -41,7 +41,7 @@ for case in $CASES; do
                         if ($(i+1) == "support") ent = $i
                         if ($i == "built") bs = $(i+2) } }
                 /\[grow@/ && /growth step/ && /iterations/ { for (i = 1; i <= NF; i++) if ($(i+1) ~ /^iterations/) it += $i }
-                /\[grow@/ && /growth steps,/ { for (i = 1; i <= NF; i++) if ($(i+1) == "s") gs = $i }
+                /\[grow@/ && /growth steps,/ { for (i = 1; i <= NF; i++) if ($(i+1) ~ /^s,?$/) gs = $i }
                 /\[grow@/ && /device: / { for (i = 1; i <= NF; i++) {
                         if ($(i+1) == "ms" && $(i+2) == "per") sm = $i
                         if ($(i+1) == "MB") { mb = $i; gsub(/[(;]/, "", mb) }
@@ -51,7 +51,7 @@ for case in $CASES; do
                         if ($i == "contact") { cm = $(i+1); gsub(/,/, "", cm) }
                         if ($(i+1) == "host-array") hf = "pending"
                         if (hf == "pending" && $(i+1) == "s") hf = $i } }
-                /min det F|inverted|failed:|error/ && err == "" && /grow/ { err = $0; gsub(/\t/, " ", err); err = substr(err, 1, 200) }
+                /inverted|failed:|error:/ && err == "" && /grow/ { err = $0; gsub(/\t/, " ", err); err = substr(err, 1, 200) }
                 END { if (sm == "" && gs != "" && it > 0) sm = sprintf("%.3f", (gs - bs) / it * 1000)
                       if (st == "failed" && gs == "" && err == "") err = "failed or timed out (" to " s)"
                       printf "%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n", preset, sp, be, th, st, nodes, ips, ent, bs, it, gs, sm, mb, gb, "", err, fm, um, cm, hf }' "$d/log" >>"$OUT"
