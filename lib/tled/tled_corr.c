@@ -21,18 +21,6 @@
 static double omp_get_wtime(void) { return 0; }
 #endif
 
-static int errf(char *err, size_t n, const char *fmt, ...)
-	__attribute__((format(printf, 3, 4)));
-static int errf(char *err, size_t n, const char *fmt, ...)
-{
-	if (err && n) {
-		va_list ap;
-		va_start(ap, fmt);
-		vsnprintf(err, n, fmt, ap);
-		va_end(ap);
-	}
-	return -1;
-}
 
 /* ------------------------------------------------- consistency correction */
 
@@ -570,7 +558,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 	double *ev = malloc((size_t)(3 * (ne ? ne : 1)) * sizeof *ev);
 	int rc = 0;
 	if (!g || !x || !r || !d || !q || !ev) {
-		rc = errf(err, errsize, "out of memory in the gradient "
+		rc = tled_errf(err, errsize, "out of memory in the gradient "
 			  "correction");
 		goto out;
 	}
@@ -610,7 +598,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 	 * the boundary and the interior, so scaling cuts the iterations) */
 	double *dg = malloc((size_t)n * sizeof *dg);
 	if (!dg) {
-		rc = errf(err, errsize, "out of memory in the gradient "
+		rc = tled_errf(err, errsize, "out of memory in the gradient "
 			  "correction");
 		goto out;
 	}
@@ -634,7 +622,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 	double t0 = omp_get_wtime();
 	if (coarse && coarse_build(&cx, ent_ip, &C)) {
 		free(dg);
-		rc = errf(err, errsize, "out of memory in the gradient "
+		rc = tled_errf(err, errsize, "out of memory in the gradient "
 			  "correction's coarse level");
 		goto out;
 	}
@@ -644,7 +632,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 	if (!z) {
 		free(dg);
 		coarse_free(&C);
-		rc = errf(err, errsize, "out of memory in the gradient "
+		rc = tled_errf(err, errsize, "out of memory in the gradient "
 			  "correction");
 		goto out;
 	}

@@ -19,9 +19,8 @@
 #include <omp.h>
 #endif
 
-static int errf(char *err, size_t n, const char *fmt, ...)
-	__attribute__((format(printf, 3, 4)));
-static int errf(char *err, size_t n, const char *fmt, ...)
+/* the message helper of lib/tled (tled_model.h) */
+int tled_errf(char *err, size_t n, const char *fmt, ...)
 {
 	if (err && n) {
 		va_list ap;
@@ -1148,21 +1147,21 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 	int K = o->support_k;
 
 	if (nin < 5)
-		return errf(err, errsize, "too few nodes (%lld): the model needs "
+		return tled_errf(err, errsize, "too few nodes (%lld): the model needs "
 			    "at least 5", (long long)nin);
 	if (K < 5 || K > 256)
-		return errf(err, errsize, "support_k %d out of [5, 256]", K);
+		return tled_errf(err, errsize, "support_k %d out of [5, 256]", K);
 	for (int i = 0; i < MAT_N; i++)
 		if (tled_material_set(&m->mat[i], o->mat[i].E, o->mat[i].nu,
 				      o->mat[i].rho))
-			return errf(err, errsize, "material %d: invalid E=%g "
+			return tled_errf(err, errsize, "material %d: invalid E=%g "
 				    "Pa, nu=%g, rho=%g kg/m^3", i, o->mat[i].E,
 				    o->mat[i].nu, o->mat[i].rho);
 	for (int i = 0; i < MAT_N; i++)
 		m->mat[i].vol = o->mat[i].vol;
 	for (int64_t i = 0; i < 3 * nin; i++)
 		if (!isfinite(Xin[i]))
-			return errf(err, errsize, "node %lld has a non-finite "
+			return tled_errf(err, errsize, "node %lld has a non-finite "
 				    "coordinate", (long long)(i / 3));
 
 	double tmark = omp_get_wtime();
@@ -1263,7 +1262,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 	free(par);
 	par = NULL;
 	if (n < 5) {
-		rc = errf(err, errsize, "only %lld distinct nodes after merging "
+		rc = tled_errf(err, errsize, "only %lld distinct nodes after merging "
 			  "coincident ones (merge_tol %g mm)", (long long)n,
 			  o->merge_tol / TLED_MM);
 		goto fail;
@@ -1300,7 +1299,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 	m->h_mean = hsum / (double)n;
 	m->h_min = hmin;
 	if (!(m->h_min > 0)) {
-		rc = errf(err, errsize, "coincident nodes remain after merging "
+		rc = tled_errf(err, errsize, "coincident nodes remain after merging "
 			  "(merge_tol %g mm)", o->merge_tol / TLED_MM);
 		goto fail;
 	}
@@ -1308,7 +1307,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		K = (int)n;
 
 	if (boundary_setup(m, &ng)) {
-		rc = errf(err, errsize, "cannot estimate brain boundary normals "
+		rc = tled_errf(err, errsize, "cannot estimate brain boundary normals "
 			  "(degenerate boundary nodes)");
 		goto fail;
 	}
@@ -1337,7 +1336,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 			ncell *= nc[c];
 		}
 		if (ncell > 2e8) {
-			rc = errf(err, errsize, "%.3g integration cells: node "
+			rc = tled_errf(err, errsize, "%.3g integration cells: node "
 				  "spacing too small for the domain", ncell);
 			goto fail;
 		}
@@ -1368,7 +1367,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		for (int64_t t = 0; t < nall; t++)
 			nip += okip[t] != 0;
 		if (nip < 1) {
-			rc = errf(err, errsize, "no integration point falls "
+			rc = tled_errf(err, errsize, "no integration point falls "
 				  "inside the domain");
 			goto fail;
 		}
@@ -1487,7 +1486,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 					q++;
 				}
 			if (q < 1) {
-				rc = errf(err, errsize, "no integration point "
+				rc = tled_errf(err, errsize, "no integration point "
 					  "falls inside the domain");
 				goto fail;
 			}
@@ -1633,7 +1632,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 	}
 	if (bad >= 0) {
 		const double *x = m->ipX + 3 * bad;
-		rc = errf(err, errsize, "singular MLS moment matrix at the "
+		rc = tled_errf(err, errsize, "singular MLS moment matrix at the "
 			  "integration point (%.3f, %.3f, %.3f) mm: its %d "
 			  "support nodes are coplanar or coincident (raise "
 			  "support_k or remove duplicate nodes)",
@@ -1764,7 +1763,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 	}
 	if (bad >= 0) {
 		const double *x = m->X + 3 * bad;
-		rc = errf(err, errsize, "singular MLS moment matrix at node "
+		rc = tled_errf(err, errsize, "singular MLS moment matrix at node "
 			  "%lld (%.3f, %.3f, %.3f) mm: its %d nearest nodes are "
 			  "coplanar", (long long)bad, x[0] / TLED_MM,
 			  x[1] / TLED_MM, x[2] / TLED_MM, badr);
@@ -1787,7 +1786,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 				goto oom;
 			if (fine_target(m, &ng, o, cellc, cellcut, Gf)) {
 				free(Gf);
-				rc = errf(err, errsize, "singular MLS moment "
+				rc = tled_errf(err, errsize, "singular MLS moment "
 					  "matrix at a sub-point of the "
 					  "integration cells (support too "
 					  "small: raise support_k)");
@@ -1853,7 +1852,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 	rc = 0;
 	goto out;
 oom:
-	rc = errf(err, errsize, "out of memory building the model (%lld "
+	rc = tled_errf(err, errsize, "out of memory building the model (%lld "
 		  "nodes)", (long long)nin);
 fail:
 	tled_model_free(m);

@@ -166,6 +166,11 @@ typedef struct tled_model_opts {
 	void *material_ctx;
 } tled_model_opts_t;
 
+/* Write a printf-style message to err (n bytes) and return -1: the error
+ * helper of lib/tled's sources. */
+int tled_errf(char *err, size_t n, const char *fmt, ...)
+	__attribute__((format(printf, 3, 4)));
+
 void tled_model_opts_default(tled_model_opts_t *o);
 
 /* Uniform grid hash for nearest-neighbour queries (3-D points). */

@@ -10,18 +10,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-static int errf(char *err, size_t n, const char *fmt, ...)
-	__attribute__((format(printf, 3, 4)));
-static int errf(char *err, size_t n, const char *fmt, ...)
-{
-	if (err && n) {
-		va_list ap;
-		va_start(ap, fmt);
-		vsnprintf(err, n, fmt, ap);
-		va_end(ap);
-	}
-	return -1;
-}
 
 static void cpu_forces(void *ctx, const tled_model_t *m, const uint8_t *ipact,
 		       const double *u, double *VP, double *f,
@@ -180,7 +168,7 @@ int tled_solver_init(tled_solver_t *s, tled_model_t *m, char *err,
 	if (!s->wt || !s->dkind || !s->react || !s->wn || !s->ipoff || !s->u || !s->v || !s->f || !s->fprev || !s->ustart || !s->tmp ||
 	    !s->tmp2 || !s->s0 || !s->VP || !s->ipact) {
 		tled_solver_free(s);
-		return errf(err, errsize, "out of memory (solver, %lld nodes)",
+		return tled_errf(err, errsize, "out of memory (solver, %lld nodes)",
 			    (long long)m->n);
 	}
 	/* contact allowance: how far beyond the nearest boundary tangent plane
@@ -814,7 +802,7 @@ int tled_solver_pick_dt(tled_solver_t *s, const tled_solver_opts_t *o,
 {
 	double lmax, lmin;
 	if (tled_solver_eigs(s, o, &lmax, &lmin))
-		return errf(err, errsize, "out of memory (time step estimate)");
+		return tled_errf(err, errsize, "out of memory (time step estimate)");
 	s->dt_eigen = lmax > 0 ? 2 / sqrt(lmax) : INFINITY;
 	s->dt_crit = o->dt_estimate == TLED_DTE_WAVE ? s->m->dt_wave
 						      : s->dt_eigen;
@@ -826,7 +814,7 @@ int tled_solver_pick_dt(tled_solver_t *s, const tled_solver_opts_t *o,
 		return 0;
 	}
 	if (o->dt > s->dt_crit && o->dt_policy == TLED_DT_REFUSE)
-		return errf(err, errsize, "time step %.4g s is above the "
+		return tled_errf(err, errsize, "time step %.4g s is above the "
 			    "critical time step %.4g s (%s estimate; wave-speed "
 			    "estimate h_min/c = %.4g s): lower dt, set dt=0 "
 			    "(auto) or dt_policy=reduce", o->dt, s->dt_crit,
@@ -1193,7 +1181,7 @@ static tled_ops_t engine_of(const tled_ops_t *ops, host_eng_t *he)
 #define ENG(call)                                                              \
 	do {                                                                   \
 		if ((call) != 0) {                                             \
-			int rc_ = errf(err, errsize, "%s, iteration %d: %s backend: %s", \
+			int rc_ = tled_errf(err, errsize, "%s, iteration %d: %s backend: %s", \
 				       tag, it, E.name ? E.name : "cpu",     \
 				       E.strerror(E.ctx));                     \
 			E.end(E.ctx, s);                                       \
@@ -1217,7 +1205,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	memset(st, 0, sizeof *st);
 	tled_solver_update_active(s);
 	if (ebc && s->nc < 0)
-		return errf(err, errsize, "%s: out of memory (constraints)", tag);
+		return tled_errf(err, errsize, "%s: out of memory (constraints)", tag);
 	/* collocated conditions (drive=collocated, ebc) are projected on the
 	 * host: a resident backend copies u and v back and forth around the
 	 * projection and the contact (3n doubles each way per step; nodal
@@ -1260,7 +1248,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			s->ipg0 = malloc((size_t)(m->nip > 0 ? m->nip : 1) *
 					 sizeof *s->ipg0);
 		if (!s->ipg0)
-			return errf(err, errsize, "%s: out of memory (growth)",
+			return tled_errf(err, errsize, "%s: out of memory (growth)",
 				    tag);
 		memcpy(s->ipg0, m->ipg, (size_t)m->nip * sizeof *s->ipg0);
 		tled_force_info_t f0 = { 0 }, f1 = { 0 };
@@ -1291,7 +1279,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	double err_est = INFINITY;
 	s->contacts = 0;
 	if (E.begin(E.ctx, s, ebc ? NULL : target, grow ? o->ipg_to : NULL))
-		return errf(err, errsize, "%s: %s backend: %s", tag,
+		return tled_errf(err, errsize, "%s: %s backend: %s", tag,
 			    E.name ? E.name : "cpu", E.strerror(E.ctx));
 	for (it = 1; it <= o->max_iter; it++) {
 		double r = !target && !grow ? 1 : it > ramp ? 1 : (double)it / ramp;
@@ -1313,7 +1301,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			static const char *matname[MAT_N] = { "brain", "CSF",
 							      "tumour" };
 			int mt = m->ipmat ? m->ipmat[p] : 0;
-			return errf(err, errsize, "%s, iteration %d: %s at the "
+			return tled_errf(err, errsize, "%s, iteration %d: %s at the "
 				    "integration point (%.2f, %.2f, %.2f) mm "
 				    "(%s; %lld such points; min det F = %.3g): "
 				    "the step deforms the tissue too much "
@@ -1388,7 +1376,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			double p[3];
 			E.end(E.ctx, s);
 			node_mm(s, ci.node_nan, p);
-			return errf(err, errsize, "%s, iteration %d: NaN/Inf "
+			return tled_errf(err, errsize, "%s, iteration %d: NaN/Inf "
 				    "displacement at node %lld (near %.2f, %.2f, "
 				    "%.2f mm): numerical blow-up (time step %.4g s, "
 				    "critical %.4g s)", tag, it,
@@ -1403,7 +1391,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			E.end(E.ctx, s);
 			if (ci.node_vmax >= 0)
 				node_mm(s, ci.node_vmax, p);
-			return errf(err, errsize, "%s, iteration %d: energy "
+			return tled_errf(err, errsize, "%s, iteration %d: energy "
 				    "blow-up: kinetic + strain energy %.3g J is "
 				    "%.3g x the energy supplied (%.3g J); fastest "
 				    "node %lld near (%.2f, %.2f, %.2f) mm at %.3g "
@@ -1501,7 +1489,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			o->progress(o->hook_ctx, it, o->max_iter, err_est);
 		if (o->cancelled && it % 100 == 0 && o->cancelled(o->hook_ctx)) {
 			E.end(E.ctx, s);
-			return errf(err, errsize, "%s: cancelled at iteration %d",
+			return tled_errf(err, errsize, "%s: cancelled at iteration %d",
 				    tag, it), -2;
 		}
 		if (nconv >= 5)
