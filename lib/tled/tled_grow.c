@@ -1206,6 +1206,22 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 				for (int64_t q = 0; q < L[j].n; q++)
 					for (int d = 0; d < 3; d++)
 						cen[d] += L[j].x[3 * q + d] / L[j].n;
+				/* the side tests in parallel (each layer_side
+				 * sums a winding number over the whole layer),
+				 * the nearest node and the count in node order */
+				uint8_t *ins = malloc((size_t)(m.n > 0 ? m.n : 1));
+				if (!ins)
+					goto oom;
+#pragma omp parallel for schedule(dynamic, 256) num_threads(m.nthreads)
+				for (int64_t a = 0; a < m.n; a++) {
+					ins[a] = 0;
+					if (m.kind[a] == TLED_FIXED || dcomp[a] >= 0)
+						continue;
+					double y[3];
+					node_at(&s, pos_u, a, y);
+					ins[a] = seedc[a] == c ||
+						 layer_side(&L[j], y, h) < 0;
+				}
 				for (int64_t a = 0; a < m.n; a++) {
 					if (m.kind[a] == TLED_FIXED || dcomp[a] >= 0)
 						continue;
@@ -1218,13 +1234,13 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 						bd = dd;
 						best = a;
 					}
-					if (seedc[a] == c ||
-					    layer_side(&L[j], y, h) < 0) {
+					if (ins[a]) {
 						dcomp[a] = c;
 						dstep[a] = step;
 						created++;
 					}
 				}
+				free(ins);
 				if (!created && best >= 0) {
 					dcomp[best] = c;
 					dstep[best] = step;
@@ -1236,6 +1252,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 			 * push_wall node spacings outside layer jp) is
 			 * attached to it; tissue already inside is tumour */
 			if (pv->front == 1)
+#pragma omp parallel for schedule(dynamic, 256) num_threads(m.nthreads)
 				for (int64_t a = 0; a < m.n; a++) {
 					if (m.kind[a] != TLED_FREE || dcomp[a] >= 0 ||
 					    att[a])
@@ -1253,6 +1270,8 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 				}
 			/* map every tumour node of c from layer jp to layer j
 			 * (and the tissue attached to the front) */
+#pragma omp parallel for schedule(dynamic, 64) reduction(| : moved) \
+	num_threads(m.nthreads)
 			for (int64_t a = 0; a < m.n; a++) {
 				if (dcomp[a] != c && att[a] != c + 1)
 					continue;
@@ -1320,6 +1339,8 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 		for (int j = 0; j < nl; j++) {
 			if (L[j].layer != l)
 				continue;
+#pragma omp parallel for schedule(dynamic, 256) reduction(+ : swept) \
+	num_threads(m.nthreads)
 			for (int64_t a = 0; a < m.n; a++) {
 				if (m.kind[a] != TLED_FREE || dcomp[a] >= 0)
 					continue;
@@ -1333,6 +1354,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 				}
 			}
 			/* integration points inside the tumour: switched off */
+#pragma omp parallel for schedule(dynamic, 256) num_threads(m.nthreads)
 			for (int64_t p = 0; p < m.nip; p++) {
 				if (s.ipoff[p])
 					continue;
