@@ -354,7 +354,12 @@ static void test_interrupt_outcome_agrees(void **state)
 	long run_us = (b.tv_sec - a.tv_sec) * 1000000L +
 		      (b.tv_nsec - a.tv_nsec) / 1000;
 	int n0 = 0, n130 = 0;
-	for (int k = 0; k < 24; k++) {
+	/* 0 to 1.15 x the run; on a loaded machine the runs can be slower
+	 * than the one measured (every signal then lands before the handler
+	 * is set, exit 1002): later signals, up to 3 x, until one
+	 * interrupts */
+	int k;
+	for (k = 0; k < 24 || (n130 == 0 && k < 60); k++) {
 		tu_rm_rf(out);
 		int code = run_and_signal(argv, SIGINT, run_us * k / 20, ef);
 		char *e = slurp(ef);
@@ -378,8 +383,9 @@ static void test_interrupt_outcome_agrees(void **state)
 			fail_msg("left after SIGINT at %ld us: %s",
 				 run_us * k / 20, l);
 	}
-	print_message("SIGINT at 0 to 1.15 x the run's %.0f ms: %d runs "
-		      "finished, %d interrupted\n", run_us / 1000.0, n0, n130);
+	print_message("SIGINT at 0 to %.2f x the run's %.0f ms: %d runs "
+		      "finished, %d interrupted\n", (k - 1) / 20.0,
+		      run_us / 1000.0, n0, n130);
 	assert_true(n130 > 0);
 	unlink(gp);
 	unlink(ef);
