@@ -15,6 +15,11 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* OpenBLAS's thread control (lib.mk links -lopenblas; its cblas.h is not
+ * on every include path, so declared here) */
+void openblas_set_num_threads(int num_threads);
+int openblas_get_num_threads(void);
+
 #ifdef _OPENMP
 #include <omp.h>
 #else
@@ -188,6 +193,9 @@ typedef struct coarse {
 	int64_t nc;       /* coarse unknowns (0: no coarse level) */
 	int32_t *cid;     /* 8 per node: compact coarse index, -1 = none */
 	double *cw;       /* 8 per node: trilinear weights */
+	int64_t *rptr;    /* nc + 1: R^T in CSR, coarse point c's entries */
+	int64_t *rent;    /*   rptr[c] .. rptr[c+1]-1, each 8 a + k (an index
+			   *   of cid / cw), in increasing node a */
 	double *A;        /* nc * nc: Cholesky factor (lower, column-major) */
 	double *rc;       /* 3 * nc: coarse right-hand sides (column-major) */
 } coarse_t;
@@ -196,9 +204,45 @@ static void coarse_free(coarse_t *C)
 {
 	free(C->cid);
 	free(C->cw);
+	free(C->rptr);
+	free(C->rent);
 	free(C->A);
 	free(C->rc);
 	memset(C, 0, sizeof *C);
+}
+
+/*
+ * The restriction's transpose R^T as rows per coarse point (CSR), so that
+ * R^T r is a gather that each coarse point owns: (R^T r)_c = sum over the
+ * rows t of c of cw[rent[t]] r_a.  The rows hold the entries in
+ * increasing node a, the order of the serial scatter over nodes it
+ * replaces, so the sum has the same bits on any thread count.  cid holds
+ * the compact indices.  Returns 0, -1 out of memory.
+ */
+static int coarse_transpose(int64_t n, coarse_t *C)
+{
+	int64_t nc = C->nc;
+	C->rptr = calloc((size_t)nc + 1, sizeof *C->rptr);
+	if (!C->rptr)
+		return -1;
+	for (int64_t t = 0; t < 8 * n; t++)
+		if (C->cid[t] >= 0)
+			C->rptr[C->cid[t] + 1]++;
+	for (int64_t c = 0; c < nc; c++)
+		C->rptr[c + 1] += C->rptr[c];
+	int64_t *fill = malloc((size_t)(nc > 0 ? nc : 1) * sizeof *fill);
+	C->rent = malloc((size_t)(C->rptr[nc] > 0 ? C->rptr[nc] : 1) *
+			 sizeof *C->rent);
+	if (!fill || !C->rent) {
+		free(fill);
+		return -1;
+	}
+	memcpy(fill, C->rptr, (size_t)nc * sizeof *fill);
+	for (int64_t t = 0; t < 8 * n; t++) /* t = 8 a + k: increasing a */
+		if (C->cid[t] >= 0)
+			C->rent[fill[C->cid[t]]++] = t;
+	free(fill);
+	return 0;
 }
 
 /* Returns 0 (C->nc = 0 when there is no coarse level: too few nodes, or
@@ -210,6 +254,11 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 	int64_t n = m->n, nip = m->nip, ncon = 0;
 	double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX },
 	       hi[3] = { -DBL_MAX, -DBL_MAX, -DBL_MAX };
+	/* scratch, freed at out: (NULL until allocated) */
+	int64_t *map = NULL, *bstart = NULL, *bip = NULL, *fill = NULL;
+	int32_t *ipblk = NULL, *yz = NULL;
+	double *A0 = NULL;
+	int rc = 0;
 	memset(C, 0, sizeof *C);
 	for (int64_t a = 0; a < n; a++)
 		if (cx->con[a]) {
@@ -231,7 +280,7 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 		lo[i] -= 1e-9 * H;
 	}
 	int64_t ng = (int64_t)g[0] * g[1] * g[2];
-	int64_t *map = malloc((size_t)ng * sizeof *map);
+	map = malloc((size_t)ng * sizeof *map);
 	C->cid = malloc((size_t)(8 * n) * sizeof *C->cid);
 	C->cw = malloc((size_t)(8 * n) * sizeof *C->cw);
 	if (!map || !C->cid || !C->cw)
@@ -274,13 +323,10 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 		if (map[q] == 0)
 			map[q] = nc++;
 	/* each ip's (y, z) range of grid rows, in grid coordinates */
-	int32_t *ipblk = malloc((size_t)(nip > 0 ? nip : 1) * sizeof *ipblk);
-	int32_t *yz = malloc((size_t)(2 * (nip > 0 ? nip : 1)) * sizeof *yz);
-	if (!ipblk || !yz) {
-		free(ipblk);
-		free(yz);
+	ipblk = malloc((size_t)(nip > 0 ? nip : 1) * sizeof *ipblk);
+	yz = malloc((size_t)(2 * (nip > 0 ? nip : 1)) * sizeof *yz);
+	if (!ipblk || !yz)
 		goto oom;
-	}
 	int span = 1, kmax = 1;
 	for (int64_t p = 0; p < nip; p++) {
 		int y0 = INT32_MAX, y1 = -1, z0 = INT32_MAX, z1 = -1, k = 0;
@@ -313,15 +359,11 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 	 * start, so same-colour blocks never write the same row */
 	int nby = g[1] / span + 1, nbz = g[2] / span + 1;
 	int64_t nblk = (int64_t)nby * nbz;
-	int64_t *bstart = calloc((size_t)nblk + 1, sizeof *bstart);
-	int64_t *bip = malloc((size_t)(nip > 0 ? nip : 1) * sizeof *bip);
-	if (!bstart || !bip) {
-		free(ipblk);
-		free(yz);
-		free(bstart);
-		free(bip);
+	bstart = calloc((size_t)nblk + 1, sizeof *bstart);
+	bip = malloc((size_t)(nip > 0 ? nip : 1) * sizeof *bip);
+	fill = malloc((size_t)nblk * sizeof *fill);
+	if (!bstart || !bip || !fill)
 		goto oom;
-	}
 	for (int64_t p = 0; p < nip; p++) {
 		ipblk[p] = yz[2 * p] < 0 ? -1
 					 : (int32_t)((yz[2 * p] / span) +
@@ -331,36 +373,21 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 	}
 	for (int64_t b = 0; b < nblk; b++)
 		bstart[b + 1] += bstart[b];
-	{
-		int64_t *fill = malloc((size_t)nblk * sizeof *fill);
-		if (!fill) {
-			free(ipblk);
-			free(yz);
-			free(bstart);
-			free(bip);
-			goto oom;
-		}
-		memcpy(fill, bstart, (size_t)nblk * sizeof *fill);
-		for (int64_t p = 0; p < nip; p++) /* stable: ip order kept */
-			if (ipblk[p] >= 0)
-				bip[fill[ipblk[p]]++] = p;
-		free(fill);
-	}
-	free(yz);
-	free(ipblk);
+	memcpy(fill, bstart, (size_t)nblk * sizeof *fill);
+	for (int64_t p = 0; p < nip; p++) /* stable: ip order kept */
+		if (ipblk[p] >= 0)
+			bip[fill[ipblk[p]]++] = p;
 	/* compact indices for the nodes' corners */
 	for (int64_t a = 0; a < 8 * n; a++)
 		if (C->cid[a] >= 0)
 			C->cid[a] = (int32_t)map[C->cid[a]];
-	free(map);
-	map = NULL;
+	C->nc = nc;
+	if (coarse_transpose(n, C))
+		goto oom;
 	C->A = calloc((size_t)(nc * nc), sizeof *C->A);
 	C->rc = malloc((size_t)(3 * nc) * sizeof *C->rc);
-	if (!C->A || !C->rc) {
-		free(bstart);
-		free(bip);
+	if (!C->A || !C->rc)
 		goto oom;
-	}
 	double *A = C->A;
 	int mmax = 8 * kmax, fail = 0;
 	for (int colour = 0; colour < 4; colour++) {
@@ -455,8 +482,6 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 		if (fail)
 			break;
 	}
-	free(bstart);
-	free(bip);
 	if (fail)
 		goto oom;
 	/* A_c is singular when every node is constrained (the linear fields);
@@ -467,13 +492,20 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 		dmax = fmax(dmax, A[c * nc + c]);
 	if (!(dmax > 0)) {
 		coarse_free(C);
-		return 0;
+		goto out;
 	}
-	double *A0 = malloc((size_t)nc * sizeof *A0);
+	A0 = malloc((size_t)nc * sizeof *A0);
 	if (!A0)
 		goto oom;
 	for (int64_t c = 0; c < nc; c++)
 		A0[c] = A[c * nc + c];
+	/* OpenBLAS factors on one thread and on several by different blockings
+	 * (other bits: 1 thread differs from 2, 3, 4 and 8, measured at nc =
+	 * 125); one thread always, so that the factor, and the model, do not
+	 * depend on the thread count.  At most about 0.12 s (nc = 2 000, one
+	 * core), once per model build. */
+	int blas_nt = openblas_get_num_threads();
+	openblas_set_num_threads(1);
 	lapack_int info = 1;
 	for (double sh = 1e-10; sh <= 1.01e-6 && info; sh *= 10) {
 		if (sh > 1e-10) /* restore the lower triangle from the upper */
@@ -486,17 +518,22 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 		info = LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)nc, A,
 				      (lapack_int)nc);
 	}
-	free(A0);
-	if (info) {
+	openblas_set_num_threads(blas_nt);
+	if (info)
 		coarse_free(C);
-		return 0;
-	}
-	C->nc = nc;
-	return 0;
+	goto out;
 oom:
-	free(map);
 	coarse_free(C);
-	return -1;
+	rc = -1;
+out:
+	free(map);
+	free(ipblk);
+	free(yz);
+	free(bstart);
+	free(bip);
+	free(fill);
+	free(A0);
+	return rc;
 }
 
 /* z = D^-1 r + R A_c^-1 R^T r (3 components); in the singular case the
@@ -507,16 +544,18 @@ static void precond(const corr_ctx_t *cx, const coarse_t *C, const double *dg,
 	const tled_model_t *m = cx->m;
 	int64_t n = m->n, nc = C->nc;
 	if (nc > 0) {
-		memset(C->rc, 0, (size_t)(3 * nc) * sizeof *C->rc);
-		for (int64_t a = 0; a < n; a++) {
-			if (!cx->con[a])
-				continue;
-			for (int k = 0; k < 8; k++) {
-				double wt = C->cw[8 * a + k];
-				int64_t c = C->cid[8 * a + k];
+		/* R^T r, gathered per coarse point (coarse_transpose) */
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+		for (int64_t c = 0; c < nc; c++) {
+			double s[3] = { 0, 0, 0 };
+			for (int64_t t = C->rptr[c]; t < C->rptr[c + 1]; t++) {
+				int64_t ak = C->rent[t], a = ak >> 3;
+				double wt = C->cw[ak];
 				for (int d = 0; d < 3; d++)
-					C->rc[d * nc + c] += wt * r[3 * a + d];
+					s[d] += wt * r[3 * a + d];
 			}
+			for (int d = 0; d < 3; d++)
+				C->rc[d * nc + c] = s[d];
 		}
 		LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)nc, 3, C->A,
 			       (lapack_int)nc, C->rc, (lapack_int)nc);
@@ -662,6 +701,9 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 		double al[3], rn[3] = { 0, 0, 0 }, zn[3] = { 0, 0, 0 };
 		for (int c = 0; c < 3; c++)
 			al[c] = dq[c] > 0 ? rz[c] / dq[c] : 0;
+		/* per-entry updates in parallel; the dot products stay serial
+		 * loops, in node order (the same bits on any thread count) */
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
 		for (int64_t a = 0; a < n; a++)
 			for (int c = 0; c < 3; c++) {
 				x[3 * a + c] += al[c] * d[3 * a + c];
@@ -675,11 +717,14 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 				rn[c] += r[3 * a + c] * r[3 * a + c];
 				zn[c] += r[3 * a + c] * z[3 * a + c];
 			}
+		double be[3];
+		for (int c = 0; c < 3; c++)
+			be[c] = rz[c] > 0 ? zn[c] / rz[c] : 0;
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
 		for (int64_t a = 0; a < n; a++)
 			for (int c = 0; c < 3; c++)
-				d[3 * a + c] = z[3 * a + c] +
-					       (rz[c] > 0 ? zn[c] / rz[c] : 0) *
-						       d[3 * a + c];
+				d[3 * a + c] = z[3 * a + c] + be[c] *
+							       d[3 * a + c];
 		for (int c = 0; c < 3; c++) {
 			rr[c] = rn[c];
 			rz[c] = zn[c];
@@ -691,6 +736,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 	m->corr_iters = it;
 	/* apply: dN += w (mu - fit(mu)) */
 	corr_resid(&cx, x, ev);
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
 	for (int64_t e = 0; e < ne; e++)
 		for (int c = 0; c < 3; c++)
 			m->dN[3 * e + c] += ev[3 * e + c];
