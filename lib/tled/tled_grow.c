@@ -10,6 +10,7 @@
 #include "armstg/volmath.h"
 #include "tled_grow.h"
 #include "tled_labels.h"
+#include "tled_layer.h"
 
 /* ------------------------------------------------------------ helpers */
 
@@ -77,126 +78,6 @@ static double now_s(void)
 	struct timespec t;
 	clock_gettime(CLOCK_MONOTONIC, &t);
 	return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
-
-/* one layer of one component: points (m), outward normals, map */
-typedef struct layer {
-	int comp, layer;
-	int64_t n;
-	double *x;    /* 3n, m */
-	double *nrm;  /* 3n, unit outward */
-	double *d;    /* 3n, parent - x, m */
-	double *A;    /* n, surface area per point, m^2 (winding number) */
-	tled_grid_t g;
-	int built;
-} layer_t;
-
-static void layer_free(layer_t *L)
-{
-	free(L->x);
-	free(L->nrm);
-	free(L->d);
-	free(L->A);
-	tled_grid_free(&L->g);
-}
-
-/* The layer's search grid and its area per point for the winding number:
- * (sqrt 3 / 2) s^2, s the mean distance to the 6 nearest points (a
- * hexagonal sampling of spacing s).  -1: out of memory. */
-static int layer_index(layer_t *L, double h)
-{
-	tled_grid_free(&L->g);
-	free(L->A);
-	L->A = NULL;
-	L->built = 0;
-	if (tled_grid_build(&L->g, L->x, L->n, h))
-		return -1;
-	L->built = 1;
-	L->A = malloc((size_t)(L->n > 0 ? L->n : 1) * sizeof(double));
-	if (!L->A)
-		return -1;
-	for (int64_t q = 0; q < L->n; q++) {
-		int64_t ids[6];
-		double d2[6], sm = 0;
-		int k = tled_grid_knn(&L->g, L->x + 3 * q, 6, q, ids, d2);
-		for (int i = 0; i < k; i++)
-			sm += sqrt(d2[i]) / k;
-		L->A[q] = 0.8660254037844386 * sm * sm;
-	}
-	return 0;
-}
-
-/* Signed distance of y (m) to the layer surface: > 0 outside.  Near the
- * surface (nearest layer point within 2 h) it is the offset along that
- * point's outward normal.  Farther away the normal of the nearest point
- * says nothing reliable about the side (a small or non-convex layer: far
- * nodes were classified inside, became tumour and were driven; phantom
- * seeds 1-8 at 4 mm nodes), so the side comes from the generalised
- * winding number of the oriented point cloud (Barill, Dickson, Schmidt,
- * Levin & Jacobson 2018, "Fast winding numbers for soups and clouds",
- * ACM TOG 37:43, eq. 8),
- *     w(y) = sum_i A_i (x_i - y) . n_i / (4 pi |x_i - y|^3),
- * about 1 inside and 0 outside, and the magnitude is the distance to the
- * nearest layer point. */
-static double layer_winding(const layer_t *L, const double y[3])
-{
-	double w = 0;
-	for (int64_t i = 0; i < L->n; i++) {
-		const double *q = L->x + 3 * i, *nn = L->nrm + 3 * i;
-		double r[3] = { q[0] - y[0], q[1] - y[1], q[2] - y[2] };
-		double d2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
-		if (d2 <= 0)
-			continue;
-		w += L->A[i] * (r[0] * nn[0] + r[1] * nn[1] + r[2] * nn[2]) /
-		     (d2 * sqrt(d2));
-	}
-	return w / (4 * M_PI);
-}
-
-static double layer_side(const layer_t *L, const double y[3], double h)
-{
-	int64_t id;
-	double d2;
-	if (tled_grid_knn(&L->g, y, 1, -1, &id, &d2) < 1)
-		return INFINITY;
-	const double *q = L->x + 3 * id, *nn = L->nrm + 3 * id;
-	double nl = nn[0] * nn[0] + nn[1] * nn[1] + nn[2] * nn[2];
-	if (!(nl > 0.25))
-		/* collapsed layer (a point or a curve): a ball of h/2 */
-		return sqrt(d2) - 0.5 * h;
-	if (!L->A)
-		return (y[0] - q[0]) * nn[0] + (y[1] - q[1]) * nn[1] +
-		       (y[2] - q[2]) * nn[2];
-	double w = layer_winding(L, y);
-	if (d2 > 4 * h * h)
-		return w > 0.5 ? -sqrt(d2) : sqrt(d2);
-	/* near: the normal offset, unless the winding number clearly says
-	 * the other side (a wrong normal at the nearest point) */
-	double pr = (y[0] - q[0]) * nn[0] + (y[1] - q[1]) * nn[1] +
-		    (y[2] - q[2]) * nn[2];
-	if ((pr < 0 && w < 0.2) || (pr > 0 && w > 0.8))
-		return w > 0.5 ? -sqrt(d2) : sqrt(d2);
-	return pr;
-}
-
-/* layer-to-layer map at y: IDW of (parent - x) over the 8 nearest points */
-static void layer_map(const layer_t *L, const double y[3], double h,
-		      double out[3])
-{
-	int64_t ids[8];
-	double d2[8];
-	int k = tled_grid_knn(&L->g, y, 8, -1, ids, d2);
-	double ws = 0;
-	out[0] = out[1] = out[2] = 0;
-	for (int i = 0; i < k; i++) {
-		double w = 1 / (d2[i] + 0.01 * h * h);
-		ws += w;
-		for (int c = 0; c < 3; c++)
-			out[c] += w * L->d[3 * ids[i] + c];
-	}
-	if (ws > 0)
-		for (int c = 0; c < 3; c++)
-			out[c] /= ws;
 }
 
 typedef struct hook {
@@ -312,7 +193,7 @@ static const ps_attr_t *find_attr(const ps_t *p, const char *name)
 
 static int cmp_layer(const void *a, const void *b)
 {
-	const layer_t *x = a, *y = b;
+	const tled_layer_t *x = a, *y = b;
 	if (x->comp != y->comp)
 		return x->comp < y->comp ? -1 : 1;
 	return (x->layer > y->layer) - (x->layer < y->layer);
@@ -495,6 +376,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	char err[1024] = "";
 	int rc = 0;
 	double t0 = now_s(), jmin_all = INFINITY;
+	double t_built = t0, t_relax = 0; /* s: the growth's time split */
 	/* where a node is: front=push reads u^h(X_a), the displacement of
 	 * the material point (MLS shape functions do not interpolate: with
 	 * nodal driving the parameter u_a is not it); front=sweep keeps the
@@ -556,7 +438,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	tled_grid_t ing = { 0 }, cg = { 0 };
 	memset(&m, 0, sizeof m);
 	memset(&s, 0, sizeof s);
-	layer_t *L = NULL;
+	tled_layer_t *L = NULL;
 	int nl = 0;
 	double *tgt = NULL, *cx = NULL;
 	int32_t *dcomp = NULL, *dstep = NULL, *seedc = NULL, *att = NULL;
@@ -684,6 +566,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	       (long long)m.ipptr[m.nip], m.h_mean / TLED_MM,
 	       m.h_min / TLED_MM, now_s() - t0,
 	       ops && ops->name ? ops->name : "cpu");
+	t_built = now_s();
 	{
 		char ph[512];
 		int o = 0;
@@ -742,7 +625,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 			if (j == nl) {
 				if (nl == cap) {
 					cap = cap ? 2 * cap : 64;
-					layer_t *t = realloc(L, (size_t)cap * sizeof *L);
+					tled_layer_t *t = realloc(L, (size_t)cap * sizeof *L);
 					if (!t)
 						goto oom;
 					L = t;
@@ -797,7 +680,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 							nn > 0 ? v[d] / nn : 0;
 				}
 			}
-			if (layer_index(&L[j], m.h_mean))
+			if (tled_layer_index(&L[j], m.h_mean))
 				goto oom;
 		}
 	}
@@ -839,7 +722,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 						L[k].x[q] += f * L[k].d[q];
 						L[k].d[q] *= 1 - f;
 					}
-					if (layer_index(&L[k], m.h_mean))
+					if (tled_layer_index(&L[k], m.h_mean))
 						goto oom;
 					keep = k + 1;
 					break;
@@ -850,7 +733,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 				if (k < keep)
 					L[w++] = L[k];
 				else
-					layer_free(&L[k]);
+					tled_layer_free(&L[k]);
 			}
 			j = e;
 		}
@@ -964,10 +847,10 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 			for (int c = 0; c < nc; c++) {
 				if (inner[c] < 0 || outer0[c] < 0)
 					continue;
-				if (layer_side(&L[outer0[c]], X, h) < 0)
+				if (tled_layer_side(&L[outer0[c]], X, h) < 0)
 					vout[c] += m.ipV[p];
 				if (ipc[p] < 0 &&
-				    layer_side(&L[inner[c]], X, h) < 0) {
+				    tled_layer_side(&L[inner[c]], X, h) < 0) {
 					ipc[p] = c;
 					vin[c] += m.ipV[p];
 				}
@@ -1023,7 +906,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 				m.kind[a] = TLED_DRIVEN;
 			for (int c = 0; c < nc; c++)
 				if (inner[c] >= 0 && outer0[c] >= 0 &&
-				    layer_side(&L[inner[c]], m.X + 3 * a, h) < 0) {
+				    tled_layer_side(&L[inner[c]], m.X + 3 * a, h) < 0) {
 					dcomp[a] = c;
 					dstep[a] = 0;
 					ndriven++;
@@ -1132,7 +1015,9 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 			snprintf(tag, sizeof tag, "growth step %d (expand, g %.3f)",
 				 step + 1, gshow);
 			tled_relax_stats_t rs;
+			double tr0 = now_s();
 			rc = relax_step(st, &s, &so, NULL, tag, &rs, err, sizeof err);
+			t_relax += now_s() - tr0;
 			if (rc) {
 				EXPAND_FREE();
 				goto out;
@@ -1210,8 +1095,13 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 				 * sums a winding number over the whole layer),
 				 * the nearest node and the count in node order */
 				uint8_t *ins = malloc((size_t)(m.n > 0 ? m.n : 1));
-				if (!ins)
+				double *dcen = malloc((size_t)(m.n > 0 ? m.n : 1) *
+						      sizeof *dcen);
+				if (!ins || !dcen) {
+					free(ins);
+					free(dcen);
 					goto oom;
+				}
 #pragma omp parallel for schedule(dynamic, 256) num_threads(m.nthreads)
 				for (int64_t a = 0; a < m.n; a++) {
 					ins[a] = 0;
@@ -1220,18 +1110,16 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 					double y[3];
 					node_at(&s, pos_u, a, y);
 					ins[a] = seedc[a] == c ||
-						 layer_side(&L[j], y, h) < 0;
+						 tled_layer_side(&L[j], y, h) < 0;
+					dcen[a] = 0;
+					for (int d = 0; d < 3; d++)
+						dcen[a] += (y[d] - cen[d]) * (y[d] - cen[d]);
 				}
 				for (int64_t a = 0; a < m.n; a++) {
 					if (m.kind[a] == TLED_FIXED || dcomp[a] >= 0)
 						continue;
-					double y[3];
-					node_at(&s, pos_u, a, y);
-					double dd = 0;
-					for (int d = 0; d < 3; d++)
-						dd += (y[d] - cen[d]) * (y[d] - cen[d]);
-					if (dd < bd) {
-						bd = dd;
+					if (dcen[a] < bd) {
+						bd = dcen[a];
 						best = a;
 					}
 					if (ins[a]) {
@@ -1241,6 +1129,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 					}
 				}
 				free(ins);
+				free(dcen);
 				if (!created && best >= 0) {
 					dcomp[best] = c;
 					dstep[best] = step;
@@ -1259,7 +1148,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 						continue;
 					double y[3];
 					node_at(&s, pos_u, a, y);
-					double sd = layer_side(&L[jp], y, h);
+					double sd = tled_layer_side(&L[jp], y, h);
 					if (sd < 0) {
 						dcomp[a] = c;
 						dstep[a] = step;
@@ -1280,7 +1169,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 				tled_solver_nodal_u(&s, a, up);
 				for (int k = 0; k < 3; k++)
 					y[k] = m.X[3 * a + k] + uh[k];
-				layer_map(&L[jp], y, h, d);
+				tled_layer_map(&L[jp], y, h, d);
 				/* prescribed value at the node: its parameter
 				 * (nodal driving) or u^h (collocated) moved by
 				 * the layer map */
@@ -1329,8 +1218,10 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 			char tag[64];
 			snprintf(tag, sizeof tag, "growth step %d (layer %d)",
 				 step + 1, l);
+			double tr0 = now_s();
 			rc = relax_step(st, &s, &so, moved ? tgt : NULL, tag, &rs,
 					err, sizeof err);
+			t_relax += now_s() - tr0;
 			if (rc)
 				goto out;
 		}
@@ -1346,7 +1237,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 					continue;
 				double y[3];
 				node_at(&s, pos_u, a, y);
-				if (layer_side(&L[j], y, h) < -margin) {
+				if (tled_layer_side(&L[j], y, h) < -margin) {
 					dcomp[a] = L[j].comp;
 					dstep[a] = step;
 					m.kind[a] = TLED_DRIVEN;
@@ -1364,7 +1255,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 						y[k] += m.N[e] * s.u[3 * m.ipnode[e] + k];
 				for (int k = 0; k < 3; k++)
 					y[k] += m.ipX[3 * p + k];
-				if (layer_side(&L[j], y, h) < -0.5 * m.ip_h)
+				if (tled_layer_side(&L[j], y, h) < -0.5 * m.ip_h)
 					s.ipoff[p] = 1;
 			}
 		}
@@ -1434,7 +1325,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 			uh[3 * a] = uh[3 * a + 1] = uh[3 * a + 2] = 0;
 	}
 	/* final labels */
-	const layer_t *outer = NULL;
+	const tled_layer_t *outer = NULL;
 	for (int64_t a = 0; a < m.n; a++) {
 		if (dcomp[a] < 0)
 			continue;
@@ -1446,7 +1337,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 					double y[3];
 					for (int k = 0; k < 3; k++)
 						y[k] = m.X[3 * a + k] + uh[3 * a + k];
-					if (layer_side(outer, y, h) > -0.5 * h)
+					if (tled_layer_side(outer, y, h) > -0.5 * h)
 						lab = TL_TUMOUR_BND;
 				}
 		m.label[a] = lab;
@@ -1530,6 +1421,9 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	H->log(st, LOG_INFO, "%d growth steps, %lld tumour nodes, %.2f s, "
 	       "min det F %.4f", lmax + 1, (long long)ndriven, now_s() - t0,
 	       jmin_all);
+	H->log(st, LOG_DEBUG, "growth time: model build %.2f s, relaxations "
+	       "%.2f s, layer tests and bookkeeping %.2f s", t_built - t0,
+	       t_relax, now_s() - t_built - t_relax);
 	itab = itl.oom ? NULL : iter_table(H, &itl);
 	if (!itab)
 		goto oom;
@@ -1552,7 +1446,7 @@ out:
 		H->msg_unref(&tab->base);
 	tled_iter_log_free(&itl);
 	for (int j = 0; j < nl; j++)
-		layer_free(&L[j]);
+		tled_layer_free(&L[j]);
 	free(L);
 	free(tgt);
 	free(cx);

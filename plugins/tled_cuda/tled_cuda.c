@@ -67,6 +67,16 @@ static int tled_cuda_process(armstg_stage_t *st)
 			      cs.bytes_per_step / 1e6,
 			      cs.bytes_per_step / (cs.step_ms / cs.steps) / 1e6,
 			      cs.upload_ms);
+	if (cs.steps > 0) {
+		/* the roofline of those steps, measured in the same run */
+		double bw = tled_cuda_copy_gbps(pv->cu);
+		if (bw > 0)
+			st->host->log(st, LOG_INFO, "device: copy bandwidth "
+				      "%.0f GB/s (cudaMemcpy device to device, "
+				      "read + write): the steps ran at %.1f %% "
+				      "of it", bw, 100 * cs.bytes_per_step /
+				      (cs.step_ms / cs.steps) / 1e6 / bw);
+	}
 	if (cs.hforces > 0)
 		st->host->log(st, LOG_INFO, "device: %lld host-array force "
 			      "evaluations (time-step estimates), %.2f s",

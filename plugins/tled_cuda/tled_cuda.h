@@ -76,6 +76,9 @@ typedef struct tled_cuda_stats {
 	double upload_ms;     /* model upload, ms */
 } tled_cuda_stats_t;
 void tled_cuda_get_stats(const tled_cuda_t *c, tled_cuda_stats_t *st);
+/* device-to-device copy bandwidth, GB/s (read + write), measured now;
+ * < 0 when it could not be measured */
+double tled_cuda_copy_gbps(tled_cuda_t *c);
 
 #ifdef __cplusplus
 }

@@ -1081,6 +1081,46 @@ double tled_cuda_mem_gib(const tled_cuda_t *c)
 	return c->mem_gib;
 }
 
+/* The device's copy bandwidth as the step's roofline, measured rather than
+ * taken from the data sheet: cudaMemcpy device to device of a 512 MiB
+ * buffer, best of 5 after one warm-up; a copy reads and writes every byte,
+ * so 2 x 512 MiB per copy.  GB/s (1e9 B/s); < 0 when the memory is not
+ * there (the caller then reports no fraction). */
+double tled_cuda_copy_gbps(tled_cuda_t *c)
+{
+	const size_t nb = (size_t)512 << 20;
+	void *a = NULL, *b = NULL;
+	cudaEvent_t e0 = NULL, e1 = NULL;
+	double best = -1;
+	cudaSetDevice(c->dev);
+	if (cudaMalloc(&a, nb) != cudaSuccess || cudaMalloc(&b, nb) != cudaSuccess ||
+	    cudaEventCreate(&e0) != cudaSuccess ||
+	    cudaEventCreate(&e1) != cudaSuccess)
+		goto out;
+	for (int r = 0; r < 6; r++) {
+		float ms = 0;
+		if (cudaEventRecord(e0) != cudaSuccess ||
+		    cudaMemcpy(b, a, nb, cudaMemcpyDeviceToDevice) != cudaSuccess ||
+		    cudaEventRecord(e1) != cudaSuccess ||
+		    cudaEventSynchronize(e1) != cudaSuccess ||
+		    cudaEventElapsedTime(&ms, e0, e1) != cudaSuccess) {
+			best = -1;
+			goto out;
+		}
+		if (r > 0 && ms > 0 && 2.0 * nb / (ms * 1e6) > best)
+			best = 2.0 * nb / (ms * 1e6);
+	}
+out:
+	cudaGetLastError();
+	if (e0)
+		cudaEventDestroy(e0);
+	if (e1)
+		cudaEventDestroy(e1);
+	cudaFree(a);
+	cudaFree(b);
+	return best;
+}
+
 void tled_cuda_get_stats(const tled_cuda_t *c, tled_cuda_stats_t *st)
 {
 	*st = c->st;
