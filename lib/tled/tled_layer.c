@@ -248,6 +248,23 @@ double tled_layer_side(const tled_layer_t *L, const double y[3], double h)
 {
 	int64_t id;
 	double d2;
+	/* More than 4 h from the layer's bounding box: outside, and the
+	 * distance to the box (a lower bound of the distance to the layer) is
+	 * returned instead of the nearest point's: the growth compares the
+	 * side with thresholds of at most 3 h (push_wall), so no decision
+	 * changes, and the nearest-point search from far away (rings of
+	 * cells of the layer's grid, O((d / h)^3) of them) was most of the
+	 * growth's host time at 2 mm nodes (113 334 nodes, 387 841 points). */
+	if (L->n > 0 && L->built) {
+		double db2 = 0;
+		for (int d = 0; d < 3; d++) {
+			double e = y[d] < L->lo[d] ? L->lo[d] - y[d]
+				   : y[d] > L->hi[d] ? y[d] - L->hi[d] : 0;
+			db2 += e * e;
+		}
+		if (db2 > 16 * h * h)
+			return sqrt(db2);
+	}
 	if (tled_grid_knn(&L->g, y, 1, -1, &id, &d2) < 1)
 		return INFINITY;
 	const double *q = L->x + 3 * id, *nn = L->nrm + 3 * id;

@@ -41,7 +41,8 @@ int tled_layer_index(tled_layer_t *L, double h);
 double tled_layer_winding(const tled_layer_t *L, const double y[3]);
 /* the same summed point by point (the reference of the clustered sum) */
 double tled_layer_winding_exact(const tled_layer_t *L, const double y[3]);
-/* signed distance of y (m) to the layer (m), > 0 outside */
+/* signed distance of y (m) to the layer (m), > 0 outside; more than 4 h
+ * from the layer's bounding box, the distance to the box (a lower bound) */
 double tled_layer_side(const tled_layer_t *L, const double y[3], double h);
 /* layer-to-layer map at y: IDW of (parent - x) over the 8 nearest points */
 void tled_layer_map(const tled_layer_t *L, const double y[3], double h,

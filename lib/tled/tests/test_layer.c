@@ -91,6 +91,7 @@ static void test_side(void **state)
 	tled_layer_t L;
 	sphere(&L, c);
 	double dmax = 0;
+	int nfar = 0;
 	for (int i = 0; i < 200; i++) {
 		double z = 1 - 2 * (i + 0.5) / 200, r = sqrt(1 - z * z);
 		double u[3] = { r * cos(2.4 * i), r * sin(2.4 * i), z };
@@ -104,12 +105,28 @@ static void test_side(void **state)
 			double want = rs[k] - R_MM;
 			if ((sd < 0) != (want < 0))
 				fail_msg("side at r = %.1f mm: %.3f mm", rs[k], sd);
+			double db2 = 0; /* to the layer's box, mm^2 */
+			for (int d = 0; d < 3; d++) {
+				double e = fabs(rs[k] * u[d]) - R_MM;
+				db2 += e > 0 ? e * e : 0;
+			}
+			if (db2 > 14 * H_MM * H_MM) {
+				/* beyond 4 h of the box: a lower bound, above
+				 * every threshold the growth uses (3 h) */
+				if (!(sd > 3 * H_MM && sd <= want + 0.5))
+					fail_msg("side at r = %.1f mm: %.3f mm "
+						 "(want in (%.1f, %.1f])", rs[k], sd,
+						 3 * H_MM, want + 0.5);
+				nfar++;
+				continue;
+			}
 			dmax = fmax(dmax, fabs(sd - want));
 		}
 	}
 	print_message("layer side: max |signed distance - (r - R)| %.3f mm\n",
 		      dmax);
 	assert_true(dmax < 0.8); /* the sampling: about 1 mm between points */
+	assert_true(nfar >= 200); /* r = 60 mm, some r = 30 mm: bounds */
 	tled_layer_free(&L); /* frees x, nrm and d too */
 }
 
