@@ -5,6 +5,7 @@
 # One row per run appended to a TSV; bench/tled/plot_trade.py plots it.
 #
 #   sh bench/tled/trade.sh [-j N] [-o OUT.tsv] [-c "CASES"] [-m "MODELS"]
+#                          [-x "CASE:MODEL ..."]
 #
 #   -j N       runs at a time (default 1; xargs -P); each gets
 #              OMP_NUM_THREADS = cores / N unless OMP_NUM_THREADS is set
@@ -19,13 +20,16 @@
 #              graphs/armstg.ini like a user's files; patNNNN: BraTS 2013
 #              patNNNN under $DATA with the SRI24 atlas (bench/pipeline/lib.sh
 #              brats_env)
-#   -m MODELS  node models, run in this order (default "6 4 3 2 2/15/90/6
-#              2/10/60/6"): S = uniform Poisson nodes S mm apart
+#   -m MODELS  node models, run in this order (default "6 4 3 2 3/15/90/6
+#              2/15/90/6 2/10/60/6"): S = uniform Poisson nodes S mm apart
 #              (nodes.spacing); S/RNEAR/RFAR/SMAX = graded (sampler
 #              grade=true): S mm within RNEAR mm of the tumour, linear to
 #              SMAX mm at RFAR mm, no nodes beyond RFAR (the cut is a fixed
 #              boundary; plugins/sampler/README.md).  The grid runs every
 #              model on every case, the model loop outside.
+#   -x RUNS    extra runs CASE:MODEL outside the grid (e.g. "default:2"),
+#              started before the grid (give the long ones here); -m "" and
+#              -x alone run only these
 #
 # Every run: build/armstg run graphs/armstg.ini --set tune.values=$PUSH
 # (one push depth, so that rows compare) --set nodes.spacing=S [grading],
@@ -140,6 +144,7 @@ one() {
 		-v to="$TRADE_TIMEOUT" -v note="$note" '
 	function num(x) { return x == "" ? "nan" : x }
 	function g(x) { return x == "" ? "nan" : sprintf("%.4g", x) }
+	function f1(x) { return x == "" ? "nan" : sprintf("%.1f", x) }
 	function addnote(s) { err = err (err == "" ? "" : "; ") s }
 	k == "log" && /^\[nodes@/ && / nodes: / && nodes == "" {
 		split($0, a, " "); nodes = a[2] }
@@ -171,9 +176,9 @@ one() {
 		if (note != "") addnote(note)
 		gsub(/[\t\r\n]/, " ", err)
 		print c, kind, sp, rn, rf, mx, be, pm, th, st, num(nodes), num(bs),
-			num(gs), (it == "" ? "nan" : it), num(jm), wall,
+			num(gs), (it == "" ? "nan" : it), g(jm), wall,
 			g(v["err_mean|band"]), g(v["err_p95|band"]),
-			g(v["S|ventricles"]), g(v["dice|tumour"]),
+			f1(v["S|ventricles"]), g(v["dice|tumour"]),
 			g(v["dice|ventricles"]), g(v["jac_min|mask"]),
 			(v["ncc|band"] == "" ? "nan" : sprintf("%.6f", v["ncc|band"])),
 			(err == "" ? "-" : err)
@@ -202,18 +207,20 @@ fi
 
 J=1 OUT=out/trade/trade.tsv
 CASES="default lobulated irregular pat0001 pat0002 pat0003"
-MODELS="6 4 3 2 2/15/90/6 2/10/60/6"
-while getopts j:o:c:m:h opt; do
+MODELS="6 4 3 2 3/15/90/6 2/15/90/6 2/10/60/6"
+EXTRA=""
+while getopts j:o:c:m:x:h opt; do
 	case $opt in
 	j) J=$OPTARG ;;
 	o) OUT=$OPTARG ;;
 	c) CASES=$OPTARG ;;
 	m) MODELS=$OPTARG ;;
+	x) EXTRA=$OPTARG ;;
 	*) sed -n '2,/^set -u/p' "$SELF" | sed '$d; s/^# \{0,1\}//'; exit 2 ;;
 	esac
 done
 shift $((OPTIND - 1))
-[ $# -eq 0 ] || die "unexpected argument '$1' (options: -j -o -c -m; -h for help)"
+[ $# -eq 0 ] || die "unexpected argument '$1' (options: -j -o -c -m -x; -h for help)"
 case $J in '' | *[!0-9]* | 0) die "-j '$J' is not a positive whole number" ;; esac
 
 export TRADE_OUT TRADE_WORK TRADE_VENTRICLES TRADE_PUSH TRADE_TIMEOUT \
@@ -236,7 +243,14 @@ if [ -z "$OMP0" ]; then
 fi
 
 [ -x "$ARMSTG" ] || die "no $ARMSTG (build first, or BUILD=DIR)"
-for c in $CASES; do
+XCASES="" XMODELS=""
+[ -n "$MODELS" ] || CASES=""
+for x in $EXTRA; do
+	case $x in *:*) ;; *) die "extra run '$x' is not CASE:MODEL" ;; esac
+	XCASES="$XCASES ${x%%:*}" XMODELS="$XMODELS ${x#*:}"
+done
+[ -n "$MODELS$XMODELS" ] || die "no runs (-m and -x are empty)"
+for c in $CASES $XCASES; do
 	case $c in
 	default | lobulated | irregular) ;;
 	pat[0-9][0-9][0-9][0-9])
@@ -249,7 +263,7 @@ for c in $CASES; do
 	*) die "unknown case '$c' (default, lobulated, irregular or patNNNN)" ;;
 	esac
 done
-for m in $MODELS; do
+for m in $MODELS $XMODELS; do
 	echo "$m" | grep -Eq '^[0-9.]+(/[0-9.]+/[0-9.]+/[0-9.]+)?$' ||
 		die "model '$m' is neither S nor S/RNEAR/RFAR/SMAX (mm)"
 done
@@ -259,7 +273,7 @@ rm -f "$TRADE_OUT.done"
 	printf 'case\tmodel\tspacing_mm\tr_near_mm\tr_far_mm\tmax_spacing_mm\tbackend\tpush_mm\tthreads\tstatus\tnodes\tbuild_s\tgrowth_s\titerations\tjmin\twall_s\terr_band_mean_mm\terr_band_p95_mm\tS_mm\tdice_tumour\tdice_ventricles\tjac_min\tncc_band\terror\n' >"$TRADE_OUT"
 
 # the phantoms as NIfTI files, once (before any run: runs in parallel share them)
-for c in $CASES; do
+for c in $CASES $XCASES; do
 	case $c in
 	default) ps="" ;;
 	lobulated) ps="phantom.lobulation=0.9" ;;
@@ -270,8 +284,11 @@ for c in $CASES; do
 	PHANTOM_SET=$ps export_phantom "$TRADE_WORK/ph-$c" 1
 done
 
-echo "trade.sh: $(echo "$CASES" | wc -w) cases x $(echo "$MODELS" | wc -w) models, $J at a time, $OMP_NUM_THREADS threads each, $TLED; rows to $TRADE_OUT"
-for m in $MODELS; do
-	for c in $CASES; do echo "$c $m"; done
-done | xargs -P "$J" -L 1 sh "$SELF" --one
+echo "trade.sh: $(echo "$CASES" | wc -w) cases x $(echo "$MODELS" | wc -w) models + $(echo "$EXTRA" | wc -w) extra runs, $J at a time, $OMP_NUM_THREADS threads each, $TLED; rows to $TRADE_OUT"
+{
+	for x in $EXTRA; do echo "${x%%:*} ${x#*:}"; done
+	for m in $MODELS; do
+		for c in $CASES; do echo "$c $m"; done
+	done
+} | xargs -P "$J" -L 1 sh "$SELF" --one
 date +%s >"$TRADE_OUT.done"
