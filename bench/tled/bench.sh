@@ -21,7 +21,8 @@
 # equilibrium inside the time limit; iterations and growth are then not
 # the equilibrium's).
 # Usage: sh bench/tled/bench.sh BUILD OUT "default:6,4,3" "cuda cpu16 cpu1"
-# Each run is limited to TLED_BENCH_TIMEOUT seconds (default 300).
+# Each run is limited to TLED_BENCH_TIMEOUT seconds (default 300); tled_cuda
+# runs use TLED_BENCH_CUDA_THREADS host threads (default: every core).
 set -u
 BUILD=$1 OUT=$2 CASES=$3 BACKENDS=$4
 TO=${TLED_BENCH_TIMEOUT:-300}
@@ -33,7 +34,7 @@ for case in $CASES; do
     for sp in $(echo "${case#*:}" | tr ',' ' '); do
         for be in $BACKENDS; do
             case $be in
-            cuda) plug=tled_cuda th=$(nproc) ;;
+            cuda) plug=tled_cuda th=${TLED_BENCH_CUDA_THREADS:-$(nproc)} ;;
             cpu*) plug=tled_cpu th=${be#cpu} ;;
             esac
             d=$(mktemp -d /tmp/tledbench.XXXXXX)
