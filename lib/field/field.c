@@ -549,6 +549,9 @@ void fimg_field_maxnorm(const fimg_t *u, double *max_mm, double *max_vox)
 {
 	const int64_t nv = fgrid_nvox(&u->g);
 	double mm = 0, mv = 0;
+	/* maxima: the same on any thread count */
+#pragma omp parallel for num_threads(NT(0)) schedule(static) \
+	reduction(max : mm, mv)
 	for (int64_t e = 0; e < nv; e++) {
 		double d[3] = { u->d[e], u->d[e + nv], u->d[e + 2 * nv] }, c[3];
 		double n2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];

@@ -72,7 +72,7 @@ static inline int clampi(int a, int lo, int hi)
 /*
  * The two passes, generated for sums in T (double, or float for the float
  * path), kernel ker in T:
- *  pass_x_T     along i: each row through a padded copy;
+ *  pass_x_T     along i: each row through a padded copy, tap by tap;
  *  pass_rows_T  along j (axis 1) or k (axis 2): whole rows of nx voxels at
  *               a time (the inner loop runs along i, contiguous).  For each
  *               plane (k fixed for axis 1, j fixed for axis 2) the
@@ -90,25 +90,36 @@ static int pass_x_##T(float *d, const int n[3], const T *ker, int r,        \
 	_Pragma("omp parallel num_threads(threads)")                        \
 	{                                                                   \
 		T *buf = malloc(sizeof(T) * (size_t)(nx + 2 * r));          \
-		if (!buf) {                                                 \
+		T *acc = malloc(sizeof(T) * (size_t)nx);                    \
+		const int ok = buf && acc;                                  \
+		if (!ok) {                                                  \
 			_Pragma("omp atomic write")                         \
 			fail = 1;                                           \
 		}                                                           \
 		_Pragma("omp for schedule(static)")                         \
 		for (int64_t row = 0; row < nrows; row++) {                 \
-			if (!buf)                                           \
+			if (!ok)                                            \
 				continue;                                   \
 			float *p = d + row * nx;                            \
 			for (int i = -r; i < nx + r; i++)                   \
 				buf[i + r] = p[clampi(i, 0, nx - 1)];       \
-			for (int i = 0; i < nx; i++) {                      \
-				T s = 0;                                    \
-				for (int t = 0; t <= 2 * r; t++)            \
-					s += ker[t] * buf[i + t];           \
-				p[i] = (float)s;                            \
+			/* tap by tap over the row (the sums of each       \
+			 * output in the same order as one at a time, so   \
+			 * the same floats; the inner loop vectorises) */  \
+			for (int i = 0; i < nx; i++)                        \
+				acc[i] = 0;                                 \
+			for (int t = 0; t <= 2 * r; t++) {                  \
+				const T w = ker[t];                         \
+				const T *s = buf + t;                       \
+				_Pragma("omp simd")                         \
+				for (int i = 0; i < nx; i++)                \
+					acc[i] += w * s[i];                 \
 			}                                                   \
+			for (int i = 0; i < nx; i++)                        \
+				p[i] = (float)acc[i];                       \
 		}                                                           \
 		free(buf);                                                  \
+		free(acc);                                                  \
 	}                                                                   \
 	return fail;                                                        \
 }                                                                           \
@@ -147,6 +158,7 @@ static int pass_rows_##T(float *d, const int n[3], int axis, const T *ker,  \
 					const float *s = buf + (int64_t)    \
 						clampi(q + t, 0, m - 1) * nx;\
 					const T w = ker[t + r];             \
+					_Pragma("omp simd")                 \
 					for (int i = 0; i < nx; i++)        \
 						acc[i] += w * s[i];         \
 				}                                           \

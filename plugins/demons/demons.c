@@ -58,7 +58,8 @@
  *   only voxels inside both masks and the moving image (so the tumour
  *   painted out of a mask takes no part in any window), with
  *   Ft = F - mean_N F, Wt = W - mean_N W:
- *     sFF = sum Ft^2, sWW = sum Wt^2, sFW = sum Ft Wt (box filters),
+ *     sFF = sum Ft^2, sWW = sum Wt^2, sFW = sum Ft Wt (box filters:
+ *     running sums, lib/img/box.h),
  *     CC(x) = sFW^2 / (sFF sWW)                       (in [0,1])
  *   and the update (Avants, Epstein, Grossman, Gee, "Symmetric
  *   diffeomorphic image registration with cross-correlation", Med Image
@@ -81,6 +82,7 @@
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
 #include "field/field.h"
+#include "img/box.h"
 
 #define MAX_LEVELS 8
 
@@ -107,6 +109,7 @@ typedef struct demons_priv {
 	double local_sigma;  /* mm */
 	int metric;
 	int radius;          /* voxels of the level (lncc window) */
+	int crop;
 	/* parsed in init */
 	int niter[MAX_LEVELS];
 	int nlist;
@@ -189,6 +192,11 @@ static const armstg_param_t demons_params[] = {
 	{ "radius", PT_INT, "2", 1, 10, "voxels",
 	  "metric=lncc: window half-width in voxels of each level (2: 5x5x5, "
 	  "Greedy's default; ANTs SyN CC often 4)", NULL, OFF(radius), 0 },
+	{ "crop", PT_BOOL, "true", 0, 0, "",
+	  "with a fixed_mask: each level computes on the mask's bounding box "
+	  "plus a margin of the smoothing and window widths (the brain is "
+	  "about 1/3 of a BraTS box), the field beyond it continued by its "
+	  "edge values; false: the whole fixed grid", NULL, OFF(crop), 0 },
 };
 
 #define FAIL(code, ...) st->host->fail(st, code, __VA_ARGS__)
@@ -418,6 +426,137 @@ static int resample_clamp(const fimg_t *src, const fgrid_t *g, fimg_t *out,
 	return 0;
 }
 
+/*
+ * crop=true: the bounding box lo..hi (voxels, inclusive) of mask > 0 on
+ * its grid, grown by margin voxels and clipped to the grid; 1 when it is
+ * smaller than the grid, 0 when the whole grid is needed (or the mask is
+ * empty).
+ */
+static int mask_box(const fimg_t *m, int margin, int lo[3], int hi[3])
+{
+	const fgrid_t *g = &m->g;
+	const int n[3] = { g->nx, g->ny, g->nz };
+	for (int a = 0; a < 3; a++) {
+		lo[a] = n[a];
+		hi[a] = -1;
+	}
+	for (int k = 0; k < n[2]; k++)
+		for (int j = 0; j < n[1]; j++) {
+			const float *row = m->d + ((int64_t)k * n[1] + j) * n[0];
+			int i0 = -1, i1 = -1;
+			for (int i = 0; i < n[0]; i++)
+				if (row[i] > 0) {
+					if (i0 < 0)
+						i0 = i;
+					i1 = i;
+				}
+			if (i0 < 0)
+				continue;
+			const int idx[3][2] = { { i0, i1 }, { j, j }, { k, k } };
+			for (int a = 0; a < 3; a++) {
+				if (idx[a][0] < lo[a])
+					lo[a] = idx[a][0];
+				if (idx[a][1] > hi[a])
+					hi[a] = idx[a][1];
+			}
+		}
+	if (hi[0] < 0)
+		return 0;
+	int64_t nbox = 1;
+	for (int a = 0; a < 3; a++) {
+		lo[a] = lo[a] - margin < 0 ? 0 : lo[a] - margin;
+		hi[a] = hi[a] + margin > n[a] - 1 ? n[a] - 1 : hi[a] + margin;
+		nbox *= hi[a] - lo[a] + 1;
+	}
+	return nbox < fgrid_nvox(g);
+}
+
+/* the sub-grid lo..hi of g (the same voxels, fewer of them) */
+static void sub_grid(const fgrid_t *g, const int lo[3], const int hi[3],
+		     fgrid_t *out)
+{
+	double A[16];
+	memcpy(A, g->v2w, sizeof A);
+	for (int r = 0; r < 3; r++)
+		for (int c = 0; c < 3; c++)
+			A[r * 4 + 3] += g->v2w[r * 4 + c] * lo[c];
+	fgrid_make(out, hi[0] - lo[0] + 1, hi[1] - lo[1] + 1,
+		   hi[2] - lo[2] + 1, A);
+}
+
+/* sub <- the block of big that starts at voxel lo (sub's grid is a
+ * sub-grid of big's) */
+static void block_copy(const fimg_t *big, fimg_t *sub, const int lo[3], int nt)
+{
+	const fgrid_t *G = &big->g, *g = &sub->g;
+	const int64_t NV = fgrid_nvox(G), nv = fgrid_nvox(g);
+	const int nc = sub->nc;
+#pragma omp parallel for num_threads(nt) schedule(static) collapse(3)
+	for (int c = 0; c < nc; c++)
+		for (int k = 0; k < g->nz; k++)
+			for (int j = 0; j < g->ny; j++)
+				memcpy(sub->d + c * nv + ((int64_t)k * g->ny + j) * g->nx,
+				       big->d + c * NV +
+					       ((int64_t)(k + lo[2]) * G->ny + j + lo[1]) *
+						       G->nx + lo[0],
+				       sizeof(float) * (size_t)g->nx);
+}
+
+/*
+ * big <- w sub + (1 - w) big over the block of sub (at voxel lo of big),
+ * w = 1 at ramp voxels or more from the block's faces inside big (faces on
+ * big's own faces do not count), falling linearly to 1 / (ramp + 1) on
+ * them: the cropped level's field joins the field carried over from the
+ * coarser level without a step.
+ */
+static void block_blend(fimg_t *big, const fimg_t *sub, const int lo[3],
+			int ramp, int nt)
+{
+	const fgrid_t *G = &big->g, *g = &sub->g;
+	const int64_t NV = fgrid_nvox(G), nv = fgrid_nvox(g);
+	const int N[3] = { G->nx, G->ny, G->nz }, n[3] = { g->nx, g->ny, g->nz };
+	int in_lo[3], in_hi[3]; /* the face is inside big */
+	for (int a = 0; a < 3; a++) {
+		in_lo[a] = lo[a] > 0;
+		in_hi[a] = lo[a] + n[a] < N[a];
+	}
+#pragma omp parallel for num_threads(nt) schedule(static)
+	for (int k = 0; k < n[2]; k++)
+		for (int j = 0; j < n[1]; j++)
+			for (int i = 0; i < n[0]; i++) {
+				const int idx[3] = { i, j, k };
+				int dmin = ramp;
+				for (int a = 0; a < 3; a++) {
+					if (in_lo[a] && idx[a] < dmin)
+						dmin = idx[a];
+					if (in_hi[a] && n[a] - 1 - idx[a] < dmin)
+						dmin = n[a] - 1 - idx[a];
+				}
+				const float w = (float)(dmin + 1) / (float)(ramp + 1);
+				const int64_t e = ((int64_t)k * n[1] + j) * n[0] + i;
+				const int64_t E = ((int64_t)(k + lo[2]) * N[1] +
+						   j + lo[1]) * N[0] + i + lo[0];
+				for (int c = 0; c < 3; c++) {
+					float *b = big->d + c * NV + E;
+					const float v = sub->d[c * nv + e];
+					*b = dmin >= ramp ? v : w * v + (1 - w) * *b;
+				}
+			}
+}
+
+/* replace f by its block lo.. on the sub-grid gs */
+static int crop_img(fimg_t *f, const int lo[3], const fgrid_t *gs, int nt)
+{
+	fimg_t c = { 0 };
+	int rc = fimg_alloc(&c, gs, f->nc);
+	if (rc)
+		return rc;
+	block_copy(f, &c, lo, nt);
+	fimg_free(f);
+	*f = c;
+	return 0;
+}
+
 /* Everything one level needs. */
 typedef struct level {
 	fgrid_t g;
@@ -522,47 +661,6 @@ static void compute_force(const demons_priv_t *p, const level_t *L,
 	*nused = nu;
 }
 
-/* box sums of half-width r (zero outside the grid) along every axis, in
- * place, for nc planar images of grid g (running sums in double) */
-static void box3(float *d, int nc, const fgrid_t *g, int r, int nt)
-{
-	const int n[3] = { g->nx, g->ny, g->nz };
-	const int64_t nv = fgrid_nvox(g), st[3] = { 1, g->nx,
-						    (int64_t)g->nx * g->ny };
-	for (int a = 0; a < 3; a++) {
-		const int len = n[a];
-		const int64_t nlines = nv / len;
-		const int b = (a + 1) % 3, c = (a + 2) % 3;
-#pragma omp parallel num_threads(nt)
-		{
-			double *line = malloc(sizeof(double) * (size_t)len);
-#pragma omp for schedule(static) collapse(2)
-			for (int comp = 0; comp < nc; comp++)
-				for (int64_t li = 0; li < nlines; li++) {
-					if (!line)
-						continue;
-					const int ib = (int)(li % n[b]),
-						  ic = (int)(li / n[b]);
-					float *p = d + comp * nv + ib * st[b] +
-						   ic * st[c];
-					for (int i = 0; i < len; i++)
-						line[i] = p[i * st[a]];
-					double acc = 0;
-					for (int i = 0; i < r && i < len; i++)
-						acc += line[i];
-					for (int i = 0; i < len; i++) {
-						if (i + r < len)
-							acc += line[i + r];
-						if (i - r - 1 >= 0)
-							acc -= line[i - r - 1];
-						p[i * st[a]] = (float)acc;
-					}
-				}
-			free(line);
-		}
-	}
-}
-
 /*
  * metric=lncc: the gradient of the local normalised cross-correlation into
  * U (nc 3, world vectors per unit step; see the header); *score = sum of
@@ -595,7 +693,10 @@ static int compute_force_lncc(const demons_priv_t *p, const level_t *L,
 		S[e + 4 * nv] = w * w;
 		S[e + 5 * nv] = f * w;
 	}
-	box3(S, 6, g, p->radius, nt);
+	if (img_box_sum(S, 6, dims, p->radius, nt)) {
+		free(S);
+		return ARMSTG_ENOMEM;
+	}
 	double Li[3][3];
 	for (int a = 0; a < 3; a++)
 		for (int c = 0; c < 3; c++)
@@ -663,11 +764,13 @@ static int compute_force_lncc(const demons_priv_t *p, const level_t *L,
 	return 0;
 }
 
-static void update_stats(const fimg_t *U, double *mean, double *max)
+static void update_stats(const fimg_t *U, double *mean, double *max, int nt)
 {
 	const int64_t nv = fgrid_nvox(&U->g);
 	double s = 0, m = 0;
 	int64_t n = 0;
+#pragma omp parallel for num_threads(nt) schedule(static) \
+	reduction(+ : s, n) reduction(max : m)
 	for (int64_t e = 0; e < nv; e++) {
 		double a = U->d[e], b = U->d[e + nv], c = U->d[e + 2 * nv];
 		double r = sqrt(a * a + b * b + c * c);
@@ -699,6 +802,7 @@ static void exp_inplace(fimg_t *A, fimg_t *B, fimg_t **res, int nt)
 	}
 	const int64_t ne = fgrid_nvox(&A->g) * 3;
 	const float s = (float)ldexp(1.0, -n);
+#pragma omp parallel for num_threads(nt) schedule(static)
 	for (int64_t e = 0; e < ne; e++)
 		A->d[e] *= s;
 	fimg_t *a = A, *b = B;
@@ -757,7 +861,7 @@ static int demons_process(armstg_stage_t *st)
 		return FAIL(ARMSTG_EINVAL, "%s", err);
 
 	fimg_t F0 = { 0 }, M0 = { 0 }, FM0 = { 0 }, MM0 = { 0 }, init = { 0 };
-	fimg_t S = { 0 }, A = { 0 }, B = { 0 };
+	fimg_t S = { 0 }, A = { 0 }, B = { 0 }, Sfull = { 0 };
 	level_t L = { 0 };
 	tab_t *tab = NULL;
 	vol_t *ofield = NULL, *owarp = NULL;
@@ -840,11 +944,12 @@ static int demons_process(armstg_stage_t *st)
 		goto out;
 	}
 
-	int done = 0;
+	int done = 0, crop_now = 0, crop_lo[3] = { 0, 0, 0 }, margin = 0;
 	for (int l = 0; l < nlev; l++) {
 		const int f = 1 << (nlev - 1 - l);
 		fgrid_t g;
 		fgrid_shrink(&F0.g, f, &g);
+		const fgrid_t gfull = g;
 		/* fixed: smooth by 0.5 f voxels, sample on the coarse grid */
 		double sig_f = f > 1 ? 0.5 * f * (F0.g.sp[0] + F0.g.sp[1] + F0.g.sp[2]) / 3 : 0;
 		double sig_m = f > 1 ? 0.5 * f * (M0.g.sp[0] + M0.g.sp[1] + M0.g.sp[2]) / 3 : 0;
@@ -873,21 +978,64 @@ static int demons_process(armstg_stage_t *st)
 			/* a coarse voxel is in the mask when its centre is */
 			fimg_resample(&FM0, NULL, FIELD_NEAREST, 0, &L.FM, nt);
 		}
+		/* regularisation widths at this level (mm) */
+		const fgrid_t *ug = p->sigma_unit == SIGMA_VOXEL ? &g
+				    : p->sigma_unit == SIGMA_IMAGE_VOXEL ? &F0.g
+				    : NULL;
+		const double vs = ug ? (ug->sp[0] + ug->sp[1] + ug->sp[2]) / 3
+				     : 1;
+		const double sg_field = p->sigma_field * vs;
+		const double sg_fluid = p->sigma_fluid * vs;
+		/* crop=true: the level computes on the fixed mask's bounding
+		 * box grown by the reach of one iteration (the lncc window,
+		 * the update's and the field's Gaussian kernels, 3 sigma each,
+		 * plus 2 voxels), so that inside the mask each iteration reads
+		 * the same voxels as on the whole grid; the field beyond the
+		 * box, where no force acts, is the only part that differs */
+		crop_now = 0;
+		if (p->crop && L.FM.d) {
+			const double spmin = fmin(g.sp[0], fmin(g.sp[1], g.sp[2]));
+			margin = (p->metric == METRIC_LNCC ? p->radius : 1) +
+					   (int)ceil(3 * sg_fluid / spmin) +
+					   (int)ceil(3 * sg_field / spmin) + 2;
+			int hi[3];
+			if (mask_box(&L.FM, margin, crop_lo, hi)) {
+				fgrid_t gc;
+				sub_grid(&g, crop_lo, hi, &gc);
+				if ((rc = crop_img(&L.F, crop_lo, &gc, nt)) ||
+				    (rc = crop_img(&L.FM, crop_lo, &gc, nt)) ||
+				    (rc = crop_img(&L.W, crop_lo, &gc, nt))) {
+					rc = FAIL(rc, "out of memory (level %d)", l);
+					goto out;
+				}
+				g = gc;
+				L.g = g;
+				crop_now = 1;
+			}
+		}
 		if (MM0.d && (rc = fimg_alloc(&L.WM, &g, 1))) {
 			rc = FAIL(rc, "out of memory (mask)");
 			goto out;
 		}
-		/* field: start or carry over from the coarser level */
+		/* field: start or carry over from the coarser level, on the
+		 * whole level grid; a cropped level works on its box and
+		 * keeps the rest (Sfull) for the blend at its end */
 		fimg_t Snew = { 0 };
 		const fimg_t *from = S.d ? &S : init.d ? &init : NULL;
 		if (from)
-			rc = resample_clamp(from, &g, &Snew, nt);
+			rc = resample_clamp(from, &gfull, &Snew, nt);
 		else
-			rc = fimg_alloc(&Snew, &g, 3);
+			rc = fimg_alloc(&Snew, &gfull, 3);
 		fimg_free(&S);
 		fimg_free(&A);
 		fimg_free(&B);
 		S = Snew;
+		if (!rc && crop_now) {
+			Sfull = S;
+			S = (fimg_t){ 0 };
+			if (!(rc = fimg_alloc(&S, &g, 3)))
+				block_copy(&Sfull, &S, crop_lo, nt);
+		}
 		if (rc || (rc = fimg_alloc(&A, &g, 3)) ||
 		    (rc = fimg_alloc(&B, &g, 3))) {
 			rc = FAIL(ARMSTG_ENOMEM, "out of memory (fields, level %d)",
@@ -898,14 +1046,6 @@ static int demons_process(armstg_stage_t *st)
 		double ms2 = (g.sp[0] * g.sp[0] + g.sp[1] * g.sp[1] +
 			      g.sp[2] * g.sp[2]) / 3;
 		const double sx2 = 4 * p->max_step * p->max_step * ms2;
-		/* regularisation widths at this level (mm) */
-		const fgrid_t *ug = p->sigma_unit == SIGMA_VOXEL ? &g
-				    : p->sigma_unit == SIGMA_IMAGE_VOXEL ? &F0.g
-				    : NULL;
-		const double vs = ug ? (ug->sp[0] + ug->sp[1] + ug->sp[2]) / 3
-				     : 1;
-		const double sg_field = p->sigma_field * vs;
-		const double sg_fluid = p->sigma_fluid * vs;
 		double hist[8] = { 0 };
 		double lscale = 0; /* metric=lncc: update scale of the level */
 		h->log(st, LOG_INFO, "level %d/%d: %dx%dx%d, %.2f mm voxels, %d "
@@ -959,12 +1099,13 @@ static int demons_process(armstg_stage_t *st)
 					const float sc = (float)fmin(lscale,
 								     p->max_step / mvox);
 					const int64_t ne = fgrid_nvox(&g) * 3;
+#pragma omp parallel for num_threads(nt) schedule(static)
 					for (int64_t e = 0; e < ne; e++)
 						A.d[e] *= sc;
 				}
 			}
 			double mu, mx;
-			update_stats(&A, &mu, &mx);
+			update_stats(&A, &mu, &mx, nt);
 			if (p->update == UPD_DIFFEO) {
 				fimg_t *v;
 				exp_inplace(&A, &B, &v, nt);
@@ -975,6 +1116,7 @@ static int demons_process(armstg_stage_t *st)
 				*v = t;
 			} else {
 				int64_t ne = fgrid_nvox(&g) * 3;
+#pragma omp parallel for num_threads(nt) schedule(static)
 				for (int64_t e = 0; e < ne; e++)
 					S.d[e] += A.d[e];
 			}
@@ -1004,6 +1146,12 @@ static int demons_process(armstg_stage_t *st)
 					break;
 				}
 			}
+		}
+		if (crop_now) {
+			block_blend(&Sfull, &S, crop_lo, (margin + 1) / 2, nt);
+			fimg_free(&S);
+			S = Sfull;
+			Sfull = (fimg_t){ 0 };
 		}
 	}
 
@@ -1068,6 +1216,7 @@ out:
 	fimg_free(&MM0);
 	fimg_free(&init);
 	fimg_free(&S);
+	fimg_free(&Sfull);
 	fimg_free(&A);
 	fimg_free(&B);
 	return rc;

@@ -417,6 +417,69 @@ static void test_fixed_mask(void **state)
 	reg_free(&o);
 }
 
+/*
+ * crop=true (the default) computes each level on the fixed mask's bounding
+ * box plus the reach of one iteration: inside the mask the field is the
+ * whole grid's (crop=false) up to float rounding carried through the
+ * iterations; SSD demons (margin 6 voxels at 1.5 mm) and lncc (18 voxels:
+ * the 5x5x5 window and Gaussians of 3 and 1.5 voxels) on the half mask
+ * (the box ends short of the grid along x).
+ */
+static void test_crop(void **state)
+{
+	fixture_t *fx = *state;
+	char e[1024];
+	vol_t *half = vol_clone(fx->fmask);
+	for (int k = 0; k < FZ; k++)
+		for (int j = 0; j < FY; j++)
+			for (int i = FX / 2 - 6; i < FX; i++)
+				vol_set(half, vol_idx(half, i, j, k), 0);
+	const char *ssd[2][4] = { { "levels=2", "iterations=20,10", "crop=true", NULL },
+				  { "levels=2", "iterations=20,10", "crop=false", NULL } };
+	const char *lncc[2][10] = {
+		{ "levels=3", "iterations=40,30,20", "metric=lncc", "normalize=minmax",
+		  "sigma_unit=voxel", "sigma_fluid=3", "sigma_field=1.5", "crop=true", NULL },
+		{ "levels=3", "iterations=40,30,20", "metric=lncc", "normalize=minmax",
+		  "sigma_unit=voxel", "sigma_fluid=3", "sigma_field=1.5", "crop=false", NULL } };
+	for (int m = 0; m < 2; m++) {
+		reg_out_t o[2] = { 0 };
+		for (int c = 0; c < 2; c++)
+			assert_int_equal(run_demons(m ? lncc[c] : ssd[c], fx->fixed,
+						    fx->moving, half, NULL, &o[c], e,
+						    sizeof e), 0);
+		const int64_t nv = vol_nvox(o[0].field);
+		const float *a = o[0].field->data, *b = o[1].field->data;
+		double dmax = 0, dsum = 0, fsum = 0;
+		int64_t n = 0;
+		for (int64_t v = 0; v < nv; v++) {
+			if (vol_get(half, v) <= 0)
+				continue;
+			double d2 = 0, f2 = 0;
+			for (int q = 0; q < 3; q++) {
+				d2 += pow(a[v + q * nv] - b[v + q * nv], 2);
+				f2 += pow(b[v + q * nv], 2);
+			}
+			dmax = fmax(dmax, sqrt(d2));
+			dsum += sqrt(d2);
+			fsum += sqrt(f2);
+			n++;
+		}
+		print_message("%s, crop on/off in the mask: |difference| mean %.2g, "
+			      "max %.2g mm (mean |field| %.3f mm)\n",
+			      m ? "lncc" : "ssd", dsum / n, dmax, fsum / n);
+		assert_true(fsum / n > 0.5);
+		assert_true(dmax < 0.02);
+		/* the field is not the same everywhere: the box did cut */
+		double out = 0;
+		for (int64_t v = 0; v < nv * 3; v++)
+			out = fmax(out, fabs(a[v] - b[v]));
+		assert_true(out > 0);
+		reg_free(&o[0]);
+		reg_free(&o[1]);
+	}
+	msg_unref(&half->base);
+}
+
 static void expect_err(const char *const *params, const vol_t *f,
 		       const vol_t *m, const vol_t *fm, const vol_t *mm,
 		       const char *want)
@@ -638,6 +701,7 @@ int main(void)
 		cmocka_unit_test(test_inverse_consistency),
 		cmocka_unit_test(test_lncc_contrast),
 		cmocka_unit_test(test_fixed_mask),
+		cmocka_unit_test(test_crop),
 		cmocka_unit_test(test_bad_input),
 		cmocka_unit_test(test_local_bias),
 		cmocka_unit_test(test_sigma_unit),
