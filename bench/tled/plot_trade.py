@@ -164,8 +164,11 @@ def table(rows):
     for g in [r for r in rows if r["_graded"] and r["status"] == "ok"]:
         u = [r for r in rows if r["case"] == g["case"] and not r["_graded"]
              and r["_sp"] == g["_sp"] and r["status"] == "ok"]
-        if u:
-            pairs.append((g, u[-1]))
+        # times compare on the same backend and thread count
+        same = [r for r in u if r["backend"] == g["backend"]
+                and r["threads"] == g["threads"]]
+        if same or u:
+            pairs.append((g, (same or u)[-1]))
     if not pairs:
         return
     print()
