@@ -30,6 +30,7 @@ typedef struct sts_priv {
 	double k_csf, k_hyper, k_marker, k_enh;
 	double open_mm, close_mm, min_volume_mm3, keep_ratio;
 	int ref_t1;
+	int core_mismatch;
 } sts_priv_t;
 
 static const armstg_port_t sts_inputs[] = {
@@ -101,6 +102,13 @@ static const armstg_param_t sts_params[] = {
 	  "the same T1 (or T1c) intensity, so grey matter, brighter than "
 	  "white matter, is not tumour; false: one image-wide level",
 	  NULL, OFF(ref_t1), 0 },
+	{ "core_mismatch", PT_BOOL, "true", 0, 0, "",
+	  "with T2 and FLAIR: a tumour voxel whose T2 lies further above "
+	  "healthy tissue than its FLAIR does, by k_hyper sigma (each "
+	  "image's tissue mode and sigma), is core: fluid, bright in T2 and "
+	  "suppressed in FLAIR (necrosis, cysts, non-enhancing core; the "
+	  "T2-FLAIR mismatch), whether or not an enhancing rim encloses it",
+	  NULL, OFF(core_mismatch), 0 },
 };
 
 static int sts_init(armstg_stage_t *st)
@@ -269,6 +277,7 @@ static int sts_process(armstg_stage_t *st)
 	p.min_volume_mm3 = pv->min_volume_mm3;
 	p.keep_ratio = pv->keep_ratio;
 	p.ref_t1 = pv->ref_t1;
+	p.core_mismatch = pv->core_mismatch;
 	p.threads = si.grid.threads;
 
 	H->progress(st, 0.1, "segmenting %dx%dx%d", ref->nx, ref->ny,

@@ -109,6 +109,10 @@ typedef struct sts_params {
 	double keep_ratio;    /* other components kept if >= ratio*largest */
 	int ref_t1;           /* 1: hyperintensity against healthy tissue of
 	                         the same T1 (or T1c) intensity (sts_cond) */
+	int core_mismatch;    /* 1: with T2 and FLAIR, tumour voxels whose T2
+	                         excess over healthy tissue beats FLAIR's by
+	                         k_hyper sigma are core (fluid: T2-FLAIR
+	                         mismatch) */
 	int threads;
 } sts_params_t;
 
