@@ -7,6 +7,7 @@
  */
 #include "tled_model.h"
 #include "tled_corr.h"
+#include "tled_knn.h"
 
 #include <float.h>
 #include <math.h>
@@ -142,37 +143,15 @@ void tled_grid_free(tled_grid_t *g)
 	g->idx = NULL;
 }
 
-static void knn_insert(int k, int *cnt, int64_t *ids, double *d2, int64_t id,
-		       double d)
-{
-	if (*cnt == k && d >= d2[k - 1])
-		return;
-	int j = *cnt < k ? (*cnt)++ : k - 1;
-	while (j > 0 && d2[j - 1] > d) {
-		d2[j] = d2[j - 1];
-		ids[j] = ids[j - 1];
-		j--;
-	}
-	d2[j] = d;
-	ids[j] = id;
-}
-
 int tled_grid_knn(const tled_grid_t *g, const double x[3], int k, int64_t skip,
 		  int64_t *ids, double *d2)
 {
 	if (k <= 0 || g->n == 0)
 		return 0;
 	int c0[3];
-	for (int c = 0; c < 3; c++) {
-		double f = floor((x[c] - g->lo[c]) / g->cell);
-		if (f < 0)
-			f = 0;
-		if (f > g->nc[c] - 1)
-			f = g->nc[c] - 1;
-		c0[c] = (int)f;
-	}
-	/* distance from x to the block of cells [c0-r, c0+r]: lower bound for
-	 * anything in ring r+1 */
+	tled_knn_cell(x, g->lo, g->cell, g->nc, c0);
+	/* rings r of cells around c0 (tled_knn.h: the insertion and the
+	 * stopping rule, shared with tled_cuda's contact search) */
 	int cnt = 0;
 	int rmax = g->nc[0];
 	if (g->nc[1] > rmax)
@@ -203,7 +182,7 @@ int tled_grid_knn(const tled_grid_t *g, const double x[3], int k, int64_t skip,
 							double d = (q[0] - x[0]) * (q[0] - x[0]) +
 								   (q[1] - x[1]) * (q[1] - x[1]) +
 								   (q[2] - x[2]) * (q[2] - x[2]);
-							knn_insert(k, &cnt, ids, d2, i, d);
+							tled_knn_insert(k, &cnt, ids, d2, i, d);
 						}
 					}
 					if (r == 0)
@@ -211,22 +190,9 @@ int tled_grid_knn(const tled_grid_t *g, const double x[3], int k, int64_t skip,
 				}
 			}
 		}
-		if (cnt == k) {
-			/* min distance from x to outside the block of ring r */
-			/* sides of the block already at the grid's edge hide
-			 * no further points (x may lie outside the grid) */
-			double lb = DBL_MAX;
-			for (int c = 0; c < 3; c++) {
-				if (c0[c] - r > 0)
-					lb = fmin(lb, x[c] - (g->lo[c] +
-							      (c0[c] - r) * g->cell));
-				if (c0[c] + r < g->nc[c] - 1)
-					lb = fmin(lb, g->lo[c] + (c0[c] + r + 1) *
-							      g->cell - x[c]);
-			}
-			if (lb == DBL_MAX || (lb > 0 && lb * lb >= d2[k - 1]))
-				break;
-		}
+		if (cnt == k &&
+		    tled_knn_done(x, g->lo, g->cell, g->nc, c0, r, d2[k - 1]))
+			break;
 	}
 	return cnt;
 }

@@ -5,50 +5,12 @@
 #include <math.h>
 #include <string.h>
 
+#include "tled_law.h"
+
 double tled_neohooke(const double F[9], double mu, double kappa, int vol,
 		     double S[9], double *W)
 {
-	double C[9];
-	for (int i = 0; i < 3; i++)
-		for (int j = 0; j < 3; j++)
-			C[3 * i + j] = F[i] * F[j] + F[3 + i] * F[3 + j] +
-				       F[6 + i] * F[6 + j];
-	double J = F[0] * (F[4] * F[8] - F[5] * F[7]) -
-		   F[1] * (F[3] * F[8] - F[5] * F[6]) +
-		   F[2] * (F[3] * F[7] - F[4] * F[6]);
-	if (!(J > 0)) {
-		for (int i = 0; i < 9; i++)
-			S[i] = 0;
-		*W = 0;
-		return J;
-	}
-	/* C^-1 = adj(C) / det C, det C = J^2 */
-	double iJ2 = 1 / (J * J), Ci[9];
-	Ci[0] = (C[4] * C[8] - C[5] * C[7]) * iJ2;
-	Ci[1] = (C[2] * C[7] - C[1] * C[8]) * iJ2;
-	Ci[2] = (C[1] * C[5] - C[2] * C[4]) * iJ2;
-	Ci[3] = Ci[1];
-	Ci[4] = (C[0] * C[8] - C[2] * C[6]) * iJ2;
-	Ci[5] = (C[2] * C[3] - C[0] * C[5]) * iJ2;
-	Ci[6] = Ci[2];
-	Ci[7] = Ci[5];
-	Ci[8] = (C[0] * C[4] - C[1] * C[3]) * iJ2;
-	double trC = C[0] + C[4] + C[8];
-	double J23 = pow(J, -2.0 / 3.0);
-	/* J U'(J) and U(J) of enum tled_vol */
-	double Jp = vol == TLED_VOL_LOG ? 0.5 * kappa * (J * J - 1)
-					 : kappa * J * (J - 1);
-	double U = vol == TLED_VOL_LOG
-			   ? 0.25 * kappa * (J * J - 1 - 2 * log(J))
-			   : 0.5 * kappa * (J - 1) * (J - 1);
-	double a = mu * J23, b = Jp - a * trC / 3;
-	for (int i = 0; i < 9; i++)
-		S[i] = b * Ci[i];
-	S[0] += a;
-	S[4] += a;
-	S[8] += a;
-	*W = 0.5 * mu * (J23 * trC - 3) + U;
-	return J;
+	return tled_law_neohooke(F, mu, kappa, vol, S, W);
 }
 
 void tled_ip_stress_c(const tled_model_t *m, const uint8_t *ipact,
@@ -78,22 +40,11 @@ void tled_ip_stress_c(const tled_model_t *m, const uint8_t *ipact,
 				}
 			}
 			const tled_material_t *mt = &m->mat[m->ipmat[p]];
-			double S[9], W;
-			/* volumetric growth F = F_e F_g, F_g = g I: S_e from
-			 * F_e = F / g; per reference volume P = J_g F_e S_e
-			 * F_g^-T = g F S_e and W = g^3 W_e; J below is det F_e */
-			double g = m->ipg ? m->ipg[p] : 1, V = m->ipV[p];
-			double J;
-			if (g != 1) {
-				double Fe[9];
-				for (int i = 0; i < 9; i++)
-					Fe[i] = F[i] / g;
-				J = tled_neohooke(Fe, mt->mu, mt->kappa, mt->vol, S, &W);
-				W *= g * g * g;
-				V *= g;
-			} else {
-				J = tled_neohooke(F, mt->mu, mt->kappa, mt->vol, S, &W);
-			}
+			/* P = V F S with the growth stretch (tled_law.h); J
+			 * below is det F_e */
+			double W, g = m->ipg ? m->ipg[p] : 1;
+			double J = tled_law_ip(F, mt->mu, mt->kappa, mt->vol, g,
+					       m->ipV[p], P, &W);
 			if (!(J > 0) || !isfinite(W)) {
 				nbad++;
 				if (badl < 0)
@@ -104,11 +55,6 @@ void tled_ip_stress_c(const tled_model_t *m, const uint8_t *ipact,
 				ipl = p;
 			}
 			Wsum += m->ipV[p] * W;
-			for (int i = 0; i < 3; i++)
-				for (int j = 0; j < 3; j++)
-					P[3 * i + j] = V * (F[3 * i] * S[j] +
-							    F[3 * i + 1] * S[3 + j] +
-							    F[3 * i + 2] * S[6 + j]);
 		}
 #pragma omp critical
 		{

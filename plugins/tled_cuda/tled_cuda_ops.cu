@@ -13,6 +13,8 @@
 #include <time.h>
 
 #include "tled_cuda.h"
+#include "tled/tled_knn.h"
+#include "tled/tled_law.h"
 
 #define TPB 256      /* threads per block */
 #define MAXBLK 1024  /* blocks of a reduction (grid-stride beyond) */
@@ -108,52 +110,6 @@ struct dmod {
 	double cband; /* contact band, m (TLED_CT_BAND x mean spacing) */
 };
 
-/* neo-Hookean 2nd Piola-Kirchhoff stress, as tled_neohooke (tled_step.c):
- * S = mu J^-2/3 (I - tr C / 3 C^-1) + J U'(J) C^-1, returns J */
-__device__ double d_neohooke(const double F[9], double mu, double kappa,
-			     int vol, double S[9], double *W)
-{
-	double C[9];
-	for (int i = 0; i < 3; i++)
-		for (int j = 0; j < 3; j++)
-			C[3 * i + j] = F[i] * F[j] + F[3 + i] * F[3 + j] +
-				       F[6 + i] * F[6 + j];
-	double J = F[0] * (F[4] * F[8] - F[5] * F[7]) -
-		   F[1] * (F[3] * F[8] - F[5] * F[6]) +
-		   F[2] * (F[3] * F[7] - F[4] * F[6]);
-	if (!(J > 0)) {
-		for (int i = 0; i < 9; i++)
-			S[i] = 0;
-		*W = 0;
-		return J;
-	}
-	double iJ2 = 1 / (J * J), Ci[9];
-	Ci[0] = (C[4] * C[8] - C[5] * C[7]) * iJ2;
-	Ci[1] = (C[2] * C[7] - C[1] * C[8]) * iJ2;
-	Ci[2] = (C[1] * C[5] - C[2] * C[4]) * iJ2;
-	Ci[3] = Ci[1];
-	Ci[4] = (C[0] * C[8] - C[2] * C[6]) * iJ2;
-	Ci[5] = (C[2] * C[3] - C[0] * C[5]) * iJ2;
-	Ci[6] = Ci[2];
-	Ci[7] = Ci[5];
-	Ci[8] = (C[0] * C[4] - C[1] * C[3]) * iJ2;
-	double trC = C[0] + C[4] + C[8];
-	double J23 = pow(J, -2.0 / 3.0);
-	double Jp = vol == TLED_VOL_LOG ? 0.5 * kappa * (J * J - 1)
-					 : kappa * J * (J - 1);
-	double U = vol == TLED_VOL_LOG
-			   ? 0.25 * kappa * (J * J - 1 - 2 * log(J))
-			   : 0.5 * kappa * (J - 1) * (J - 1);
-	double a = mu * J23, b = Jp - a * trC / 3;
-	for (int i = 0; i < 9; i++)
-		S[i] = b * Ci[i];
-	S[0] += a;
-	S[4] += a;
-	S[8] += a;
-	*W = 0.5 * mu * (J23 * trC - 3) + U;
-	return J;
-}
-
 /* stresses: VP = V F S per active ip; s0 = strain energy, max of -J (min
  * det F) and where, count and first of inverted / non-finite points.
  * A group of SG lanes per integration point: the lanes share its support
@@ -202,18 +158,11 @@ __global__ void k_stress(dmod m, const unsigned char *ipact, const double *ipg,
 		for (int k = 0; k < 9; k++)
 			F[k] = H[k] + (k % 4 == 0 ? 1 : 0);
 		int mt = m.ipmat[p];
-		double S[9], W, J;
-		double g = ipg ? ipg[p] : 1, V = m.ipV[p];
-		if (g != 1) {
-			double Fe[9];
-			for (int i = 0; i < 9; i++)
-				Fe[i] = F[i] / g;
-			J = d_neohooke(Fe, m.mu[mt], m.kappa[mt], m.vol[mt], S, &W);
-			W *= g * g * g;
-			V *= g;
-		} else {
-			J = d_neohooke(F, m.mu[mt], m.kappa[mt], m.vol[mt], S, &W);
-		}
+		/* P = V F S with the growth stretch: tled_law_ip, the text the
+		 * C reference runs (lib/tled/tled_law.h) */
+		double W, g = ipg ? ipg[p] : 1;
+		double J = tled_law_ip(F, m.mu[mt], m.kappa[mt], m.vol[mt], g,
+				       m.ipV[p], P, &W);
 		if (!(J > 0) || !isfinite(W)) {
 			r.cnt++;
 			if (p < r.first)
@@ -224,11 +173,6 @@ __global__ void k_stress(dmod m, const unsigned char *ipact, const double *ipg,
 			r.imx = p;
 		}
 		r.s0 += m.ipV[p] * W;
-		for (int i = 0; i < 3; i++)
-			for (int j = 0; j < 3; j++)
-				P[3 * i + j] = V * (F[3 * i] * S[j] +
-						    F[3 * i + 1] * S[3 + j] +
-						    F[3 * i + 2] * S[6 + j]);
 	}
 	red_block(r, part);
 }
@@ -348,20 +292,14 @@ __global__ void k_grow(int nip, const double *g0, const double *g1, double rr,
 }
 
 /* the K = TLED_CT_K nearest brain-boundary nodes to y on its uniform grid
- * (ascending; ties: the first found): the traversal, insertion, stopping
- * rule and tie rule of tled_grid_knn (lib/tled/tled_model.c); returns how
- * many were found */
-__device__ int d_knnK(const dmod &m, const double y[3], int *ids, double *d2)
+ * (ascending; ties: the first found): the traversal of tled_grid_knn
+ * (lib/tled/tled_model.c), its start cell, insertion and stopping rule
+ * from lib/tled/tled_knn.h; returns how many were found */
+__device__ int d_knnK(const dmod &m, const double y[3], int64_t *ids,
+		      double *d2)
 {
 	int c0[3];
-	for (int c = 0; c < 3; c++) {
-		double f = floor((y[c] - m.blo[c]) / m.bcell);
-		if (f < 0)
-			f = 0;
-		if (f > m.bnc[c] - 1)
-			f = m.bnc[c] - 1;
-		c0[c] = (int)f;
-	}
+	tled_knn_cell(y, m.blo, m.bcell, m.bnc, c0);
 	const int K = TLED_CT_K;
 	int cnt = 0;
 	int rmax = max(m.bnc[0], max(m.bnc[1], m.bnc[2]));
@@ -386,16 +324,7 @@ __device__ int d_knnK(const dmod &m, const double y[3], int *ids, double *d2)
 							double d = (q[0] - y[0]) * (q[0] - y[0]) +
 								   (q[1] - y[1]) * (q[1] - y[1]) +
 								   (q[2] - y[2]) * (q[2] - y[2]);
-							if (cnt == K && d >= d2[K - 1])
-								continue;
-							int j = cnt < K ? cnt++ : K - 1;
-							while (j > 0 && d2[j - 1] > d) {
-								d2[j] = d2[j - 1];
-								ids[j] = ids[j - 1];
-								j--;
-							}
-							d2[j] = d;
-							ids[j] = i;
+							tled_knn_insert(K, &cnt, ids, d2, i, d);
 						}
 					}
 					if (r == 0)
@@ -403,17 +332,9 @@ __device__ int d_knnK(const dmod &m, const double y[3], int *ids, double *d2)
 				}
 			}
 		}
-		if (cnt == K) {
-			double lb = DBL_MAX;
-			for (int c = 0; c < 3; c++) {
-				if (c0[c] - r > 0)
-					lb = fmin(lb, y[c] - (m.blo[c] + (c0[c] - r) * m.bcell));
-				if (c0[c] + r < m.bnc[c] - 1)
-					lb = fmin(lb, m.blo[c] + (c0[c] + r + 1) * m.bcell - y[c]);
-			}
-			if (lb == DBL_MAX || (lb > 0 && lb * lb >= d2[K - 1]))
-				break;
-		}
+		if (cnt == K &&
+		    tled_knn_done(y, m.blo, m.bcell, m.bnc, c0, r, d2[K - 1]))
+			break;
 	}
 	return cnt;
 }
@@ -446,14 +367,14 @@ __device__ double d_side(const dmod &m, int a, const double y[3], int *b,
 			}
 		}
 	} else {
-		int ids[TLED_CT_K];
+		int64_t ids[TLED_CT_K];
 		double d2[TLED_CT_K];
 		int k = d_knnK(m, y, ids, d2);
 		if (k < 1)
 			return -INFINITY;
-		*b = ids[0];
+		*b = (int)ids[0];
 		for (int i = 0; i < TLED_CT_K; i++)
-			cb[i] = i < k ? ids[i] : -1;
+			cb[i] = i < k ? (int)ids[i] : -1;
 		ctgap[a] = k == TLED_CT_K ? sqrt(d2[k - 1]) - sqrt(d2[0]) : INFINITY;
 		ctd[a] = sqrt(d2[0]);
 		for (int i = 0; i < 3; i++)
