@@ -1252,16 +1252,20 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 			goto oom;
 	}
 	double hsum = 0, hmin = DBL_MAX;
-#pragma omp parallel for reduction(+ : hsum) reduction(min : hmin) \
-	num_threads(m->nthreads)
+#pragma omp parallel for reduction(min : hmin) num_threads(m->nthreads)
 	for (int64_t i = 0; i < n; i++) {
 		int64_t id;
 		double dd;
 		tled_grid_knn(&ng, m->X + 3 * i, 1, i, &id, &dd);
 		m->nn_dist[i] = sqrt(dd);
-		hsum += m->nn_dist[i];
 		hmin = fmin(hmin, m->nn_dist[i]);
 	}
+	/* the mean spacing sets the integration grid, the coarse level and
+	 * the time step: summed in node order, not by an OpenMP reduction
+	 * (whose partial sums join in the order the threads finish: other
+	 * bits from run to run on 3 or more threads) */
+	for (int64_t i = 0; i < n; i++)
+		hsum += m->nn_dist[i];
 	m->h_mean = hsum / (double)n;
 	m->h_min = hmin;
 	if (!(m->h_min > 0)) {

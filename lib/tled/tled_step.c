@@ -1,8 +1,15 @@
 /* SPDX-License-Identifier: MIT */
-/* MTLED hot loops, plain C reference + OpenMP (see tled_step.h). */
+/* MTLED hot loops, plain C reference + OpenMP (see tled_step.h).  The
+ * energies are summed per thread and the partial sums joined in thread
+ * order, not by an OpenMP reduction (whose partials join in the order the
+ * threads finish: other bits from run to run on 3 or more threads; the
+ * energy watchdog and the growth table read them).  With a static schedule
+ * the result is the same on every run with the same thread count, and on
+ * 1 and 2 threads the same bits as the reduction gave. */
 #include "tled_step.h"
 
 #include <math.h>
+#include <omp.h>
 #include <string.h>
 
 #include "tled_law.h"
@@ -18,11 +25,15 @@ void tled_ip_stress_c(const tled_model_t *m, const uint8_t *ipact,
 {
 	double Wsum = 0, jmin = INFINITY;
 	int64_t ipj = -1, nbad = 0, ipbad = -1;
-#pragma omp parallel num_threads(m->nthreads)
+	int nt = m->nthreads > 0 ? m->nthreads : 1;
+	double Wpart[nt]; /* per thread, summed in thread order below */
+	for (int t = 0; t < nt; t++)
+		Wpart[t] = 0;
+#pragma omp parallel num_threads(nt)
 	{
-		double jl = INFINITY;
+		double jl = INFINITY, wl = 0;
 		int64_t ipl = -1, badl = -1;
-#pragma omp for schedule(static) reduction(+ : Wsum, nbad)
+#pragma omp for schedule(static) reduction(+ : nbad)
 		for (int64_t p = 0; p < m->nip; p++) {
 			double *P = VP + 9 * p;
 			if (ipact && !ipact[p]) {
@@ -54,8 +65,9 @@ void tled_ip_stress_c(const tled_model_t *m, const uint8_t *ipact,
 				jl = J;
 				ipl = p;
 			}
-			Wsum += m->ipV[p] * W;
+			wl += m->ipV[p] * W;
 		}
+		Wpart[omp_get_thread_num()] = wl;
 #pragma omp critical
 		{
 			if (jl < jmin || (jl == jmin && ipl < ipj)) {
@@ -66,6 +78,8 @@ void tled_ip_stress_c(const tled_model_t *m, const uint8_t *ipact,
 				ipbad = badl;
 		}
 	}
+	for (int t = 0; t < nt; t++)
+		Wsum += Wpart[t];
 	if (info) {
 		info->W = Wsum;
 		info->Jmin = jmin;
@@ -111,11 +125,15 @@ void tled_cd_step_c(const tled_model_t *m, const uint8_t *kind,
 	double ke = 0, a1 = (2 - c * dt) / (2 + c * dt), a2 = 2 * dt / (2 + c * dt);
 	double vmax = 0;
 	int64_t nvmax = -1, nnan = -1;
-#pragma omp parallel num_threads(m->nthreads)
+	int nt = m->nthreads > 0 ? m->nthreads : 1;
+	double kpart[nt]; /* per thread, summed in thread order below */
+	for (int t = 0; t < nt; t++)
+		kpart[t] = 0;
+#pragma omp parallel num_threads(nt)
 	{
-		double vl = 0;
+		double vl = 0, kl = 0;
 		int64_t nl = -1, bad = -1;
-#pragma omp for schedule(static) reduction(+ : ke)
+#pragma omp for schedule(static)
 		for (int64_t a = 0; a < m->n; a++) {
 			if (kind[a] != TLED_FREE)
 				continue;
@@ -126,7 +144,7 @@ void tled_cd_step_c(const tled_model_t *m, const uint8_t *kind,
 				u[3 * a + i] += dt * vi;
 				v2 += vi * vi;
 			}
-			ke += 0.5 * m->mass[a] * v2;
+			kl += 0.5 * m->mass[a] * v2;
 			if (!isfinite(v2) || !isfinite(u[3 * a]) ||
 			    !isfinite(u[3 * a + 1]) || !isfinite(u[3 * a + 2])) {
 				if (bad < 0)
@@ -136,6 +154,7 @@ void tled_cd_step_c(const tled_model_t *m, const uint8_t *kind,
 				nl = a;
 			}
 		}
+		kpart[omp_get_thread_num()] = kl;
 #pragma omp critical
 		{
 			if (vl > vmax || (vl == vmax && nl >= 0 && nl < nvmax)) {
@@ -146,6 +165,8 @@ void tled_cd_step_c(const tled_model_t *m, const uint8_t *kind,
 				nnan = bad;
 		}
 	}
+	for (int t = 0; t < nt; t++)
+		ke += kpart[t];
 	if (info) {
 		info->ke = ke;
 		info->vmax = sqrt(vmax);
