@@ -8,11 +8,11 @@
 
 /* one layer of one component: points (m), outward normals, map */
 
-void tled_layer_free(tled_layer_t *L)
+/* what tled_layer_index builds (the grid, areas, clusters), freed and
+ * reset; the points, normals and map stay */
+static void layer_unindex(tled_layer_t *L)
 {
-	free(L->x);
-	free(L->nrm);
-	free(L->d);
+	tled_grid_free(&L->g);
 	free(L->A);
 	free(L->cptr);
 	free(L->cperm);
@@ -20,7 +20,19 @@ void tled_layer_free(tled_layer_t *L)
 	free(L->cr);
 	free(L->cd);
 	free(L->cT);
-	tled_grid_free(&L->g);
+	L->A = NULL;
+	L->cptr = L->cperm = NULL;
+	L->cc = L->cr = L->cd = L->cT = NULL;
+	L->nclu = 0;
+	L->built = 0;
+}
+
+void tled_layer_free(tled_layer_t *L)
+{
+	free(L->x);
+	free(L->nrm);
+	free(L->d);
+	layer_unindex(L);
 }
 
 /* The layer's clusters: cells of a cubic grid of side 2 h (about 20-40
@@ -66,30 +78,25 @@ static int layer_cluster(tled_layer_t *L, double h)
 	/* counting sort: points in cell order, stable (index order in a cell) */
 	for (int64_t q = 0; q < n; q++)
 		L->cperm[cnt[cell[q]]++] = q;
-	free(cell);
 	free(cnt);
 	L->cptr = malloc((size_t)(nclu + 1) * sizeof *L->cptr);
 	L->cc = malloc((size_t)(nclu > 0 ? nclu : 1) * 3 * sizeof *L->cc);
 	L->cr = malloc((size_t)(nclu > 0 ? nclu : 1) * sizeof *L->cr);
 	L->cd = malloc((size_t)(nclu > 0 ? nclu : 1) * 3 * sizeof *L->cd);
 	L->cT = malloc((size_t)(nclu > 0 ? nclu : 1) * 9 * sizeof *L->cT);
-	if (!L->cptr || !L->cc || !L->cr || !L->cd || !L->cT)
+	if (!L->cptr || !L->cc || !L->cr || !L->cd || !L->cT) {
+		free(cell);
 		return -1;
-	/* cluster boundaries: runs of equal cell (recomputed from the sorted
-	 * points' cells) */
+	}
+	/* cluster boundaries: runs of equal cell along the sorted points */
 	int64_t k = 0, prev = -1;
 	for (int64_t r = 0; r < n; r++) {
-		const double *x = L->x + 3 * L->cperm[r];
-		int64_t id[3];
-		for (int d = 0; d < 3; d++) {
-			id[d] = (int64_t)floor((x[d] - L->lo[d]) / cs);
-			id[d] = id[d] < 0 ? 0 : id[d] >= dim[d] ? dim[d] - 1 : id[d];
-		}
-		int64_t cc = (id[2] * dim[1] + id[1]) * dim[0] + id[0];
+		int64_t cc = cell[L->cperm[r]];
 		if (cc != prev)
 			L->cptr[k++] = r;
 		prev = cc;
 	}
+	free(cell);
 	L->cptr[k] = n;
 	L->nclu = k;
 	for (k = 0; k < L->nclu; k++) {
@@ -130,19 +137,7 @@ static int layer_cluster(tled_layer_t *L, double h)
  * hexagonal sampling of spacing s).  -1: out of memory. */
 int tled_layer_index(tled_layer_t *L, double h)
 {
-	tled_grid_free(&L->g);
-	free(L->A);
-	free(L->cptr);
-	free(L->cperm);
-	free(L->cc);
-	free(L->cr);
-	free(L->cd);
-	free(L->cT);
-	L->A = NULL;
-	L->cptr = L->cperm = NULL;
-	L->cc = L->cr = L->cd = L->cT = NULL;
-	L->nclu = 0;
-	L->built = 0;
+	layer_unindex(L);
 	if (tled_grid_build(&L->g, L->x, L->n, h))
 		return -1;
 	L->built = 1;
