@@ -11,7 +11,7 @@
 
 #include "tled_model.h"
 
-/* Inverse of a symmetric positive definite 4x4 (tled_model.c); -1 when
+/* Inverse of a symmetric positive definite 4x4 (tled_model_mls.c); -1 when
  * (numerically) singular. */
 int tled_inv4(const double A[16], double Ai[16]);
 

@@ -9,9 +9,9 @@
  * operations table (NULL: the plain C reference of tled_step.c).
  *
  * DESIGN.md section 6; thesis sections 3.5-3.6.  The numerics live in
- * tled_model.c (setup), tled_step.c (hot loops) and tled_solve.c (time
- * step, dynamic relaxation, contact, watchdogs); tled_grow.c is the growth
- * replay.
+ * tled_model.c, tled_model_ip.c and tled_model_mls.c (setup), tled_step.c
+ * (hot loops) and tled_solve.c (time step, dynamic relaxation, contact,
+ * watchdogs); tled_grow.c is the growth replay.
  *
  * Units: ports in mm (RAS world), the model in SI (m, kg, s, Pa).
  *
@@ -31,7 +31,7 @@
  *                its nearest node (label 2: CSF, else parenchyma).  With it
  *                the integration points are only those inside the brain
  *                (label > 0 at the nearest voxel, tled_labels.h); without
- *                it the default domain test of tled_model.c.
+ *                it the default domain test of tled_model_ip.c.
  * out  nodes     the input nodes (same order, input attributes kept) with
  *                attribute u (x3, mm: the displacement, reference -> grown)
  *                and the final labels (below)

@@ -293,7 +293,7 @@ __global__ void k_grow(int nip, const double *g0, const double *g1, double rr,
 
 /* the K = TLED_CT_K nearest brain-boundary nodes to y on its uniform grid
  * (ascending; ties: the first found): the traversal of tled_grid_knn
- * (lib/tled/tled_model.c), its start cell, insertion and stopping rule
+ * (lib/tled/tled_model_mls.c), its start cell, insertion and stopping rule
  * from lib/tled/tled_knn.h; returns how many were found */
 __device__ int d_knnK(const dmod &m, const double y[3], int64_t *ids,
 		      double *d2)
