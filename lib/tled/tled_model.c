@@ -166,6 +166,8 @@ void tled_model_free(tled_model_t *m)
 	free(m->dN);
 	free(m->nptr);
 	free(m->nent);
+	free(m->gdN);
+	free(m->gip);
 	free(m->bnode);
 	free(m->bX);
 	free(m->bn);
@@ -279,6 +281,35 @@ static int boundary_setup(tled_model_t *m, const tled_grid_t *ng)
 			m->bn[3 * b + c] = nrm[c] / l;
 	}
 	return rc;
+}
+
+int tled_model_gather_index(tled_model_t *m)
+{
+	free(m->gdN);
+	free(m->gip);
+	m->gdN = NULL;
+	m->gip = NULL;
+	if (!m->nptr || !m->nent || !m->dN || !m->entip)
+		return 0;
+	int64_t ne = m->nptr[m->n];
+	m->gdN = malloc((size_t)(3 * (ne ? ne : 1)) * sizeof *m->gdN);
+	m->gip = malloc((size_t)(ne ? ne : 1) * sizeof *m->gip);
+	if (!m->gdN || !m->gip) {
+		free(m->gdN);
+		free(m->gip);
+		m->gdN = NULL;
+		m->gip = NULL;
+		return -1;
+	}
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+	for (int64_t t = 0; t < ne; t++) {
+		int64_t e = m->nent[t];
+		m->gip[t] = m->entip[e];
+		m->gdN[3 * t] = m->dN[3 * e];
+		m->gdN[3 * t + 1] = m->dN[3 * e + 1];
+		m->gdN[3 * t + 2] = m->dN[3 * e + 2];
+	}
+	return 0;
 }
 
 void tled_model_gradsum(const tled_model_t *m, double *g)
@@ -576,6 +607,9 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 				 errsize);
 	if (prc)
 		goto phase_err;
+
+	if (tled_model_gather_index(m))
+		goto oom;
 
 	phase_mark(m, 6, &tmark);
 	/* wave-speed time step estimate: h_min / c_max */

@@ -225,6 +225,14 @@ typedef struct tled_model {
 	/* transposed CSR: for node a, the support entries e with ipnode[e]==a */
 	int64_t *nptr;      /* n+1 */
 	int64_t *nent;      /* entries */
+	/* the same entries stored in node order for the force gather
+	 * (tled_gather_c, tled_cuda's k_gather): gdN[3t..] = dN[3 nent[t]..],
+	 * gip[t] = entip[nent[t]].  Read in sequence instead of through nent,
+	 * so the gather's one random access is the stress VP of the ip.
+	 * Built by tled_model_build after the correction; NULL in a model made
+	 * by hand (the gather then reads through nent: the same sums) */
+	double *gdN;        /* 3 per entry, 1/m */
+	int64_t *gip;       /* entries */
 
 	tled_material_t mat[MAT_N];
 	int nthreads;
@@ -300,6 +308,8 @@ int tled_mls_nodal(const double *X, const int64_t *ids, int k,
 double tled_weight(double r, double *dwdr);
 
 /* Sum over ips of V * dN_a (3n): the integration-constraint residual. */
+/* (re)build gdN and gip from nent, entip and dN: 0, or -1 out of memory */
+int tled_model_gather_index(tled_model_t *m);
 void tled_model_gradsum(const tled_model_t *m, double *g);
 
 /* Signed distance of y (m) beyond the brain boundary, measured along the

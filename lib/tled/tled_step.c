@@ -92,14 +92,19 @@ void tled_ip_stress_c(const tled_model_t *m, const uint8_t *ipact,
 void tled_gather_c(const tled_model_t *m, const uint8_t *ipact,
 		   const double *VP, double *f)
 {
+	/* node-ordered copies (tled_model.h, gdN/gip) when the model has
+	 * them: the same terms in the same order, read in sequence */
+	const int ord = m->gdN && m->gip;
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
 	for (int64_t a = 0; a < m->n; a++) {
 		double s0 = 0, s1 = 0, s2 = 0;
 		for (int64_t t = m->nptr[a]; t < m->nptr[a + 1]; t++) {
-			int64_t e = m->nent[t], p = m->entip[e];
+			int64_t e = ord ? t : m->nent[t];
+			int64_t p = ord ? m->gip[t] : m->entip[e];
 			if (ipact && !ipact[p])
 				continue;
-			const double *P = VP + 9 * p, *d = m->dN + 3 * e;
+			const double *P = VP + 9 * p,
+				     *d = (ord ? m->gdN : m->dN) + 3 * e;
 			s0 += P[0] * d[0] + P[1] * d[1] + P[2] * d[2];
 			s1 += P[3] * d[0] + P[4] * d[1] + P[5] * d[2];
 			s2 += P[6] * d[0] + P[7] * d[1] + P[8] * d[2];

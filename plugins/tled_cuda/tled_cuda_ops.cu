@@ -97,8 +97,9 @@ __global__ void k_red_final(red *part, int nb, red *out)
 
 struct dmod {
 	int n, nip;
-	const int *ipptr, *ipnode, *nptr, *nent, *entip, *ipmat;
-	const double *dN, *ipV, *mass, *X;
+	const int *ipptr, *ipnode, *nptr, *gip, *ipmat;
+	/* dN in ip order (stress), gdN in node order (gather): tled_model.h */
+	const double *dN, *gdN, *ipV, *mass, *X;
 	double mu[MAT_N], kappa[MAT_N];
 	int vol[MAT_N];
 	/* brain boundary: nodes, normals and their uniform grid */
@@ -179,7 +180,9 @@ __global__ void k_stress(dmod m, const unsigned char *ipact, const double *ipg,
 
 /* f_a = sum over a's support entries of VP_ip dN_a(ip): the node->entry
  * CSR of tled_gather_c, no atomics; one warp per node, lanes over its
- * entries, reduced across the warp (a deterministic order) */
+ * entries, reduced across the warp (a deterministic order).  The entries'
+ * ip and dN are stored in node order (gip, gdN), so a warp reads them
+ * coalesced; only VP is read at random */
 __global__ void k_gather(dmod m, const unsigned char *ipact, const double *VP,
 			 double *f)
 {
@@ -189,10 +192,10 @@ __global__ void k_gather(dmod m, const unsigned char *ipact, const double *VP,
 	     a += warps) {
 		double s0 = 0, s1 = 0, s2 = 0;
 		for (int t = m.nptr[a] + lane; t < m.nptr[a + 1]; t += 32) {
-			int e = m.nent[t], p = m.entip[e];
+			int p = m.gip[t];
 			if (ipact && !ipact[p])
 				continue;
-			const double *P = VP + 9 * (size_t)p, *d = m.dN + 3 * (size_t)e;
+			const double *P = VP + 9 * (size_t)p, *d = m.gdN + 3 * (size_t)t;
 			double d0 = d[0], d1 = d[1], d2 = d[2];
 			s0 += P[0] * d0 + P[1] * d1 + P[2] * d2;
 			s1 += P[3] * d0 + P[4] * d1 + P[5] * d2;
@@ -598,13 +601,43 @@ static int ensure_model(tled_cuda_t *c, const tled_model_t *m)
 	if (up_idx(c, d.ipptr, m->ipptr, m->nip + 1, "ipptr") ||
 	    up_idx(c, d.ipnode, m->ipnode, nent, "ipnode") ||
 	    up_idx(c, d.nptr, m->nptr, m->n + 1, "nptr") ||
-	    up_idx(c, d.nent, m->nent, m->nptr[m->n], "nent") ||
-	    up_idx(c, d.entip, m->entip, nent, "entip") ||
 	    up_dbl(c, d.dN, m->dN, 3 * nent, "dN") ||
 	    up_dbl(c, d.ipV, m->ipV, m->nip, "ipV") ||
 	    up_dbl(c, d.mass, m->mass, m->n, "mass") ||
 	    up_dbl(c, d.X, m->X, 3 * m->n, "X"))
 		return -1;
+	{
+		/* the gather's node-ordered entries (tled_model.h gdN, gip):
+		 * the model's, or made here for a model built by hand */
+		int64_t *gip = m->gip;
+		double *gdN = m->gdN;
+		if (!gip || !gdN) {
+			gip = (int64_t *)malloc((size_t)(nent ? nent : 1) * sizeof *gip);
+			gdN = (double *)malloc((size_t)(3 * (nent ? nent : 1)) * sizeof *gdN);
+			if (!gip || !gdN) {
+				free(gip);
+				free(gdN);
+				snprintf(c->err, sizeof c->err, "out of host memory "
+					 "for the gather's entries (%lld)",
+					 (long long)nent);
+				return -1;
+			}
+			for (int64_t t = 0; t < nent; t++) {
+				int64_t e = m->nent[t];
+				gip[t] = m->entip[e];
+				for (int k = 0; k < 3; k++)
+					gdN[3 * t + k] = m->dN[3 * e + k];
+			}
+		}
+		int rc = up_idx(c, d.gip, gip, nent, "gip") ||
+			 up_dbl(c, d.gdN, gdN, 3 * nent, "gdN");
+		if (gip != m->gip)
+			free(gip);
+		if (gdN != m->gdN)
+			free(gdN);
+		if (rc)
+			return -1;
+	}
 	{
 		void *p;
 		if (dalloc(c, &p, (size_t)m->nip * sizeof(int), "ipmat"))
@@ -664,12 +697,12 @@ static int ensure_model(tled_cuda_t *c, const tled_model_t *m)
 	c->nbl_ip = (int)((m->nip + TPB - 1) / TPB);
 	/* bytes the step kernels move per time step: stress reads the
 	 * support entries (ipnode 4 + dN 24 B) and u per entry, writes VP
-	 * (72 B per ip); the gather reads nent + entip (8 B), dN (24 B) and
-	 * VP (72 B) per entry and writes f; the update reads f, mass, kind and
+	 * (72 B per ip); the gather reads gip (4 B), gdN (24 B) and VP
+	 * (72 B) per entry and writes f; the update reads f, mass, kind and
 	 * reads and writes u, v (the minimum: each array touched once) */
 	c->st.bytes_per_step = (double)nent * (4 + 24 + 24) +
 			       (double)m->nip * (72 + 4 + 8 + 8 + 1) +
-			       (double)nent * (8 + 24 + 72) +
+			       (double)nent * (4 + 24 + 72) +
 			       (double)m->n * (24 + 24 + 48 + 48 + 8 + 1 + 8);
 	c->gen = m->gen;
 	c->st.upload_ms += now_ms() - t0;
