@@ -10,8 +10,9 @@
  *
  * DESIGN.md section 6; thesis sections 3.5-3.6.  The numerics live in
  * tled_model.c, tled_model_ip.c and tled_model_mls.c (setup), tled_step.c
- * (hot loops) and tled_solve.c (time step, dynamic relaxation, contact,
- * watchdogs); tled_grow.c is the growth replay.
+ * (hot loops) and tled_solve.c (dynamic relaxation, watchdogs),
+ * tled_solve_dt.c (time step) and tled_solve_con.c (collocated conditions,
+ * contact); tled_grow.c is the growth replay.
  *
  * Units: ports in mm (RAS world), the model in SI (m, kg, s, Pa).
  *

@@ -47,11 +47,11 @@
 #ifndef TLED_SOLVE_H
 #define TLED_SOLVE_H
 
-/* contact: boundary-node candidates cached per node (tled_solve.c,
+/* contact: boundary-node candidates cached per node (tled_solve_con.c,
  * side_cached; the same in tled_cuda) */
 #define TLED_CT_K 8
 /* contact is looked for within this many mean node spacings of the brain
- * boundary (tled_solve.c, side_cached) */
+ * boundary (tled_solve_con.c, side_cached) */
 #define TLED_CT_BAND 3.0
 
 #include "tled_step.h"

@@ -343,7 +343,7 @@ __device__ int d_knnK(const dmod &m, const double y[3], int64_t *ids,
 }
 
 /* side of y beyond the brain boundary for node a, with the per-node cache
- * of lib/tled/tled_solve.c (side_cached): K candidates, exact, a grid
+ * of lib/tled/tled_solve_con.c (side_cached): K candidates, exact, a grid
  * search only when the node has moved by half the gap between the K-th and
  * the first distance since its last one */
 __device__ double d_side(const dmod &m, int a, const double y[3], int *b,
