@@ -449,6 +449,8 @@ graph_t *graph_load_full(const char *path, const char *const *sets,
 	}
 	g->vars = vars;
 	g->nvars = nvars;
+	g->sets = sets;
+	g->nsets = nsets;
 	if (g_parse_file(g, path)) {
 		graph_free(g);
 		return NULL;
@@ -496,6 +498,8 @@ graph_t *graph_load_full(const char *path, const char *const *sets,
 	g->err = NULL;
 	g->vars = NULL; /* the caller's: used only while loading */
 	g->nvars = 0;
+	g->sets = NULL;
+	g->nsets = 0;
 	return g;
 }
 
@@ -519,6 +523,7 @@ void graph_free(graph_t *g)
 	free(g->tune.values);
 	free(g->stages);
 	free(g->nodes);
+	g_vars_free(g);
 	free(g);
 }
 

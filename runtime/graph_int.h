@@ -2,8 +2,9 @@
 /*
  * Inside the graph: the types and functions the graph's files share.
  *
- *   graph_parse.c   the file: INI (libinih), sections, keys, ${VAR}
- *                   expansion, --set                        -> graph_t
+ *   graph_parse.c   the file: INI (libinih), sections, keys, --set
+ *                                                           -> graph_t
+ *   graph_vars.c    ${VAR} expansion, [vars]
  *   graph_check.c   plugins, parameters, ports, connections, cycles,
  *                   targets, declared outputs; graph_load   -> graph_t
  *   tune.c          [tune]: its keys checked; the search during a run
@@ -113,17 +114,26 @@ struct graph {
 	 * case's row; the caller's, used only while loading) */
 	const char *const *vars;
 	int nvars;
+	/* the --set arguments, whose vars.NAME=value win over every other
+	 * source (the caller's, used only while loading) */
+	const char *const *sets;
+	int nsets;
+	/* [vars]: NAME = value as written (expanded where used) */
+	g_kv_t *fvars;
+	int nfvars;
+	char **refs;                /* the variable names looked up */
+	int nrefs;
 	int plugin_failed;          /* a plugin could not be loaded */
 	/* parse state (graph_parse.c) */
 	int cur_kind;               /* 0 none, 1 graph, 2 stage, 3 node,
-				       4 tune */
+				       4 tune, 5 vars */
+	int prescan;                /* first pass: [vars] only, silent */
 	int cur_index;
 	int lineno;
 	int cont;                   /* current raw line is a continuation */
 	int stop;                   /* a line was refused: no more keys */
-	FILE *fp;
-	const char *text;           /* string parsing */
-	size_t textpos;
+	const char *text;           /* the file's bytes (NULs included) */
+	size_t textlen, textpos;
 	/* errors while loading (g_err) */
 	char *err;
 	size_t errsize, errlen;
@@ -146,6 +156,27 @@ void g_parse_text(graph_t *g, const char *text);
 /* --set stage.key=value / tune.key=value, expanded */
 void g_apply_sets(graph_t *g, const char *const *sets, int nsets);
 int g_stage_index(const graph_t *g, const char *name);
+
+/* ---- graph_vars.c ---- */
+/* Where a value is expanded, for its errors: a key on a line of the file
+ * (0: a --set; stage NULL: not a stage's), or inside the value of the
+ * variable var that up needed. */
+typedef struct g_at {
+	int line;
+	const char *stage, *key;
+	const char *var;
+	const struct g_at *up;
+} g_at_t;
+/* ${VAR}, ${VAR:-default}, ${A_${B}}, $$ of in into out (graph_vars.c's
+ * top says from where).  0, or -1 with the error reported. */
+int g_expand(graph_t *g, const g_at_t *at, const char *in, char *out,
+	     size_t outsize);
+/* a line NAME = value of [vars]: recorded while g->prescan, else checked */
+void g_vars_line(graph_t *g, const char *name, const char *val, int line);
+/* --set vars.NAME=value (arg, for errors): a name the graph defines or
+ * reads; its value was used while parsing */
+void g_vars_set(graph_t *g, const char *name, const char *arg);
+void g_vars_free(graph_t *g);
 const g_kv_t *g_kv_find(const g_kv_t *kv, int n, const char *key);
 const g_kv_t *g_stage_kv(const g_stage_t *s, const char *key);
 

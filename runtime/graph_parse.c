@@ -4,18 +4,22 @@
  * graph_t of sections and keys, before any plugin is loaded.
  *
  *   [graph]         name, description, targets
+ *   [vars]          NAME = value: variables for the file's ${NAME}
+ *                   (graph_vars.c; the environment wins over them)
  *   [stage NAME]    any key (checked later against the plugin)
  *   [node NAME]     the keys of remote.h (endpoint, ...)
  *   [tune]          any key (checked by tune.c)
  *
- * Values may use ${VAR} and ${VAR:-default} (environment variables, or a
- * batch case's variables that win over them; the default is itself
- * expanded, so they nest as in sh; "$$" is a literal
- * '$').  Lines hold at most G_MAX_LINE - 3 characters; a NUL byte, an
- * indented continuation line, a key outside a section, an empty value and
- * a duplicate key are errors naming the file and line.  `--set
- * stage.key=value` (g_apply_sets) overrides or adds a key of a stage, and
- * `--set tune.key=value` one of [tune].
+ * Values may use ${VAR}, ${VAR:-default} and composed names ${A_${B}}
+ * (graph_vars.c says where a variable's value comes from: --set vars.NAME,
+ * a batch case's variables, the environment, [vars]; "$$" is a literal
+ * '$').  The file is read twice: first for [vars] alone (silently), so
+ * that its entries may stand anywhere, then for everything.  Lines hold at
+ * most G_MAX_LINE - 3 characters; a NUL byte, an indented continuation
+ * line, a key outside a section, an empty value and a duplicate key are
+ * errors naming the file and line.  `--set stage.key=value` (g_apply_sets)
+ * overrides or adds a key of a stage, `--set tune.key=value` one of
+ * [tune], and `--set vars.NAME=value` a variable (read while parsing).
  */
 #include <errno.h>
 #include <ini.h>
@@ -32,6 +36,8 @@ void g_err(graph_t *g, int line, const char *stage, const char *key,
 {
 	char msg[1536], pre[PATH_MAX + 256], all[sizeof pre + sizeof msg];
 	va_list ap;
+	if (g->prescan)
+		return; /* the second pass reports */
 	va_start(ap, fmt);
 	vsnprintf(msg, sizeof msg, fmt, ap);
 	va_end(ap);
@@ -69,128 +75,11 @@ int g_is_name(const char *s)
 	return 1;
 }
 
-/* a variable: the graph's own (graph_load_vars), else the environment */
-static const char *lookup_var(const graph_t *g, const char *name)
-{
-	size_t n = strlen(name);
-	for (int i = 0; i < g->nvars; i++)
-		if (!strncmp(g->vars[i], name, n) && g->vars[i][n] == '=')
-			return g->vars[i] + n + 1;
-	return getenv(name);
-}
-
-/* The '}' that closes the '${' whose name starts at p (nested '${' count),
- * or NULL when it is not closed. */
-static const char *var_end(const char *p)
-{
-	int depth = 1;
-	for (; *p; p++) {
-		if (p[0] == '$' && p[1] == '$') {
-			p++;
-		} else if (p[0] == '$' && p[1] == '{') {
-			depth++;
-			p++;
-		} else if (*p == '}' && --depth == 0) {
-			return p;
-		}
-	}
-	return NULL;
-}
-
-#define G_EXPAND_DEPTH 8
-
-/* Expand in[0..n) into out at *o: ${VAR}, ${VAR:-default} (the default is
- * itself expanded, so defaults nest: ${A:-${B:-x}}, as in sh), $$.  0, or
- * -1 with an error reported. */
-static int expand_n(graph_t *g, int line, const char *stage, const char *key,
-		    const char *in, size_t n, char *out, size_t *o,
-		    size_t outsize, int depth)
-{
-	const char *end_in = in + n;
-	if (depth > G_EXPAND_DEPTH) {
-		g_err(g, line, stage, key, "variables nested more than %d deep",
-		     G_EXPAND_DEPTH);
-		return -1;
-	}
-	for (const char *p = in; p < end_in;) {
-		const char *add = p;
-		size_t addn = 1;
-		if (p[0] == '$' && p + 1 < end_in && p[1] == '$') {
-			add = "$";
-			p += 2;
-		} else if (p[0] == '$' && p + 1 < end_in && p[1] == '{') {
-			const char *end = var_end(p + 2);
-			if (!end || end >= end_in) {
-				g_err(g, line, stage, key,
-				     "unterminated '${' in value");
-				return -1;
-			}
-			size_t vn = strcspn(p + 2, ":}");
-			const char *colon = p + 2 + vn < end ? p + 2 + vn : NULL;
-			if (colon && colon[1] != '-') {
-				g_err(g, line, stage, key,
-				     "bad variable syntax '%.*s' (use ${VAR} or "
-				     "${VAR:-default})", (int)(end - p + 1), p);
-				return -1;
-			}
-			char var[128];
-			if (vn == 0 || vn >= sizeof var) {
-				g_err(g, line, stage, key,
-				     "bad variable name in '%.*s'",
-				     (int)(end - p + 1), p);
-				return -1;
-			}
-			memcpy(var, p + 2, vn);
-			var[vn] = 0;
-			for (size_t i = 0; i < vn; i++)
-				if (!((var[i] >= 'A' && var[i] <= 'Z') ||
-				      (var[i] >= 'a' && var[i] <= 'z') ||
-				      (var[i] >= '0' && var[i] <= '9') ||
-				      var[i] == '_')) {
-					g_err(g, line, stage, key,
-					     "bad variable name '%s'", var);
-					return -1;
-				}
-			const char *val = lookup_var(g, var);
-			p = end + 1;
-			if (val && *val) {
-				add = val;
-				addn = strlen(val);
-			} else if (colon) {
-				/* only the default used is expanded (sh) */
-				if (expand_n(g, line, stage, key, colon + 2,
-					     (size_t)(end - colon - 2), out, o,
-					     outsize, depth + 1))
-					return -1;
-				continue;
-			} else {
-				g_err(g, line, stage, key,
-				     "variable '%s' is not set (give a default"
-				     " with ${%s:-value})", var, var);
-				return -1;
-			}
-		} else {
-			p++;
-		}
-		if (*o + addn >= outsize) {
-			g_err(g, line, stage, key, "value longer than %zu "
-			     "characters after expansion", outsize - 1);
-			return -1;
-		}
-		memcpy(out + *o, add, addn);
-		*o += addn;
-	}
-	out[*o] = 0;
-	return 0;
-}
-
 static int expand(graph_t *g, int line, const char *stage, const char *key,
 		  const char *in, char *out, size_t outsize)
 {
-	size_t o = 0;
-	out[0] = 0;
-	return expand_n(g, line, stage, key, in, strlen(in), out, &o, outsize,
-			0);
+	g_at_t at = { .line = line, .stage = stage, .key = key };
+	return g_expand(g, &at, in, out, outsize);
 }
 
 static g_stage_t *find_stage(graph_t *g, const char *name)
@@ -318,6 +207,22 @@ static void on_section(graph_t *g, const char *raw)
 	} else {
 		snprintf(kind, sizeof kind, "%s", s);
 	}
+	if (g->prescan) {
+		/* the first pass reads [vars] only */
+		g->cur_kind = !strcmp(kind, "vars") && !name[0] ? 5 : -1;
+		return;
+	}
+	if (!strcmp(kind, "vars")) {
+		if (name[0]) {
+			g_err(g, g->lineno, NULL, NULL,
+			     "section [vars] takes no name (its keys are the "
+			     "variables)");
+			g->cur_kind = -1;
+			return;
+		}
+		g->cur_kind = 5;
+		return;
+	}
 	if (!strcmp(kind, "graph") && !name[0]) {
 		g->cur_kind = 1;
 		return;
@@ -357,6 +262,13 @@ static void on_section(graph_t *g, const char *raw)
 			return;
 		}
 		if (kind[0] == 's') {
+			if (!strcmp(name, "vars")) {
+				g_err(g, g->lineno, NULL, NULL,
+				     "the stage name 'vars' is reserved (--set "
+				     "vars.NAME sets a variable)");
+				g->cur_kind = -1;
+				return;
+			}
 			if (find_stage(g, name)) {
 				g_err(g, g->lineno, name, NULL,
 				     "stage defined twice (first on line %d)",
@@ -416,8 +328,8 @@ static void on_section(graph_t *g, const char *raw)
 		return;
 	}
 	g_err(g, g->lineno, NULL, NULL,
-	     "unknown section [%s] (expected [graph], [stage NAME], "
-	     "[node NAME] or [tune])", s);
+	     "unknown section [%s] (expected [graph], [vars], "
+	     "[stage NAME], [node NAME] or [tune])", s);
 	g->cur_kind = -1;
 }
 
@@ -444,23 +356,24 @@ static void track_line(graph_t *g, const char *line)
 	}
 }
 
-/* fgets that also sees NUL bytes: a graph file is text, and a NUL would
- * silently cut a value short */
-static char *file_reader(char *str, int num, void *stream)
+/* fgets on the file's bytes that also sees NUL bytes: a graph file is
+ * text, and a NUL would silently cut a value short */
+static char *text_reader(char *str, int num, void *stream)
 {
 	graph_t *g = stream;
-	int i = 0, c = EOF, nul = 0;
-	while (i < num - 1 && (c = getc(g->fp)) != EOF) {
+	if (g->textpos >= g->textlen || num <= 1)
+		return NULL;
+	int i = 0, nul = 0;
+	while (i < num - 1 && g->textpos < g->textlen) {
+		char c = g->text[g->textpos++];
 		if (c == 0) {
 			nul = 1;
 			c = ' ';
 		}
-		str[i++] = (char)c;
+		str[i++] = c;
 		if (c == '\n')
 			break;
 	}
-	if (!i)
-		return NULL;
 	str[i] = 0;
 	track_line(g, str);
 	if (nul && !g->stop) {
@@ -471,29 +384,16 @@ static char *file_reader(char *str, int num, void *stream)
 	return str;
 }
 
-static char *string_reader(char *str, int num, void *stream)
-{
-	graph_t *g = stream;
-	const char *t = g->text + g->textpos;
-	if (!*t || num <= 1)
-		return NULL;
-	int i = 0;
-	while (i < num - 1 && t[i]) {
-		str[i] = t[i];
-		if (t[i++] == '\n')
-			break;
-	}
-	str[i] = 0;
-	g->textpos += (size_t)i;
-	track_line(g, str);
-	return str;
-}
-
 static int handler(void *user, const char *section, const char *key,
 		   const char *value)
 {
 	graph_t *g = user;
 	(void)section;
+	if (g->prescan) {
+		if (g->cur_kind == 5 && !g->stop)
+			g_vars_line(g, key, value, g->lineno);
+		return 1;
+	}
 	if (g->stop)
 		return 1;
 	char val[G_MAX_LINE];
@@ -514,6 +414,11 @@ static int handler(void *user, const char *section, const char *key,
 	}
 	if (!*value) {
 		g_err(g, g->lineno, sname, key, "empty value");
+		return 1;
+	}
+	if (g->cur_kind == 5) {
+		/* expanded where used (graph_vars.c) */
+		g_vars_line(g, key, value, g->lineno);
 		return 1;
 	}
 	if (expand(g, g->lineno, sname, key, value, val, sizeof val))
@@ -587,34 +492,94 @@ static void parse_result(graph_t *g, int rc)
 		g_err(g, 0, NULL, NULL, "out of memory");
 }
 
+/* [vars] first (silently), then everything, on g->text */
+static void parse_twice(graph_t *g)
+{
+	g->prescan = 1;
+	ini_parse_stream(text_reader, g, handler, g);
+	g->prescan = 0;
+	g->lineno = 0;
+	g->cur_kind = 0;
+	g->cur_index = -1;
+	g->cont = 0;
+	g->stop = 0;
+	g->textpos = 0;
+	parse_result(g, ini_parse_stream(text_reader, g, handler, g));
+	g->text = NULL;
+}
+
 void g_parse_text(graph_t *g, const char *text)
 {
 	g->text = text;
+	g->textlen = strlen(text);
 	g->textpos = 0;
-	parse_result(g, ini_parse_stream(string_reader, g, handler, g));
+	parse_twice(g);
 }
+
+/* a graph file is a few kB; this is far above any, and stops /dev/zero */
+#define G_MAX_FILE (16 << 20)
 
 int g_parse_file(graph_t *g, const char *path)
 {
 	struct stat sb;
-	g->fp = fopen(path, "r");
-	if (!g->fp || (!fstat(fileno(g->fp), &sb) && S_ISDIR(sb.st_mode))) {
+	FILE *fp = fopen(path, "r");
+	char *buf = NULL;
+	size_t n = 0, cap = 0;
+	int too_big = 0, rerr = 0, isdir = 0;
+	if (fp && !fstat(fileno(fp), &sb) && S_ISDIR(sb.st_mode))
+		isdir = 1;
+	if (fp && !isdir) {
+		/* read whole: the file is read twice, and may be a pipe */
+		for (;;) {
+			if (n == cap) {
+				size_t nc = cap ? 2 * cap : 65536;
+				char *nb = realloc(buf, nc);
+				if (!nb) {
+					rerr = ENOMEM;
+					break;
+				}
+				buf = nb;
+				cap = nc;
+			}
+			size_t r = fread(buf + n, 1, cap - n, fp);
+			n += r;
+			if (n > G_MAX_FILE) {
+				too_big = 1;
+				break;
+			}
+			if (r == 0) {
+				if (ferror(fp))
+					rerr = errno ? errno : EIO;
+				break;
+			}
+		}
+	}
+	if (!fp || isdir || too_big || rerr) {
 		/* the --set prefix of g_err makes no sense here */
-		if (g->fp)
-			snprintf(g->err, g->errsize, "%s: is a folder, not a "
-				 "graph file", path);
-		else
+		if (!fp)
 			snprintf(g->err, g->errsize, "%s: cannot open: %s",
 				 path, strerror(errno));
-		if (g->fp)
-			fclose(g->fp);
-		g->fp = NULL;
+		else if (isdir)
+			snprintf(g->err, g->errsize, "%s: is a folder, not a "
+				 "graph file", path);
+		else if (too_big)
+			snprintf(g->err, g->errsize, "%s: larger than %d MiB: "
+				 "not a graph file", path, G_MAX_FILE >> 20);
+		else
+			snprintf(g->err, g->errsize, "%s: cannot read: %s",
+				 path, strerror(rerr));
+		if (fp)
+			fclose(fp);
+		free(buf);
 		g->err = NULL;
 		return -1;
 	}
-	parse_result(g, ini_parse_stream(file_reader, g, handler, g));
-	fclose(g->fp);
-	g->fp = NULL;
+	fclose(fp);
+	g->text = buf ? buf : "";
+	g->textlen = n;
+	g->textpos = 0;
+	parse_twice(g);
+	free(buf);
 	if (!g->name[0]) {
 		const char *b = strrchr(path, '/');
 		snprintf(g->name, sizeof g->name, "%s", b ? b + 1 : path);
@@ -658,6 +623,12 @@ void g_apply_sets(graph_t *g, const char *const *sets, int nsets)
 		sn[sl] = 0;
 		memcpy(key, dot + 1, kl);
 		key[kl] = 0;
+		/* vars.NAME: a variable, read while parsing (graph_vars.c);
+		 * checked here (a stage cannot be called 'vars') */
+		if (!strcmp(sn, "vars")) {
+			g_vars_set(g, key, a);
+			continue;
+		}
 		/* tune.KEY: a key of the [tune] section (a stage cannot be
 		 * called 'tune' next to one: validate_tune says so) */
 		if (!strcmp(sn, "tune") &&

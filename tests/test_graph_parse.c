@@ -1,19 +1,36 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Graph files, parsing only (runtime/graph_parse.c): sections, keys, line
- * numbers, ${VAR} expansion, --set, and the syntax errors with their exact
- * messages.  No plugin is loaded: the parsed graph (graph_int.h) is
- * inspected directly.
+ * Graph files, parsing only (runtime/graph_parse.c, graph_vars.c): sections,
+ * keys, line numbers, ${VAR} expansion, [vars] and where a variable's value
+ * comes from, --set, the shipped graphs' backend and node spacing, and the
+ * syntax errors with their exact messages.  No plugin is loaded: the parsed
+ * graph (graph_int.h) is inspected directly.
  */
+#include <sys/wait.h>
+
 #include "testutil.h"
 #include "graph_int.h"
 
-static graph_t *parse(const char *text, char *err, size_t errsize)
+/* text parsed with a batch case's variables and --set arguments (either
+ * NULL) */
+static graph_t *parse_with(const char *text, const char *const *vars,
+			   int nvars, const char *const *sets, int nsets,
+			   char *err, size_t errsize)
 {
 	graph_t *g = g_alloc("t.ini", err, errsize);
 	assert_non_null(g);
+	g->vars = vars;
+	g->nvars = nvars;
+	g->sets = sets;
+	g->nsets = nsets;
 	g_parse_text(g, text);
+	g_apply_sets(g, sets, nsets);
 	return g;
+}
+
+static graph_t *parse(const char *text, char *err, size_t errsize)
+{
+	return parse_with(text, NULL, 0, NULL, 0, err, errsize);
 }
 
 static const char *val(const graph_t *g, const char *stage, const char *key)
@@ -109,6 +126,305 @@ static void test_expansion(void **state)
 	}
 }
 
+/* [vars]: values for the file's ${NAME}, themselves expanded where used,
+ * from any place in the file */
+static void test_vars(void **state)
+{
+	(void)state;
+	char err[4096];
+	unsetenv("ARMSTG_TP_UNSET");
+	unsetenv("ARMSTG_TP_V");
+	setenv("ARMSTG_TP_SET", "set", 1);
+	const char *text =
+		"[vars]\n"
+		"A = one\n"
+		"B = ${A}-two              ; another entry\n"
+		"C = ${ARMSTG_TP_SET}/${ARMSTG_TP_UNSET:-dflt}\n"
+		"U = ${ARMSTG_TP_UNSET}    ; never used: never expanded\n"
+		"ARMSTG_TP_V = file\n"
+		"[stage s]\n"
+		"a = ${A}\n"
+		"b = ${B}\n"
+		"c = ${C}\n"
+		"d = ${LATER}              ; a [vars] further down\n"
+		"e = ${A:-unused}\n"
+		"f = $${A}\n"
+		"v = ${ARMSTG_TP_V}\n"
+		"[vars]\n"
+		"LATER = late ${B}\n";
+	graph_t *g = parse(text, err, sizeof err);
+	if (g->nerr)
+		fail_msg("%s", err);
+	assert_string_equal(val(g, "s", "a"), "one");
+	assert_string_equal(val(g, "s", "b"), "one-two");
+	assert_string_equal(val(g, "s", "c"), "set/dflt");
+	assert_string_equal(val(g, "s", "d"), "late one-two");
+	assert_string_equal(val(g, "s", "e"), "one");
+	assert_string_equal(val(g, "s", "f"), "${A}");
+	assert_string_equal(val(g, "s", "v"), "file");
+	/* the entries as written, with their lines */
+	assert_int_equal(g->nfvars, 6);
+	assert_string_equal(g->fvars[1].key, "B");
+	assert_string_equal(g->fvars[1].val, "${A}-two");
+	assert_int_equal(g->fvars[1].line, 3);
+	assert_string_equal(g->fvars[5].key, "LATER");
+	assert_int_equal(g->fvars[5].line, 16);
+	/* the stages' keys keep their own lines */
+	assert_int_equal(g_stage_kv(&g->stages[0], "v")->line, 14);
+	graph_free(g);
+
+	/* the environment wins over [vars]; an empty one counts as unset;
+	 * its value is taken as it is */
+	setenv("ARMSTG_TP_V", "env", 1);
+	g = parse(text, err, sizeof err);
+	assert_string_equal(val(g, "s", "v"), "env");
+	graph_free(g);
+	setenv("ARMSTG_TP_V", "", 1);
+	g = parse(text, err, sizeof err);
+	assert_string_equal(val(g, "s", "v"), "file");
+	graph_free(g);
+	setenv("ARMSTG_TP_V", "${A}", 1);
+	g = parse(text, err, sizeof err);
+	assert_string_equal(val(g, "s", "v"), "${A}");
+	graph_free(g);
+
+	/* a batch case's variables win over the environment, --set
+	 * vars.NAME (the last given) over both; a --set's value is expanded
+	 * like an entry of [vars] */
+	setenv("ARMSTG_TP_V", "env", 1);
+	const char *cv[] = { "ARMSTG_TP_V=case" };
+	g = parse_with(text, cv, 1, NULL, 0, err, sizeof err);
+	assert_string_equal(val(g, "s", "v"), "case");
+	graph_free(g);
+	const char *sets[] = { "vars.ARMSTG_TP_V=x", "s.z=1",
+			       "vars.ARMSTG_TP_V=${B}!" };
+	g = parse_with(text, cv, 1, sets, 3, err, sizeof err);
+	if (g->nerr)
+		fail_msg("%s", err);
+	assert_string_equal(val(g, "s", "v"), "one-two!");
+	assert_string_equal(val(g, "s", "z"), "1");
+	graph_free(g);
+	/* --set vars.A changes what B, C and LATER say too */
+	const char *seta[] = { "vars.A=uno" };
+	g = parse_with(text, NULL, 0, seta, 1, err, sizeof err);
+	assert_string_equal(val(g, "s", "b"), "uno-two");
+	assert_string_equal(val(g, "s", "d"), "late uno-two");
+	graph_free(g);
+	/* --set vars.NAME of a variable the graph reads without [vars] */
+	const char *setu[] = { "vars.ARMSTG_TP_UNSET=given" };
+	g = parse_with("[stage s]\nk = ${ARMSTG_TP_UNSET:-d}\n", NULL, 0,
+		       setu, 1, err, sizeof err);
+	assert_int_equal(g->nerr, 0);
+	assert_string_equal(val(g, "s", "k"), "given");
+	graph_free(g);
+	unsetenv("ARMSTG_TP_V");
+}
+
+/* ${A_${B}}: the name composed first, then looked up; the shipped graphs'
+ * node spacing follows the backend */
+static void test_composed_names(void **state)
+{
+	(void)state;
+	char err[4096];
+	unsetenv("TLED");
+	unsetenv("NODE_SPACING");
+	const char *text =
+		"[vars]\n"
+		"TLED = tled_cpu\n"
+		"NODE_SPACING = ${NODE_SPACING_${TLED}}\n"
+		"NODE_SPACING_tled_cpu  = 6.0\n"
+		"NODE_SPACING_tled_cuda = 3.0\n"
+		"[stage grow]\n"
+		"plugin = ${TLED}\n"
+		"[stage nodes]\n"
+		"spacing = ${NODE_SPACING}\n"
+		"other = ${K_${TLED}_${TLED}:-none}\n"
+		"deep = ${NODE_SPACING_${TLED:-${NOPE}}}\n";
+	struct { const char *tled, *spacing, *set; const char *plugin, *want;
+	} cases[] = {
+		{ NULL, NULL, NULL, "tled_cpu", "6.0" },
+		{ "tled_cuda", NULL, NULL, "tled_cuda", "3.0" },
+		{ "tled_cuda", "4.5", NULL, "tled_cuda", "4.5" },
+		{ NULL, "4.5", NULL, "tled_cpu", "4.5" },
+		{ NULL, NULL, "vars.TLED=tled_cuda", "tled_cuda", "3.0" },
+		{ "tled_cuda", NULL, "vars.TLED=tled_cpu", "tled_cpu", "6.0" },
+		{ "tled_cuda", NULL, "nodes.spacing=2", "tled_cuda", "2" },
+	};
+	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+		if (cases[i].tled)
+			setenv("TLED", cases[i].tled, 1);
+		else
+			unsetenv("TLED");
+		if (cases[i].spacing)
+			setenv("NODE_SPACING", cases[i].spacing, 1);
+		else
+			unsetenv("NODE_SPACING");
+		const char *sets[] = { cases[i].set };
+		graph_t *g = parse_with(text, NULL, 0, sets,
+					cases[i].set ? 1 : 0, err, sizeof err);
+		if (g->nerr)
+			fail_msg("case %zu: %s", i, err);
+		assert_string_equal(val(g, "grow", "plugin"), cases[i].plugin);
+		assert_string_equal(val(g, "nodes", "spacing"), cases[i].want);
+		assert_string_equal(val(g, "nodes", "other"), "none");
+		graph_free(g);
+	}
+	unsetenv("TLED");
+	unsetenv("NODE_SPACING");
+	setenv("ARMSTG_TP_SET", "set", 1);
+	graph_t *g = parse("[stage a]\n"
+			   "k = ${ARMSTG_TP_${ARMSTG_TP_UNSET:-SET}}\n", err,
+			   sizeof err);
+	assert_int_equal(g->nerr, 0);
+	assert_string_equal(val(g, "a", "k"), "set");
+	graph_free(g);
+}
+
+/* every shipped graph with a growth: tled_cpu and 6 mm nodes unless told,
+ * tled_cuda and 3 mm with TLED=tled_cuda, NODE_SPACING or --set
+ * nodes.spacing over both */
+static void test_shipped_graphs(void **state)
+{
+	(void)state;
+	const char *graphs[] = { "graphs/armstg.ini", "graphs/armstg_auto.ini",
+				 "graphs/demo.ini", "graphs/distributed.ini",
+				 "graphs/spherical.ini" };
+	struct { const char *tled, *spacing, *set; const char *plugin, *want;
+	} cases[] = {
+		{ NULL, NULL, NULL, "tled_cpu", "6.0" },
+		{ "tled_cpu", NULL, NULL, "tled_cpu", "6.0" },
+		{ "tled_cuda", NULL, NULL, "tled_cuda", "3.0" },
+		{ NULL, NULL, "vars.TLED=tled_cuda", "tled_cuda", "3.0" },
+		{ "tled_cuda", "4", NULL, "tled_cuda", "4" },
+		{ "tled_cuda", NULL, "nodes.spacing=6", "tled_cuda", "6" },
+	};
+	char err[8192];
+	for (size_t k = 0; k < sizeof graphs / sizeof graphs[0]; k++)
+		for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+			if (cases[i].tled)
+				setenv("TLED", cases[i].tled, 1);
+			else
+				unsetenv("TLED");
+			if (cases[i].spacing)
+				setenv("NODE_SPACING", cases[i].spacing, 1);
+			else
+				unsetenv("NODE_SPACING");
+			const char *sets[] = { cases[i].set };
+			int ns = cases[i].set ? 1 : 0;
+			graph_t *g = g_alloc(graphs[k], err, sizeof err);
+			g->sets = sets;
+			g->nsets = ns;
+			assert_int_equal(g_parse_file(g, graphs[k]), 0);
+			g_apply_sets(g, sets, ns);
+			if (g->nerr)
+				fail_msg("%s, case %zu: %s", graphs[k], i, err);
+			if (strcmp(val(g, "grow", "plugin"), cases[i].plugin) ||
+			    strcmp(val(g, "nodes", "spacing"), cases[i].want))
+				fail_msg("%s, case %zu: grow.plugin %s, "
+					 "nodes.spacing %s", graphs[k], i,
+					 val(g, "grow", "plugin"),
+					 val(g, "nodes", "spacing"));
+			graph_free(g);
+		}
+	unsetenv("TLED");
+	unsetenv("NODE_SPACING");
+}
+
+static void test_vars_errors(void **state)
+{
+	(void)state;
+	char err[4096];
+	unsetenv("ARMSTG_TP_UNSET");
+	setenv("ARMSTG_TP_SP", "a b", 1);
+	static const char *const s_bad[] = { "vars.NOPE=1", "vars.9x=1" };
+	static const char *const s_unset[] = { "vars.A=${ARMSTG_TP_UNSET}" };
+	struct { const char *text; const char *const *sets; int nsets;
+		 const char *want; } bad[] = {
+		/* not set, with [vars] in the file: it says where to define
+		 * it */
+		{ "[vars]\nA = 1\n[stage a]\nk = ${NOPE}\n", NULL, 0,
+		  "t.ini:4: stage 'a': key 'k': variable 'NOPE' is not set "
+		  "(give a default with ${NOPE:-value} or a [vars] entry)" },
+		/* inside an entry: its line, and the key that needed it */
+		{ "[vars]\nA = x${ARMSTG_TP_UNSET}\n[stage a]\nk = ${A}\n",
+		  NULL, 0,
+		  "t.ini:2: [vars] A: variable 'ARMSTG_TP_UNSET' is not set "
+		  "(give a default with ${ARMSTG_TP_UNSET:-value} or a [vars] "
+		  "entry); needed by stage 'a', key 'k' on line 4" },
+		{ "[vars]\nA = ${B}\nB = ${C:-${ARMSTG_TP_UNSET}}\n"
+		  "[graph]\nname = ${A}\n", NULL, 0,
+		  "t.ini:3: [vars] B: variable 'ARMSTG_TP_UNSET' is not set "
+		  "(give a default with ${ARMSTG_TP_UNSET:-value} or a [vars] "
+		  "entry); needed by key 'name' on line 5 (A -> B)" },
+		/* in a --set's value */
+		{ "[vars]\nA = 1\n[stage a]\nk = ${A}\n", s_unset, 1,
+		  "t.ini: --set: vars.A: variable 'ARMSTG_TP_UNSET' is not set "
+		  "(give a default with ${ARMSTG_TP_UNSET:-value} or a [vars] "
+		  "entry); needed by stage 'a', key 'k' on line 4" },
+		/* composed names that are no names */
+		{ "[stage a]\nk = ${X_${ARMSTG_TP_SP}}\n", NULL, 0,
+		  "t.ini:2: stage 'a': key 'k': bad variable name 'X_a b' "
+		  "(composed by '${X_${ARMSTG_TP_SP}}')" },
+		{ "[stage a]\nk = ${${ARMSTG_TP_UNSET:-}:-x}\n", NULL, 0,
+		  "t.ini:2: stage 'a': key 'k': bad variable name '' "
+		  "(composed by '${${ARMSTG_TP_UNSET:-}:-x}')" },
+		{ "[stage a]\nk = ${X_$$}\n", NULL, 0,
+		  "t.ini:2: stage 'a': key 'k': bad variable name 'X_$' "
+		  "(composed by '${X_$$}')" },
+		/* a composed name that is not set */
+		{ "[vars]\nT = gpu\n[stage a]\nk = ${S_${T}}\n", NULL, 0,
+		  "t.ini:4: stage 'a': key 'k': variable 'S_gpu' is not set "
+		  "(give a default with ${S_gpu:-value} or a [vars] entry)" },
+		/* recursion: a loop, and a chain too deep */
+		{ "[vars]\nA = ${A}\n[stage a]\nk = ${A}\n", NULL, 0,
+		  "t.ini:2: [vars] A: variable 'A' needs itself (A -> A); "
+		  "needed by stage 'a', key 'k' on line 4" },
+		{ "[vars]\nA = ${B}\nB = x${C}\nC = ${A}\n[stage a]\n"
+		  "k = ${B}\n", NULL, 0,
+		  "t.ini:2: [vars] A: variable 'B' needs itself "
+		  "(B -> C -> A -> B); needed by stage 'a', key 'k' on line "
+		  "6" },
+		{ "[vars]\nV0 = ${V1}\nV1 = ${V2}\nV2 = ${V3}\nV3 = ${V4}\n"
+		  "V4 = ${V5}\nV5 = ${V6}\nV6 = ${V7}\nV7 = ${V8}\n"
+		  "V8 = ${V9}\nV9 = end\n[stage a]\nk = ${V0}\n", NULL, 0,
+		  "t.ini:10: [vars] V8: variables nested more than 8 deep; "
+		  "needed by stage 'a', key 'k' on line 13 (V0 -> V1 -> V2 -> "
+		  "V3 -> V4 -> V5 -> V6 -> V7 -> V8)" },
+		/* the section and its lines */
+		{ "[vars]\n9a = 1\n", NULL, 0,
+		  "t.ini:2: [vars]: bad variable name '9a' (letters, digits, "
+		  "'_', not starting with a digit; at most 63 characters)" },
+		{ "[vars]\nA-B = 1\n", NULL, 0,
+		  "t.ini:2: [vars]: bad variable name 'A-B' (letters, digits, "
+		  "'_', not starting with a digit; at most 63 characters)" },
+		{ "[vars]\nA = 1\n[vars]\nA = 2\n", NULL, 0,
+		  "t.ini:4: [vars] A: defined twice (first on line 2)" },
+		{ "[vars]\nA =\n", NULL, 0, "t.ini:2: key 'A': empty value" },
+		{ "[vars x]\n", NULL, 0,
+		  "t.ini:1: section [vars] takes no name (its keys are the "
+		  "variables)" },
+		{ "[stage vars]\nplugin = p\n", NULL, 0,
+		  "t.ini:1: the stage name 'vars' is reserved (--set vars.NAME "
+		  "sets a variable)" },
+		/* --set vars.NAME: a name the graph defines or reads */
+		{ "[vars]\nA = 1\n[stage a]\nk = ${A}\n", s_bad, 2,
+		  "t.ini: --set: 'vars.NOPE=1': the graph has no variable "
+		  "'NOPE' (no [vars] entry and no ${NOPE} that was read)\n"
+		  "t.ini: --set: 'vars.9x=1': bad variable name '9x' (letters, "
+		  "digits, '_', not starting with a digit)" },
+	};
+	for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+		graph_t *g = parse_with(bad[i].text, NULL, 0, bad[i].sets,
+					bad[i].nsets, err, sizeof err);
+		if (strcmp(err, bad[i].want))
+			fail_msg("case %zu:\n want %s\n got  %s", i,
+				 bad[i].want, err);
+		assert_true(g->nerr >= 1);
+		graph_free(g);
+	}
+	unsetenv("ARMSTG_TP_SP");
+}
+
 static void test_syntax_errors(void **state)
 {
 	(void)state;
@@ -131,7 +447,8 @@ static void test_syntax_errors(void **state)
 		{ "[graph]\ncolour = red\n", "t.ini:2: key 'colour': unknown "
 		  "key in [graph] (known: name, description, targets)" },
 		{ "[pipeline]\n", "t.ini:1: unknown section [pipeline] "
-		  "(expected [graph], [stage NAME], [node NAME] or [tune])" },
+		  "(expected [graph], [vars], [stage NAME], [node NAME] or "
+		  "[tune])" },
 		{ "[tune x]\n", "t.ini:1: section [tune] takes no name (the "
 		  "parameter is its 'param' key)" },
 		{ "[stage a]\nnot a key line\n", "t.ini:2: syntax error "
@@ -171,7 +488,8 @@ static void test_sets(void **state)
 	graph_free(g);
 }
 
-/* through a file: a line too long, a NUL byte, a folder */
+/* through a file: a line too long, a NUL byte, a pipe, an endless file,
+ * a folder */
 static void test_file_limits(void **state)
 {
 	(void)state;
@@ -223,6 +541,29 @@ static void test_file_limits(void **state)
 	assert_string_equal(g->name, strrchr(path, '/') + 1);
 	graph_free(g);
 	unlink(path);
+	/* a pipe is read once, whole: [vars] after its use still counts */
+	assert_int_equal(mkfifo(path, 0600), 0);
+	pid_t pid = fork();
+	assert_true(pid >= 0);
+	if (pid == 0) {
+		FILE *w = fopen(path, "w");
+		fputs("[stage a]\nk = ${PIPED}\n[vars]\nPIPED = yes\n", w);
+		_exit(fclose(w) ? 1 : 0);
+	}
+	g = g_alloc(path, err, sizeof err);
+	assert_int_equal(g_parse_file(g, path), 0);
+	int st;
+	assert_int_equal(waitpid(pid, &st, 0), pid);
+	assert_int_equal(g->nerr, 0);
+	assert_string_equal(val(g, "a", "k"), "yes");
+	graph_free(g);
+	unlink(path);
+	/* an endless file is refused after 16 MiB */
+	g = g_alloc("/dev/zero", err, sizeof err);
+	assert_int_equal(g_parse_file(g, "/dev/zero"), -1);
+	assert_string_equal(err, "/dev/zero: larger than 16 MiB: not a graph "
+			    "file");
+	graph_free(g);
 	g = g_alloc("/tmp", err, sizeof err);
 	assert_int_equal(g_parse_file(g, "/tmp"), -1);
 	assert_string_equal(err, "/tmp: is a folder, not a graph file");
@@ -234,6 +575,10 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_sections_and_keys),
 		cmocka_unit_test(test_expansion),
+		cmocka_unit_test(test_vars),
+		cmocka_unit_test(test_composed_names),
+		cmocka_unit_test(test_shipped_graphs),
+		cmocka_unit_test(test_vars_errors),
 		cmocka_unit_test(test_syntax_errors),
 		cmocka_unit_test(test_sets),
 		cmocka_unit_test(test_file_limits),
