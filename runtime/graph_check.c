@@ -80,6 +80,20 @@ static void validate_stage(graph_t *g, g_stage_t *s)
 		g_kv_t *kv = &s->kv[i];
 		if (!strcmp(kv->key, "plugin"))
 			continue;
+		if (!strcmp(kv->key, "threads")) {
+			/* the runtime's key, any plugin: this stage's OpenMP
+			 * threads instead of the run's share (sched.c) */
+			char *end;
+			errno = 0;
+			long n = strtol(kv->val, &end, 10);
+			if (errno || end == kv->val || *end || n < 1 || n > 4096)
+				g_err(g, kv->line, s->name, kv->key,
+				     "threads must be a whole number from 1 to "
+				     "4096, got '%s'", kv->val);
+			else
+				s->threads = (int)n;
+			continue;
+		}
 		if (!strcmp(kv->key, "node")) {
 			int found = 0;
 			for (int n = 0; n < g->nnodes; n++)

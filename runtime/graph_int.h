@@ -54,6 +54,8 @@ typedef struct g_stage {
 	int src_port[G_MAX_PORTS];
 	int conn_line[G_MAX_PORTS];
 	int node;                  /* [node] index; NODE_UNSET, NODE_LOCAL */
+	int threads;               /* `threads` key: the stage's OpenMP
+	                              threads (0: the run's share) */
 } g_stage_t;
 
 enum { NODE_UNSET = -1, NODE_LOCAL = -2 };

@@ -233,7 +233,10 @@ int sched_pass(g_run_t *r, char *err, size_t errsize)
 		if (!x->needed)
 			continue;
 		rn.remaining++;
-		stage_set_threads(x->st, per > 0 ? per : 1);
+		/* a stage's own `threads` key wins over the share */
+		stage_set_threads(x->st, g->stages[i].threads > 0
+						 ? g->stages[i].threads
+						 : per > 0 ? per : 1);
 	}
 	for (int i = 0; i < g->nstages; i++) {
 		const g_stage_t *s = &g->stages[i];

@@ -419,6 +419,11 @@ void stage_set_threads(rt_stage_t *s, int n)
 	s->threads = n > 0 ? n : 1;
 }
 
+int stage_threads(const rt_stage_t *s)
+{
+	return s->threads;
+}
+
 static int find_param(const armstg_plugin_t *d, const char *key)
 {
 	for (int i = 0; i < d->n_params; i++)

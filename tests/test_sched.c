@@ -6,6 +6,7 @@
  * released once their consumers ran, the first failure stopping the pass,
  * and a loaded graph that no run changes.
  */
+#include <omp.h>
 #include <time.h>
 
 #include "testutil.h"
@@ -122,6 +123,46 @@ static void test_jobs(void **state)
 	graph_free(g);
 }
 
+/* a stage's `threads` key gives it that many OpenMP threads; the others
+ * get the run's share (OMP_NUM_THREADS / --jobs); a bad value is an error
+ * naming the file, line, stage and key */
+static void test_stage_threads(void **state)
+{
+	(void)state;
+	setenv("OMP_NUM_THREADS", "4", 1);
+	omp_set_num_threads(4);
+	graph_t *g = load("[stage gen]\nplugin = tp_gen\n"
+			  "[stage a]\nplugin = tp_add\na = gen.volume\n"
+			  "threads = 3\n");
+	run_opts_t o = { .outdir = "/nonexistent", .jobs = 2 };
+	char err[2048];
+	g_run_t *r = run_new(g, &o, err, sizeof err);
+	assert_non_null(r);
+	sched_mark_needed(r, idx(g, "a"));
+	assert_int_equal(sched_pass(r, err, sizeof err), 0);
+	assert_int_equal(stage_threads(r->rs[idx(g, "a")].st), 3);
+	assert_int_equal(stage_threads(r->rs[idx(g, "gen")].st), 2);
+	run_free(r);
+	graph_free(g);
+	const char *bad[] = { "0", "-2", "two", "3x", "5000" };
+	for (int i = 0; i < 5; i++) {
+		char text[256], path[128];
+		snprintf(text, sizeof text, "[stage gen]\nplugin = tp_gen\n"
+			 "threads = %s\n", bad[i]);
+		snprintf(path, sizeof path, "/tmp/armstg-sched-bad-%d.ini",
+			 (int)getpid());
+		FILE *f = fopen(path, "w");
+		fputs(text, f);
+		fclose(f);
+		graph_t *gb = graph_load(path, NULL, 0, err, sizeof err);
+		unlink(path);
+		assert_null(gb);
+		assert_non_null(strstr(err, ":3:"));
+		assert_non_null(strstr(err, "threads must be a whole number"));
+	}
+	unsetenv("OMP_NUM_THREADS");
+}
+
 static void test_failure_stops_the_pass(void **state)
 {
 	(void)state;
@@ -176,6 +217,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_needed_and_order),
 		cmocka_unit_test(test_jobs),
+		cmocka_unit_test(test_stage_threads),
 		cmocka_unit_test(test_failure_stops_the_pass),
 		cmocka_unit_test(test_graph_unchanged_by_runs),
 	};
