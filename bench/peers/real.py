@@ -114,13 +114,18 @@ def case_def(data, name):
 
 
 def run_armstg(args, graph, out, env, sets=(), extra=()):
-    cmd = [args.armstg, "run", graph, "--out", out, "-q", "--jobs", "2"]
+    cmd = [args.armstg, "run", graph, "--out", out, "-v" if args.log else "-q",
+           "--jobs", "2"]
     for s in sets:
         cmd += ["--set", s]
     cmd += list(extra)
     t0, c0 = time.time(), cpu_s()
     r = subprocess.run(cmd, env=dict(os.environ, **env), capture_output=True,
                        text=True)
+    if args.log:
+        os.makedirs(out, exist_ok=True)
+        with open(os.path.join(out, "armstg.log"), "w") as f:
+            f.write(r.stderr)
     if r.returncode:
         raise RuntimeError("armstg failed: %s\n%s" % (" ".join(cmd), r.stderr[-3000:]))
     return time.time() - t0, cpu_s() - c0
@@ -340,6 +345,9 @@ def main():
     ap.add_argument("--set", action="append", default=[],
                     help="STAGE.KEY=V for the growth graphs")
     ap.add_argument("--tag", default="", help="suffix of the method names")
+    ap.add_argument("--log", action="store_true",
+                    help="run the graphs with -v and keep their log (OUT/CASE/METHOD/armstg.log: "
+                    "stage times, every iteration's metric)")
     args = ap.parse_args()
     args.here = os.path.dirname(os.path.abspath(__file__))
     args.out = os.path.abspath(args.out)

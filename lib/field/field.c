@@ -408,10 +408,28 @@ static void aff3_mul(const double A[16], const double B[16], double M[16])
 int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
 		  float outside, fimg_t *dst, int nthreads)
 {
+	if (!dst)
+		return ARMSTG_EINVAL;
+	const int lo[3] = { 0, 0, 0 },
+		  hi[3] = { dst->g.nx - 1, dst->g.ny - 1, dst->g.nz - 1 };
+	return fimg_resample_block(src, u, interp, outside, dst, lo, hi,
+				   nthreads);
+}
+
+int fimg_resample_block(const fimg_t *src, const fimg_t *u, int interp,
+			float outside, fimg_t *dst, const int lo[3],
+			const int hi[3], int nthreads)
+{
 	if (!src || !dst || !src->d || !dst->d || dst->nc != src->nc)
 		return ARMSTG_EINVAL;
 	if (u && (u->nc != 3 || !u->d))
 		return ARMSTG_EINVAL;
+	{
+		const int n[3] = { dst->g.nx, dst->g.ny, dst->g.nz };
+		for (int a = 0; a < 3; a++)
+			if (lo[a] < 0 || hi[a] >= n[a] || lo[a] > hi[a])
+				return ARMSTG_EINVAL;
+	}
 	const fgrid_t *dg = &dst->g, *sg = &src->g;
 	const int64_t nvd = fgrid_nvox(dg), nvs = fgrid_nvox(sg);
 	const int u_same = u && fgrid_same(&u->g, dg, 1e-6);
@@ -421,9 +439,9 @@ int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
 	const int nc = src->nc;
 
 #pragma omp parallel for num_threads(NT(nthreads)) schedule(static)
-	for (int k = 0; k < dg->nz; k++) {
-		for (int j = 0; j < dg->ny; j++) {
-			for (int i = 0; i < dg->nx; i++) {
+	for (int k = lo[2]; k <= hi[2]; k++) {
+		for (int j = lo[1]; j <= hi[1]; j++) {
+			for (int i = lo[0]; i <= hi[0]; i++) {
 				int64_t e = ((int64_t)k * dg->ny + j) * dg->nx + i;
 				double p[3] = { i, j, k }, c[3];
 				aff_apply(M, p, c);

@@ -150,6 +150,16 @@ int fimg_resample(const fimg_t *src, const fimg_t *u, int interp,
 		  float outside, fimg_t *dst, int nthreads);
 
 /*
+ * fimg_resample on the block lo..hi (dst voxels, inclusive) of dst only;
+ * the voxels outside it are left as they are.  The same value at every
+ * voxel of the block as the whole-grid call.  ARMSTG_EINVAL when the block
+ * is empty or leaves the grid.
+ */
+int fimg_resample_block(const fimg_t *src, const fimg_t *u, int interp,
+			float outside, fimg_t *dst, const int lo[3],
+			const int hi[3], int nthreads);
+
+/*
  * Separable Gaussian smoothing in place, sigma in mm (per axis
  * sigma/spacing voxels; lib/img's discrete Gaussian kernel e^-t I_n(t),
  * t = sigma^2,

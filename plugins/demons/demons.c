@@ -47,8 +47,18 @@
  * fitted their blurred images closely, towards the equilibrium of force
  * and smoothing of the sharp images.  SimpleITK does the same under the
  * same smoothing; it is not a defect of the update.
- * A level stops after its iterations or when the MSE improved by less than
- * tol (relative) over the last 5 iterations.
+ * A level stops after its iterations or when its cost c (the MSE;
+ * metric=lncc: the mean of 1 - CC) has improved by less than tol (relative)
+ * over the last tol_window iterations:
+ *   stop after iteration i >= k (k = tol_window) when
+ *     b(i-k) - b(i) < tol b(i-k),
+ * b(i) = c(i) (tol_best=false, as since the first version), or the best
+ * cost so far, b(i) = min over j <= i of c(j) (tol_best=true).  The best
+ * so far makes the test blind to an oscillating cost: the finest LNCC level
+ * of a 1 mm case alternates between two step sizes and its cost between two
+ * branches, and comparing single values stopped a level or not by the
+ * parity of the window (pat0001's middle level after 23 of 30 iterations).
+ * A rising cost stops the level after k iterations either way.
  *
  * metric=lncc replaces the demons force by the gradient of the local
  * normalised cross-correlation, the metric of ANTs SyN's CC and of Greedy's
@@ -83,6 +93,7 @@
 #include "armstg/volmath.h"
 #include "field/field.h"
 #include "img/box.h"
+#include "img/sample.h"
 
 #define MAX_LEVELS 8
 
@@ -104,6 +115,8 @@ typedef struct demons_priv {
 	const char *iterations;
 	double max_step;     /* voxels */
 	double tol;
+	int tol_window;      /* iterations */
+	int tol_best;
 	double diff_threshold;
 	int normalize;
 	double local_sigma;  /* mm */
@@ -167,8 +180,18 @@ static const armstg_param_t demons_params[] = {
 	  "bound on the length of one update (sigma_x / 2)", NULL,
 	  OFF(max_step), 0 },
 	{ "tol", PT_DOUBLE, "1e-4", 0, 1, "",
-	  "stop a level when the MSE improved by less than this fraction over "
-	  "5 iterations (0: always run every iteration)", NULL, OFF(tol), 0 },
+	  "stop a level when its cost (MSE; metric=lncc: mean 1 - CC; "
+	  "tol_best: the best so far) improved by less than this fraction "
+	  "over the last tol_window iterations (0: always run every "
+	  "iteration)", NULL,
+	  OFF(tol), 0 },
+	{ "tol_window", PT_INT, "5", 1, 1000, "iterations",
+	  "iterations over which the convergence test (tol) measures the "
+	  "gain of the cost", NULL, OFF(tol_window), 0 },
+	{ "tol_best", PT_BOOL, "false", 0, 0, "",
+	  "the convergence test compares the best cost so far of the level "
+	  "(blind to a cost that oscillates between iterations) instead of "
+	  "the cost of single iterations", NULL, OFF(tol_best), 0 },
 	{ "diff_threshold", PT_DOUBLE, "0.001", 0, 1e30, "intensity",
 	  "no force where |fixed - warped| is below this (after "
 	  "normalisation)", NULL, OFF(diff_threshold), 0 },
@@ -414,14 +437,21 @@ static int resample_clamp(const fimg_t *src, const fgrid_t *g, fimg_t *out,
 	if (rc)
 		return rc;
 	const int64_t nv = fgrid_nvox(g);
+	const int n[3] = { src->g.nx, src->g.ny, src->g.nz };
+	const int64_t ns = fgrid_nvox(&src->g);
+	/* fimg_sample_clamp's arithmetic (world point, then src voxel), its
+	 * stencil found once for every component */
 #pragma omp parallel for num_threads(nt > 0 ? nt : 1) schedule(static)
 	for (int64_t e = 0; e < nv; e++) {
 		double p[3] = { (double)(e % g->nx), (double)(e / g->nx % g->ny),
 				(double)(e / ((int64_t)g->nx * g->ny)) },
-		       w[3];
+		       w[3], v[3];
 		aff_apply(g->v2w, p, w);
+		aff_apply(src->g.w2v, w, v);
+		img_linf_t s;
+		img_linf_at(n, v, IMG_EDGE_CLAMP, &s);
 		for (int c = 0; c < src->nc; c++)
-			out->d[e + c * nv] = fimg_sample_clamp(src, c, w);
+			out->d[e + c * nv] = img_linf_f32(src->d + c * ns, &s);
 	}
 	return 0;
 }
@@ -565,6 +595,11 @@ typedef struct level {
 	fimg_t FM;  /* fixed mask on g (0/1), or empty */
 	fimg_t W;   /* warped moving (NaN outside) */
 	fimg_t WM;  /* warped moving mask, or empty */
+	/* W and WM are computed on the block wlo..whi only: with a fixed
+	 * mask, its bounding box grown by the one voxel of the gradients'
+	 * stencil (no force, no window sum reads W outside the mask) */
+	int wlo[3], whi[3];
+	float *sums; /* metric=lncc: the 6 window sums, one level's buffer */
 } level_t;
 
 static void level_free(level_t *L)
@@ -574,6 +609,8 @@ static void level_free(level_t *L)
 	fimg_free(&L->FM);
 	fimg_free(&L->W);
 	fimg_free(&L->WM);
+	free(L->sums);
+	L->sums = NULL;
 }
 
 /*
@@ -669,6 +706,9 @@ static void compute_force(const demons_priv_t *p, const level_t *L,
 static int compute_force_lncc(const demons_priv_t *p, const level_t *L,
 			      fimg_t *U, double *score, int64_t *nused, int nt)
 {
+	/* the window sums of V, V F, V W, V F^2, V W^2, V F W over valid
+	 * voxels, in the level's buffer (6 nv floats) */
+	float *S = L->sums;
 	const fgrid_t *g = &L->g;
 	const int nx = g->nx, ny = g->ny, nz = g->nz;
 	const int64_t nv = fgrid_nvox(g);
@@ -676,10 +716,6 @@ static int compute_force_lncc(const demons_priv_t *p, const level_t *L,
 	const int dims[3] = { nx, ny, nz };
 	const float *F = L->F.d, *W = L->W.d;
 	const float *FM = L->FM.d, *WM = L->WM.d;
-	float *S = malloc(sizeof(float) * 6 * (size_t)nv);
-	if (!S)
-		return ARMSTG_ENOMEM;
-	/* window sums of V, V F, V W, V F^2, V W^2, V F W over valid voxels */
 #pragma omp parallel for num_threads(nt) schedule(static)
 	for (int64_t e = 0; e < nv; e++) {
 		float w = W[e], f = F[e];
@@ -693,10 +729,8 @@ static int compute_force_lncc(const demons_priv_t *p, const level_t *L,
 		S[e + 4 * nv] = w * w;
 		S[e + 5 * nv] = f * w;
 	}
-	if (img_box_sum(S, 6, dims, p->radius, nt)) {
-		free(S);
+	if (img_box_sum(S, 6, dims, p->radius, nt))
 		return ARMSTG_ENOMEM;
-	}
 	double Li[3][3];
 	for (int a = 0; a < 3; a++)
 		for (int c = 0; c < 3; c++)
@@ -758,7 +792,6 @@ static int compute_force_lncc(const demons_priv_t *p, const level_t *L,
 					U->d[e + c * nv] = (float)(coef * sw);
 				}
 			}
-	free(S);
 	*score = sc;
 	*nused = nu;
 	return 0;
@@ -863,6 +896,7 @@ static int demons_process(armstg_stage_t *st)
 	fimg_t F0 = { 0 }, M0 = { 0 }, FM0 = { 0 }, MM0 = { 0 }, init = { 0 };
 	fimg_t S = { 0 }, A = { 0 }, B = { 0 }, Sfull = { 0 };
 	level_t L = { 0 };
+	double *best = NULL; /* the level's compared cost after each iteration */
 	tab_t *tab = NULL;
 	vol_t *ofield = NULL, *owarp = NULL;
 
@@ -1017,6 +1051,27 @@ static int demons_process(armstg_stage_t *st)
 			rc = FAIL(rc, "out of memory (mask)");
 			goto out;
 		}
+		if (p->metric == METRIC_LNCC &&
+		    !(L.sums = malloc(sizeof(float) * 6 * (size_t)fgrid_nvox(&g)))) {
+			rc = FAIL(ARMSTG_ENOMEM, "out of memory (lncc sums, level %d)",
+				  l + 1);
+			goto out;
+		}
+		/* the block where W and WM are needed: every force and window
+		 * sum is zero outside the fixed mask, the gradients read one
+		 * voxel beyond it; outside the block W stays NaN (outside the
+		 * moving image) and WM 0 */
+		if (!L.FM.d || !mask_box(&L.FM, 1, L.wlo, L.whi)) {
+			L.wlo[0] = L.wlo[1] = L.wlo[2] = 0;
+			L.whi[0] = g.nx - 1;
+			L.whi[1] = g.ny - 1;
+			L.whi[2] = g.nz - 1;
+		}
+		{
+			const int64_t nvl = fgrid_nvox(&g);
+			for (int64_t e = 0; e < nvl; e++)
+				L.W.d[e] = NAN;
+		}
 		/* field: start or carry over from the coarser level, on the
 		 * whole level grid; a cropped level works on its box and
 		 * keeps the rest (Sfull) for the blend at its end */
@@ -1046,7 +1101,14 @@ static int demons_process(armstg_stage_t *st)
 		double ms2 = (g.sp[0] * g.sp[0] + g.sp[1] * g.sp[1] +
 			      g.sp[2] * g.sp[2]) / 3;
 		const double sx2 = 4 * p->max_step * p->max_step * ms2;
-		double hist[8] = { 0 };
+		/* the cost the convergence test compares after each
+		 * iteration (tol_best: the best so far) */
+		free(best);
+		best = malloc(sizeof(double) * (size_t)(iters[l] > 0 ? iters[l] : 1));
+		if (!best) {
+			rc = FAIL(ARMSTG_ENOMEM, "out of memory (level %d)", l + 1);
+			goto out;
+		}
 		double lscale = 0; /* metric=lncc: update scale of the level */
 		h->log(st, LOG_INFO, "level %d/%d: %dx%dx%d, %.2f mm voxels, %d "
 		       "iterations", l + 1, nlev, g.nx, g.ny, g.nz, g.sp[0],
@@ -1058,9 +1120,11 @@ static int demons_process(armstg_stage_t *st)
 					  l + 1, it + 1);
 				goto out;
 			}
-			fimg_resample(&L.M, &S, FIELD_LINEAR, NAN, &L.W, nt);
+			fimg_resample_block(&L.M, &S, FIELD_LINEAR, NAN, &L.W,
+					    L.wlo, L.whi, nt);
 			if (L.WM.d)
-				fimg_resample(&MM0, &S, FIELD_NEAREST, 0, &L.WM, nt);
+				fimg_resample_block(&MM0, &S, FIELD_NEAREST, 0, &L.WM,
+						    L.wlo, L.whi, nt);
 			double ssd;
 			int64_t nused;
 			const int lncc = p->metric == METRIC_LNCC;
@@ -1133,15 +1197,19 @@ static int demons_process(armstg_stage_t *st)
 				    "level %d/%d iter %d/%d %s %.5g mean update "
 				    "%.3g mm", l + 1, nlev, it + 1, iters[l],
 				    lncc ? "lncc" : "mse", lncc ? 1 - mse : mse, mu);
-			/* convergence: relative MSE gain over 5 iterations */
-			hist[it % 8] = mse;
-			if (p->tol > 0 && it >= 5) {
-				double old = hist[(it - 5) % 8];
-				if (old > 0 && (old - mse) < p->tol * old) {
+			/* convergence: relative gain of the best cost over
+			 * the last tol_window iterations (header) */
+			best[it] = p->tol_best && it > 0 && best[it - 1] < mse
+					   ? best[it - 1] : mse;
+			const int k = p->tol_window;
+			if (p->tol > 0 && it >= k) {
+				const double old = best[it - k];
+				if (old > 0 && (old - best[it]) < p->tol * old) {
 					h->log(st, LOG_INFO,
 					       "level %d converged after %d "
-					       "iterations (mse %.5g)", l + 1,
-					       it + 1, mse);
+					       "iterations (%s %.5g, compared %.5g)",
+					       l + 1, it + 1, lncc ? "1 - lncc" : "mse",
+					       mse, best[it]);
 					done += iters[l] - it - 1;
 					break;
 				}
@@ -1210,6 +1278,7 @@ out:
 	if (tab)
 		h->msg_unref(&tab->base);
 	level_free(&L);
+	free(best);
 	fimg_free(&F0);
 	fimg_free(&M0);
 	fimg_free(&FM0);

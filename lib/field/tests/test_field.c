@@ -122,6 +122,71 @@ static void test_resample_affine(void **state)
 	fimg_free(&out);
 }
 
+/* fimg_resample_block: the block's voxels bit for bit those of the whole
+ * grid's call (linear and nearest), the rest untouched, a block outside
+ * the grid refused */
+static void test_resample_block(void **state)
+{
+	(void)state;
+	fgrid_t gs, gd;
+	grid_of(&gs, 48, 44, 40, 1.2, 0.1);
+	double A[16] = { 1.5, 0, 0, -12, 0, -1.5, 0, 25, 0, 0, 1.5, -10,
+			 0, 0, 0, 1 };
+	assert_int_equal(fgrid_make(&gd, 40, 40, 30, A), 0);
+	fimg_t src, u, whole, blk;
+	assert_int_equal(fimg_alloc(&src, &gs, 1), 0);
+	assert_int_equal(fimg_alloc(&u, &gd, 3), 0);
+	assert_int_equal(fimg_alloc(&whole, &gd, 1), 0);
+	assert_int_equal(fimg_alloc(&blk, &gd, 1), 0);
+	for (int64_t e = 0; e < fgrid_nvox(&gs); e++) {
+		double w[3];
+		world(&gs, e, w);
+		src.d[e] = (float)(lin_img(w) + 3 * sin(w[0] / 3) * cos(w[1] / 4));
+	}
+	affine_field(&u, 1.0, Fb);
+	const int lo[3] = { 3, 7, 2 }, hi[3] = { 30, 39, 21 };
+	for (int interp = 0; interp < 2; interp++) {
+		const int mode = interp ? FIELD_NEAREST : FIELD_LINEAR;
+		assert_int_equal(fimg_resample(&src, &u, mode, -1, &whole, 2), 0);
+		for (int64_t e = 0; e < fgrid_nvox(&gd); e++)
+			blk.d[e] = 12345;
+		assert_int_equal(fimg_resample_block(&src, &u, mode, -1, &blk, lo,
+						     hi, 2), 0);
+		int64_t nin = 0, same = 0, kept = 0;
+		for (int k = 0; k < gd.nz; k++)
+			for (int j = 0; j < gd.ny; j++)
+				for (int i = 0; i < gd.nx; i++) {
+					int64_t e = ((int64_t)k * gd.ny + j) * gd.nx + i;
+					int in = i >= lo[0] && i <= hi[0] && j >= lo[1] &&
+						 j <= hi[1] && k >= lo[2] && k <= hi[2];
+					if (in) {
+						nin++;
+						same += memcmp(&blk.d[e], &whole.d[e],
+							       sizeof(float)) == 0;
+					} else {
+						kept += blk.d[e] == 12345;
+					}
+				}
+		print_message("resample block (%s): %lld voxels in the block, %lld "
+			      "identical; %lld outside, %lld untouched\n",
+			      interp ? "nearest" : "linear", (long long)nin,
+			      (long long)same, (long long)(fgrid_nvox(&gd) - nin),
+			      (long long)kept);
+		assert_int_equal(nin, 28 * 33 * 20);
+		assert_int_equal(same, nin);
+		assert_int_equal(kept, fgrid_nvox(&gd) - nin);
+	}
+	const int bad_hi[3] = { 40, 39, 21 }, bad_lo[3] = { 5, 7, 22 };
+	assert_int_equal(fimg_resample_block(&src, &u, FIELD_LINEAR, -1, &blk, lo,
+					     bad_hi, 2), ARMSTG_EINVAL);
+	assert_int_equal(fimg_resample_block(&src, &u, FIELD_LINEAR, -1, &blk,
+					     bad_lo, hi, 2), ARMSTG_EINVAL);
+	fimg_free(&src);
+	fimg_free(&u);
+	fimg_free(&whole);
+	fimg_free(&blk);
+}
+
 static void test_compose_affine(void **state)
 {
 	(void)state;
@@ -929,6 +994,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_resample_affine),
+		cmocka_unit_test(test_resample_block),
 		cmocka_unit_test(test_compose_affine),
 		cmocka_unit_test(test_invert),
 		cmocka_unit_test(test_jacobian_linear),

@@ -692,6 +692,116 @@ static void test_smooth_subvoxel(void **state)
 	}
 }
 
+/*
+ * The convergence test (tol, tol_window, tol_best): a run with a tolerance
+ * repeats the rows of the run without one up to where each level stops, and
+ * each level stops exactly at the first iteration i >= k whose 1 - lncc (or
+ * best 1 - lncc so far) gained less than tol of that k iterations earlier
+ * (or at its last iteration), as recomputed from the table here.
+ */
+static int64_t level_rows(const tab_t *t, int level, int64_t *r0)
+{
+	const tab_col_t *lv = tab_col(t, "level");
+	int64_t n = 0;
+	*r0 = -1;
+	for (int64_t r = 0; r < t->nrows; r++)
+		if ((int)lv->num[r] == level) {
+			if (*r0 < 0)
+				*r0 = r;
+			n++;
+		}
+	return n;
+}
+
+/* the first iteration (1-based) after which the rule stops a level of
+ * cost c[0..n-1], or 0 when it never does */
+static int rule_stop(const double *c, int n, double tol, int k, int best)
+{
+	double b[64];
+	for (int i = 0; i < n && i < 64; i++) {
+		b[i] = best && i > 0 && b[i - 1] < c[i] ? b[i - 1] : c[i];
+		if (i >= k && b[i - k] - b[i] < tol * b[i - k])
+			return i + 1;
+	}
+	return 0;
+}
+
+static void test_convergence(void **state)
+{
+	fixture_t *fx = *state;
+	char e[1024];
+	const int caps[3] = { 40, 30, 20 };
+	const char *p0[] = { "levels=3", "iterations=40,30,20", "metric=lncc",
+			     "normalize=minmax", "sigma_unit=voxel", "sigma_fluid=3",
+			     "sigma_field=1.5", "tol=0", NULL };
+	reg_out_t o0 = { 0 };
+	assert_int_equal(run_demons(p0, fx->fixed, fx->moving, fx->fmask, NULL,
+				    &o0, e, sizeof e), 0);
+	assert_int_equal(o0.tab->nrows, 90); /* tol = 0: every iteration */
+	const tab_col_t *cc0 = tab_col(o0.tab, "lncc");
+	const struct {
+		const char *tol, *win, *best;
+		double t;
+		int k, b;
+	} cfg[] = { { "tol=0.002", "tol_window=5", "tol_best=true", 0.002, 5, 1 },
+		    { "tol=0.002", "tol_window=2", "tol_best=true", 0.002, 2, 1 },
+		    { "tol=0.01", "tol_window=5", "tol_best=true", 0.01, 5, 1 },
+		    { "tol=0.002", "tol_window=2", "tol_best=false", 0.002, 2, 0 } };
+	int stopped_early = 0, differ = 0, prev_total = -1;
+	for (size_t c = 0; c < sizeof cfg / sizeof cfg[0]; c++) {
+		const char *p[] = { "levels=3", "iterations=40,30,20", "metric=lncc",
+				    "normalize=minmax", "sigma_unit=voxel",
+				    "sigma_fluid=3", "sigma_field=1.5", cfg[c].tol,
+				    cfg[c].win, cfg[c].best, NULL };
+		reg_out_t o = { 0 };
+		assert_int_equal(run_demons(p, fx->fixed, fx->moving, fx->fmask,
+					    NULL, &o, e, sizeof e), 0);
+		const tab_col_t *cc = tab_col(o.tab, "lncc");
+		int total = 0, got[3], want[3];
+		for (int l = 1; l <= 3; l++) {
+			int64_t r0, q0;
+			got[l - 1] = (int)level_rows(o.tab, l, &r0);
+			/* level 1 starts from zero in both runs: the same
+			 * rows as the tol = 0 run until it stops, which is
+			 * where the rule first holds on the uncapped rows;
+			 * later levels start from a field that differs once
+			 * an earlier level stopped: each stops where the rule
+			 * first holds on its own rows, or at its cap */
+			double cost[64];
+			int stop;
+			if (l == 1) {
+				level_rows(o0.tab, 1, &q0);
+				for (int i = 0; i < got[0]; i++)
+					assert_true(cc->num[r0 + i] == cc0->num[q0 + i]);
+				for (int i = 0; i < caps[0]; i++)
+					cost[i] = 1 - cc0->num[q0 + i];
+				stop = rule_stop(cost, caps[0], cfg[c].t, cfg[c].k,
+						 cfg[c].b);
+			} else {
+				for (int i = 0; i < got[l - 1]; i++)
+					cost[i] = 1 - cc->num[r0 + i];
+				stop = rule_stop(cost, got[l - 1], cfg[c].t, cfg[c].k,
+						 cfg[c].b);
+			}
+			want[l - 1] = stop ? stop : caps[l - 1];
+			assert_int_equal(got[l - 1], want[l - 1]);
+			stopped_early += got[l - 1] < caps[l - 1];
+			total += got[l - 1];
+		}
+		print_message("%s, %s, %s: iterations %d,%d,%d of 40,30,20; lncc "
+			      "%.4f (tol = 0: %.4f)\n", cfg[c].tol, cfg[c].win,
+			      cfg[c].best, got[0],
+			      got[1], got[2], tab_last(o.tab, "lncc"),
+			      tab_last(o0.tab, "lncc"));
+		differ += prev_total >= 0 && total != prev_total;
+		prev_total = total;
+		reg_free(&o);
+	}
+	assert_true(stopped_early > 0);
+	assert_true(differ > 0);
+	reg_free(&o0);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -707,6 +817,7 @@ int main(void)
 		cmocka_unit_test(test_sigma_unit),
 		cmocka_unit_test(test_sigma_image_voxel),
 		cmocka_unit_test(test_smooth_subvoxel),
+		cmocka_unit_test(test_convergence),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
