@@ -12,7 +12,10 @@
  * tled_model.c, tled_model_ip.c and tled_model_mls.c (setup), tled_step.c
  * (hot loops) and tled_solve.c (dynamic relaxation, watchdogs),
  * tled_solve_dt.c (time step) and tled_solve_con.c (collocated conditions,
- * contact); tled_grow.c is the growth replay.
+ * contact); the growth replay is tled_grow.c (inputs, model, layers,
+ * relabelling, outputs), tled_grow_replay.c (the kinematic fronts),
+ * tled_grow_expand.c (front = expand) and tled_grow_relax.c (a growth
+ * step's relaxation: sub-steps, saturation), sharing tled_grow_int.h.
  *
  * Units: ports in mm (RAS world), the model in SI (m, kg, s, Pa).
  *
@@ -84,8 +87,8 @@
  * front = expand (experimental; measured worse, bench/pipeline/results.md
  * at 7a4d369, the front=expand round) replaces the replay: the core inside the innermost kept layer
  * grows by a volumetric growth stretch (F = F_e g I, tled_ip_stress_c)
- * until its deformed volume is the tumour's; see the block in
- * tled_process.
+ * until its deformed volume is the tumour's; see tled_grow_expand
+ * (tled_grow_expand.c).
  */
 #ifndef TLED_GROW_H
 #define TLED_GROW_H
