@@ -9,7 +9,8 @@
  *   [tune]              param = STAGE.KEY, values = V1, V2, ...,
  *                       score = STAGE.PORT (a table output), metric = M,
  *                       structure = S (optional), goal = max | min,
- *                       require = M2 [S2] OP NUMBER (optional),
+ *                       require = [STAGE.PORT:] M2 [S2] OP NUMBER, ...
+ *                       (optional: conditions separated by commas),
  *                       tolerance = T (optional, >= 0, the score's units),
  *                       metric_column = C, structure_column = C,
  *                       value_column = C (optional: the score table's
@@ -36,8 +37,10 @@
  * those columns or that row fails the run (an error naming the score
  * stage).  A candidate that fails
  * in a stage that depends on the tuned one, or scores NaN (or +-inf), or
- * whose row M2 (S2) of the same table fails `require` (OP: > >= < <=), is
- * skipped with a warning; if all fail, the run fails.  Ties keep the
+ * whose row M2 (S2) of the score table, or of the table output STAGE.PORT
+ * (a stage that depends on the tuned one; it runs for every candidate),
+ * fails a condition of `require` (OP: > >= < <=), is skipped with a
+ * warning; if all fail, the run fails.  Ties keep the
  * earlier value; with a tolerance T the earliest candidate whose score is
  * within T of the best is chosen (the score's noise should not pick a
  * later value).  Then

@@ -66,6 +66,19 @@ typedef struct g_node {
 	remote_node_t rn;          /* endpoints, keys, time-out (remote.h) */
 } g_node_t;
 
+/* One condition of [tune] require: [STAGE.PORT:] METRIC [STRUCTURE] OP
+ * NUMBER, read with the [tune] column names from the score table or from
+ * the table output STAGE.PORT (another stage's, which must depend on the
+ * tuned stage). */
+#define G_TUNE_NREQ 8
+typedef struct g_req {
+	int stage, port;           /* the table read; stage -1: the score's */
+	char table[2 * G_NAME];    /* "STAGE.PORT" as written; "": the score's */
+	char metric[G_NAME], structure[G_NAME]; /* structure "": any */
+	char op[3];                /* ">", ">=", "<", "<=" */
+	double value;
+} g_req_t;
+
 /* [tune]: one stage parameter chosen per run by a score (see graph.h),
  * as checked by tune_check. */
 typedef struct g_tune {
@@ -89,12 +102,10 @@ typedef struct g_tune {
 	 * chosen (a score difference below the score's noise does not pick
 	 * a later, usually larger, value); 0: the best, ties the earlier */
 	double tol;
-	/* require = METRIC [STRUCTURE] OP NUMBER: a candidate whose row
-	 * fails it is dropped like a failed one */
-	int has_req;
-	char req_metric[G_NAME], req_structure[G_NAME]; /* "": any */
-	char req_op[3];            /* ">", ">=", "<", "<=" */
-	double req_value;
+	/* require = COND, COND, ...: a candidate whose row fails one is
+	 * dropped like a failed one (g_req_t) */
+	g_req_t req[G_TUNE_NREQ];
+	int nreq;
 	int search;                /* 1: try the candidates when running */
 	int one_value;             /* no search: the single value is used */
 	char why[512];             /* when present but no search: why */

@@ -18,8 +18,13 @@
  * of the metrics plugin's table, any table by naming its columns.  A table
  * without those columns or that row fails the run (an error naming the
  * score stage).  A candidate that fails in a stage that depends on the
- * tuned one, or scores NaN (or +-inf), or whose row of `require` fails, is
- * skipped with a warning; if all fail, the run fails.  Ties keep the
+ * tuned one, or scores NaN (or +-inf), or fails a condition of `require`,
+ * is skipped with a warning; if all fail, the run fails.  require is a
+ * list of conditions separated by commas, [STAGE.PORT:] METRIC [STRUCTURE]
+ * OP NUMBER, each read like the score (the same columns) from the score
+ * table or from the table output STAGE.PORT: another stage that depends on
+ * the tuned one and runs for every candidate with the score's stages
+ * (e.g. the growth's own measures next to the registration's score).  Ties keep the
  * earlier value; with a tolerance T the earliest candidate whose score is
  * within T of the best is chosen.  tune.tsv lists the candidates
  * (tune_table_write).
@@ -93,6 +98,148 @@ static int tune_split(graph_t *g, const g_kv_t *vk)
 	return 0;
 }
 
+/* The table output STAGE.PORT named by [tune] key `key` (score, require):
+ * 0 with its stage and port, else -1 (an error reported at line, or
+ * nothing when the stage's plugin failed to load: its own error was). */
+static int tune_table(graph_t *g, int line, const char *key, const char *val,
+		      int *stage, int *port)
+{
+	char sn[G_NAME], pn[G_NAME];
+	if (g_parse_conn(val, sn, pn)) {
+		g_err(g, line, NULL, key, "[tune] %s must name <stage>.<output "
+		      "port> of a table, got '%s'", key, val);
+		return -1;
+	}
+	int si = g_stage_index(g, sn);
+	if (si < 0) {
+		g_err(g, line, NULL, key, "[tune] %s: unknown stage '%s'", key,
+		      sn);
+		return -1;
+	}
+	const g_stage_t *ss = &g->stages[si];
+	if (!ss->loaded)
+		return -1;
+	const armstg_plugin_t *d = ss->plug.desc;
+	int op = g_port_index(d->outputs, d->n_outputs, pn);
+	if (op < 0) {
+		char outs[512];
+		g_port_list(d->outputs, d->n_outputs, outs, sizeof outs);
+		g_err(g, line, NULL, key, "[tune] %s: stage '%s' (plugin '%s') "
+		      "has no output port '%s' (outputs: %s)", key, sn, d->name,
+		      pn, outs);
+		return -1;
+	}
+	if (d->outputs[op].type != MSG_TABLE) {
+		g_err(g, line, NULL, key, "[tune] %s: '%s.%s' is a %s, not a "
+		      "table", key, sn, pn, msg_type_name(d->outputs[op].type));
+		return -1;
+	}
+	*stage = si;
+	*port = op;
+	return 0;
+}
+
+static const char req_syntax[] =
+	"[tune] require must read [STAGE.PORT:] METRIC [STRUCTURE] OP NUMBER "
+	"with OP one of > >= < <=, conditions separated by commas (e.g. "
+	"'jac_min mask > 0' or 'jac_min mask > 0, mass.table: shift grown "
+	">= 0')";
+
+/* One condition of require (text a..b, trimmed): into *q, 0; -1 with an
+ * error reported. */
+static int tune_req_parse(graph_t *g, int line, const char *a, const char *b,
+			  g_req_t *q)
+{
+	char cond[1024];
+	snprintf(cond, sizeof cond, "%.*s", (int)(b - a), a);
+	memset(q, 0, sizeof *q);
+	q->stage = q->port = -1;
+	const char *body = cond, *colon = strchr(cond, ':');
+	if (colon) {
+		/* the table: STAGE.PORT before the colon */
+		const char *ta = cond, *tb = colon;
+		while (tb > ta && (tb[-1] == ' ' || tb[-1] == '\t'))
+			tb--;
+		if ((size_t)(tb - ta) >= sizeof q->table) {
+			g_err(g, line, NULL, "require", "%s, got '%s'",
+			      req_syntax, cond);
+			return -1;
+		}
+		snprintf(q->table, sizeof q->table, "%.*s", (int)(tb - ta), ta);
+		if (tune_table(g, line, "require", q->table, &q->stage,
+			       &q->port))
+			return -1;
+		body = colon + 1;
+	}
+	/* METRIC [STRUCTURE] OP NUMBER, blank separated */
+	char tok[5][G_NAME];
+	int nt = 0, bad = 0;
+	for (const char *p = body; *p && !bad;) {
+		while (*p == ' ' || *p == '\t')
+			p++;
+		if (!*p)
+			break;
+		size_t l = strcspn(p, " \t");
+		if (nt == 5 || l >= G_NAME)
+			bad = 1;
+		else
+			snprintf(tok[nt++], G_NAME, "%.*s", (int)l, p);
+		p += l;
+	}
+	const char *op = nt >= 3 ? tok[nt - 2] : "";
+	if (!bad && (nt == 3 || nt == 4))
+		bad = !finite_number(tok[nt - 1], &q->value) ||
+		      (strcmp(op, ">") && strcmp(op, ">=") && strcmp(op, "<") &&
+		       strcmp(op, "<="));
+	else
+		bad = 1;
+	if (bad) {
+		g_err(g, line, NULL, "require", "%s, got '%s'", req_syntax,
+		      cond);
+		return -1;
+	}
+	snprintf(q->metric, sizeof q->metric, "%s", tok[0]);
+	snprintf(q->structure, sizeof q->structure, "%s",
+		 nt == 4 ? tok[1] : "");
+	snprintf(q->op, sizeof q->op, "%s", op);
+	return 0;
+}
+
+/* require: conditions separated by commas, each parsed (tune_req_parse);
+ * at most G_TUNE_NREQ; an empty condition is an error. */
+static void tune_req_split(graph_t *g, const g_kv_t *rk)
+{
+	g_tune_t *t = &g->tune;
+	for (const char *p = rk->val;;) {
+		const char *end = strchr(p, ',');
+		if (!end)
+			end = p + strlen(p);
+		const char *a = p, *b = end;
+		while (a < b && (*a == ' ' || *a == '\t'))
+			a++;
+		while (b > a && (b[-1] == ' ' || b[-1] == '\t'))
+			b--;
+		if (a == b) {
+			g_err(g, rk->line, NULL, "require", "[tune] require: "
+			      "empty condition in '%s' (conditions are "
+			      "separated by commas)", rk->val);
+			return;
+		}
+		if (t->nreq == G_TUNE_NREQ) {
+			g_err(g, rk->line, NULL, "require", "[tune] require: "
+			      "more than %d conditions in '%s'", G_TUNE_NREQ,
+			      rk->val);
+			return;
+		}
+		if (tune_req_parse(g, rk->line, a, b, &t->req[t->nreq]))
+			return;
+		t->nreq++;
+		if (!*end)
+			return;
+		p = end + 1;
+	}
+}
+
 /* [tune]: resolve the tuned parameter and the score table, check every
  * candidate with the stage's own parameter parser, and decide whether the
  * run searches (2+ values and no explicit --set of the parameter). */
@@ -141,7 +288,7 @@ void tune_check(graph_t *g)
 	const g_kv_t *stk = g_kv_find(t->kv, t->nkv, "structure");
 	const g_kv_t *gk = g_kv_find(t->kv, t->nkv, "goal");
 	char sn[G_NAME], pn[G_NAME], e[1024];
-	g_stage_t *ts = NULL, *ss = NULL;
+	g_stage_t *ts = NULL;
 	if (pk && pk->val[0]) {
 		if (g_parse_conn(pk->val, sn, pn)) {
 			g_err(g, pk->line, NULL, "param", "[tune] param must "
@@ -175,36 +322,9 @@ void tune_check(graph_t *g)
 				     "[tune] values: %s", e);
 		stage_free(scr);
 	}
-	if (sk && sk->val[0]) {
-		if (g_parse_conn(sk->val, sn, pn)) {
-			g_err(g, sk->line, NULL, "score", "[tune] score must "
-			     "name <stage>.<output port> of a table, got '%s'",
-			     sk->val);
-		} else if (g_stage_index(g, sn) < 0) {
-			g_err(g, sk->line, NULL, "score", "[tune] score: "
-			     "unknown stage '%s'", sn);
-		} else if ((ss = &g->stages[g_stage_index(g, sn)])->loaded) {
-			const armstg_plugin_t *d = ss->plug.desc;
-			int op = g_port_index(d->outputs, d->n_outputs, pn);
-			if (op < 0) {
-				char outs[512];
-				g_port_list(d->outputs, d->n_outputs, outs,
-					  sizeof outs);
-				g_err(g, sk->line, NULL, "score",
-				     "[tune] score: stage '%s' (plugin '%s') "
-				     "has no output port '%s' (outputs: %s)",
-				     sn, d->name, pn, outs);
-			} else if (d->outputs[op].type != MSG_TABLE) {
-				g_err(g, sk->line, NULL, "score",
-				     "[tune] score: '%s.%s' is a %s, not a "
-				     "table", sn, pn,
-				     msg_type_name(d->outputs[op].type));
-			} else {
-				t->score = (int)(ss - g->stages);
-				t->score_port = op;
-			}
-		}
-	}
+	if (sk && sk->val[0])
+		(void)tune_table(g, sk->line, "score", sk->val, &t->score,
+				 &t->score_port);
 	/* only on an otherwise sound graph: unresolved inputs would make
 	 * this a false alarm */
 	if (g->nerr == 0 && t->stage >= 0 && t->score >= 0) {
@@ -255,43 +375,28 @@ void tune_check(graph_t *g)
 			     "'%s'", tk->val);
 	}
 	const g_kv_t *rk = g_kv_find(t->kv, t->nkv, "require");
-	if (rk && rk->val[0]) {
-		/* METRIC [STRUCTURE] OP NUMBER, blank separated */
-		char tok[5][G_NAME];
-		int nt = 0, bad = 0;
-		for (const char *p = rk->val; *p && !bad;) {
-			while (*p == ' ' || *p == '\t')
-				p++;
-			if (!*p)
-				break;
-			size_t l = strcspn(p, " \t");
-			if (nt == 5 || l >= G_NAME)
-				bad = 1;
-			else
-				snprintf(tok[nt++], G_NAME, "%.*s", (int)l, p);
-			p += l;
-		}
-		const char *op = nt >= 3 ? tok[nt - 2] : "";
-		if (!bad && (nt == 3 || nt == 4)) {
-			bad = !finite_number(tok[nt - 1], &t->req_value) ||
-			      (strcmp(op, ">") && strcmp(op, ">=") &&
-			       strcmp(op, "<") && strcmp(op, "<="));
-		} else {
-			bad = 1;
-		}
-		if (bad) {
-			g_err(g, rk->line, NULL, "require", "[tune] require "
-			     "must read METRIC [STRUCTURE] OP NUMBER with OP "
-			     "one of > >= < <= (e.g. 'jac_min mask > 0'), got "
-			     "'%s'", rk->val);
-		} else {
-			t->has_req = 1;
-			snprintf(t->req_metric, sizeof t->req_metric, "%s",
-				 tok[0]);
-			snprintf(t->req_structure, sizeof t->req_structure,
-				 "%s", nt == 4 ? tok[1] : "");
-			snprintf(t->req_op, sizeof t->req_op, "%s", op);
-		}
+	t->nreq = 0;
+	if (rk && rk->val[0])
+		tune_req_split(g, rk);
+	/* a requirement on a table that does not depend on the tuned stage
+	 * is met alike by every value: a mistake (only on an otherwise
+	 * sound graph, as for the score) */
+	for (int k = 0; g->nerr == 0 && t->stage >= 0 && k < t->nreq; k++) {
+		const g_req_t *q = &t->req[k];
+		signed char *memo = q->stage >= 0 ? malloc((size_t)g->nstages)
+						  : NULL;
+		if (!memo)
+			continue;
+		memset(memo, -1, (size_t)g->nstages);
+		if (!g_depends_on(g, q->stage, t->stage, memo))
+			g_err(g, rk->line, NULL, "require", "[tune] require: "
+			      "stage '%s' (table '%s') does not depend on stage "
+			      "'%s', so every value would meet '%s %s%s%s %g' "
+			      "alike", g->stages[q->stage].name, q->table,
+			      g->stages[t->stage].name, q->metric,
+			      q->structure, q->structure[0] ? " " : "", q->op,
+			      q->value);
+		free(memo);
 	}
 	if (g->nerr != nerr0 || !ts || t->score < 0)
 		return;
@@ -335,17 +440,17 @@ static void tune_reset(g_run_t *r, const char *down)
  * of the score table whose metric column (and structure column, when a
  * structure is given) match (the column names of [tune]; by default the
  * metrics plugin's layout). */
-static int tune_lookup(const g_run_t *r, const char *metric,
-		       const char *structure, double *score, char *err,
-		       size_t errsize)
+static int tune_lookup(const g_run_t *r, const char *what, int stage,
+		       int oport, const char *metric, const char *structure,
+		       double *score, char *err, size_t errsize)
 {
 	const g_tune_t *t = &r->g->tune;
-	const g_stage_t *s = &r->g->stages[t->score];
-	const char *port = s->plug.desc->outputs[t->score_port].name;
-	const msg_t *m = stage_output(r->rs[t->score].st, t->score_port);
+	const g_stage_t *s = &r->g->stages[stage];
+	const char *port = s->plug.desc->outputs[oport].name;
+	const msg_t *m = stage_output(r->rs[stage].st, oport);
 	if (!msg_valid(m, MSG_TABLE)) {
-		snprintf(err, errsize, "[tune] score: stage '%s' gave no table "
-			 "on its output '%s'", s->name, port);
+		snprintf(err, errsize, "[tune] %s: stage '%s' gave no table "
+			 "on its output '%s'", what, s->name, port);
 		return ARMSTG_EINVAL;
 	}
 	const tab_t *tab = (const tab_t *)m;
@@ -368,9 +473,9 @@ static int tune_lookup(const g_run_t *r, const char *metric,
 		for (int c = 0; c < tab->ncols && o < sizeof cols; c++)
 			o += (size_t)snprintf(cols + o, sizeof cols - o, "%s%s",
 					      c ? ", " : "", tab->col[c].name);
-		snprintf(err, errsize, "[tune] score: the table of stage '%s' "
-			 "(output '%s') has no %s (columns: %s)", s->name, port,
-			 miss, cols);
+		snprintf(err, errsize, "[tune] %s: the table of stage '%s' "
+			 "(output '%s') has no %s (columns: %s)", what, s->name,
+			 port, miss, cols);
 		return ARMSTG_EINVAL;
 	}
 	for (int64_t k = 0; k < tab->nrows; k++) {
@@ -382,9 +487,9 @@ static int tune_lookup(const g_run_t *r, const char *metric,
 		*score = vc->num[k];
 		return 0;
 	}
-	snprintf(err, errsize, "[tune] score: the table of stage '%s' (output "
-		 "'%s') has no row with %s '%s'%s%s%s%s%s (%lld rows)", s->name,
-		 port, t->col_metric, metric, structure ? " and " : "",
+	snprintf(err, errsize, "[tune] %s: the table of stage '%s' (output "
+		 "'%s') has no row with %s '%s'%s%s%s%s%s (%lld rows)", what,
+		 s->name, port, t->col_metric, metric, structure ? " and " : "",
 		 structure ? t->col_structure : "", structure ? " '" : "",
 		 structure ? structure : "", structure ? "'" : "",
 		 (long long)tab->nrows);
@@ -394,34 +499,43 @@ static int tune_lookup(const g_run_t *r, const char *metric,
 static int tune_score(const g_run_t *r, double *score, char *err,
 		      size_t errsize)
 {
-	return tune_lookup(r, r->g->tune.metric, r->g->tune.structure, score,
-			   err, errsize);
+	const g_tune_t *t = &r->g->tune;
+	return tune_lookup(r, "score", t->score, t->score_port, t->metric,
+			   t->structure, score, err, errsize);
 }
 
-/* 1 when the candidate just run meets [tune] require (or there is none),
- * 0 with the reason in why; < 0: the row is missing (a graph error). */
+/* 1 when the candidate just run meets every condition of [tune] require
+ * (or there is none), 0 with the first one it fails in why; < 0: a table
+ * or row is missing (a graph error). */
 static int tune_require(const g_run_t *r, char *why, size_t whysize,
 			char *err, size_t errsize)
 {
 	const g_tune_t *t = &r->g->tune;
-	if (!t->has_req)
-		return 1;
-	double v;
-	int rc = tune_lookup(r, t->req_metric,
-			     t->req_structure[0] ? t->req_structure : NULL, &v,
-			     err, errsize);
-	if (rc)
-		return rc; /* the ARMSTG_E* codes are negative */
-	const char *op = t->req_op;
-	int ok = !strcmp(op, ">") ? v > t->req_value
-		 : !strcmp(op, ">=") ? v >= t->req_value
-		 : !strcmp(op, "<") ? v < t->req_value
-		 : v <= t->req_value; /* NaN meets nothing */
-	if (!ok)
-		snprintf(why, whysize, "require %s%s%s %s %g not met: %.6g",
-			 t->req_metric, t->req_structure[0] ? " " : "",
-			 t->req_structure, op, t->req_value, v);
-	return ok;
+	for (int k = 0; k < t->nreq; k++) {
+		const g_req_t *q = &t->req[k];
+		double v;
+		int rc = tune_lookup(r, "require",
+				     q->stage >= 0 ? q->stage : t->score,
+				     q->stage >= 0 ? q->port : t->score_port,
+				     q->metric,
+				     q->structure[0] ? q->structure : NULL, &v,
+				     err, errsize);
+		if (rc)
+			return rc; /* the ARMSTG_E* codes are negative */
+		const char *op = q->op;
+		int ok = !strcmp(op, ">") ? v > q->value
+			 : !strcmp(op, ">=") ? v >= q->value
+			 : !strcmp(op, "<") ? v < q->value
+			 : v <= q->value; /* NaN meets nothing */
+		if (!ok) {
+			snprintf(why, whysize, "require %s%s%s%s%s %s %g not "
+				 "met: %.6g", q->table, q->table[0] ? ": " : "",
+				 q->metric, q->structure[0] ? " " : "",
+				 q->structure, op, q->value, v);
+			return 0;
+		}
+	}
+	return 1;
 }
 
 /*
@@ -466,6 +580,9 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 		goto out;
 	}
 	sched_mark_needed(r, t->score);
+	for (int k = 0; k < t->nreq; k++)
+		if (t->req[k].stage >= 0)
+			sched_mark_needed(r, t->req[k].stage);
 	for (int i = 0; i < g->nstages; i++) {
 		r_stage_t *x = &r->rs[i];
 		cand[i] = (char)x->needed;

@@ -6,7 +6,9 @@
  * The graph below tunes sim.offset over 1..5.  tp_score's table scores x,
  * the first voxel of its output (here x = the candidate):
  *     sq near (x - 3.2)^2,  sq far (x - 13.2)^2,  neg near -(x - 3.2)^2
- * so goal = min of sq picks 3.  base, pre and ref do not depend on sim: they
+ * so goal = min of sq picks 3.  alt scores x against 4.2 (its sq near is
+ * (x - 4.2)^2): a table that depends on sim and that the score does not
+ * read, for require.  base, pre and ref do not depend on sim: they
  * must run once; pre and ref write files while the tuning runs (pre-0.txt,
  * ref-0.txt), committed only when the final run needs them.  fit writes
  * fit-<x>.txt and save writes chosen.txt = x: only the final value's files
@@ -43,6 +45,8 @@ static const char tune_graph[] =
 	"path = chosen.txt\n"
 	"[stage side]\nplugin = tp_sink\nvolume = base.volume\n"
 	"path = side.txt\n"
+	"[stage alt]\nplugin = tp_score\nvolume = sim.volume\ntarget = 4.2\n"
+	"count_file = ${TT_COUNT}/alt.count\n"
 	"[tune]\n"
 	"param = sim.offset      ; the file's offset = 9 is not a --set\n"
 	"values = 1, 2, 3, 4, 5\n"
@@ -329,6 +333,68 @@ static void test_require(void **state)
 	assert_int_equal(r.rc, ARMSTG_EINVAL);
 	assert_non_null(strstr(r.err, "has no row with metric 'nope' and "
 				      "structure 'mask'"));
+	done(&r);
+}
+
+/* require on another stage's table, alt.table (sq near = (x - 4.2)^2:
+ * 10.24 4.84 1.44 0.04 0.64 for 1..5), alone and next to a condition on
+ * the score table: "alt.table: sq near < 1" leaves 4 and 5 (min of fit's
+ * sq near: 4); with "sq far <= 104.04" (3, 4, 5) 3 still fails alt's
+ * condition, and its error names the table; alt runs for every candidate
+ * even when the targets do not need it; a row alt's
+ * table lacks is a graph error naming alt */
+static void test_require_other_table(void **state)
+{
+	(void)state;
+	const char *a[] = { "tune.require=alt.table: sq near < 1" };
+	assert_float_equal(chosen_with(a, 1), 4.0, 0);
+	/* blanks separate the tokens: "near<1" is one (no OP) */
+	const char *b[] = { "tune.require=alt.table:sq near<1" };
+	char err[4096];
+	graph_t *g = graph_load(graph_path, b, 1, err, sizeof err);
+	assert_null(g);
+	assert_non_null(strstr(err, "key 'require': [tune] require must read "
+				    "[STAGE.PORT:] METRIC [STRUCTURE] OP "
+				    "NUMBER"));
+	assert_non_null(strstr(err, "got 'alt.table:sq near<1'"));
+	trun_t r;
+	const char *c[] = { "tune.require=sq far <= 104.04 ,alt.table : sq near "
+			    "< 1" };
+	run_sets(&r, c, 1);
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 4.0, 0);
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 5);
+	assert_string_equal(tt.error->str[0],
+			    "require sq far <= 104.04 not met: 148.84");
+	assert_string_equal(tt.error->str[2],
+			    "require alt.table: sq near < 1 not met: 1.44");
+	assert_float_equal(tt.score->num[2], 0.04, 1e-9);
+	assert_string_equal(tt.status->str[3], "ok");
+	assert_string_equal(tt.status->str[4], "ok");
+	assert_float_equal(chosen_value(&tt), 4.0, 0);
+	ttab_free(&tt);
+	/* alt: once per candidate and once in the final run */
+	assert_int_equal(count_lines(in(r.cnt, "alt.count")), 6);
+	done(&r);
+	/* the targets do not need alt: it runs for the search only */
+	const char *save[] = { "save" };
+	run_with(&r, a, 1, 1, save, 1);
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 4.0, 0);
+	assert_int_equal(count_lines(in(r.cnt, "alt.count")), 5);
+	/* like fit: a stage reset after the search is not in run.tsv */
+	assert_null(strstr(slurp(in(r.out, "run.tsv")), "\nalt\t"));
+	done(&r);
+	const char *d[] = { "tune.require=alt.table: nope > 0" };
+	run_sets(&r, d, 1);
+	assert_int_equal(r.rc, ARMSTG_EINVAL);
+	assert_non_null(strstr(r.err, "[tune] require: the table of stage "
+				      "'alt' (output 'table') has no row with "
+				      "metric 'nope'"));
 	done(&r);
 }
 
@@ -805,6 +871,7 @@ int main(void)
 		cmocka_unit_test(test_score_columns),
 		cmocka_unit_test(test_failed_candidates_are_skipped),
 		cmocka_unit_test(test_require),
+		cmocka_unit_test(test_require_other_table),
 		cmocka_unit_test(test_all_candidates_fail),
 		cmocka_unit_test(test_shared_stage_failure_fails_the_run),
 		cmocka_unit_test(test_set_rules),
