@@ -2,7 +2,7 @@
 /*
  * The pieces of the k-nearest search on a uniform grid (tled_grid_knn,
  * tled_model_mls.c) that the CUDA backend's contact search repeats
- * (plugins/tled_cuda/tled_cuda_ops.cu, d_knnK): the start cell, the sorted
+ * (plugins/tled_cuda/tled_cuda_kernels.cu, d_knnK): the start cell, the sorted
  * insertion (ties: the first found stays first) and the stopping rule.
  * `static inline` and TLED_HD (tled_hd.h): one text for both.  Lengths in
  * the grid's unit (m), distances squared.

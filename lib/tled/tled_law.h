@@ -1,7 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * The material law at one integration point, shared by the C reference
- * (tled_step.c) and the CUDA backend (plugins/tled_cuda/tled_cuda_ops.cu):
+ * (tled_step.c) and the CUDA backend (plugins/tled_cuda/tled_cuda_kernels.cu):
  * `static inline` and TLED_HD (tled_hd.h), so both compile this one text.
  * SI units: stresses in Pa, energy density in J/m^3, volumes in m^3.
  */

@@ -33,7 +33,7 @@
  * Errors: every CUDA call is checked; a failure (no device, out of device
  * memory, a launch error) becomes a message returned through the ops
  * table's strerror and the stage's error.  No C++ exception leaves the .cu
- * file (it uses none), and nothing calls exit().
+ * files (they use none), and nothing calls exit().
  */
 #ifndef TLED_CUDA_H
 #define TLED_CUDA_H
