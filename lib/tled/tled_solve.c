@@ -476,6 +476,12 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	}
 	int have_prev = 0, nconv = 0, logged = 0;
 	double lam_old = -1, lam_mid = -1, jmin_est = 1;
+	/* automatic step: re-estimated as the tissue stiffens (below) */
+	int autodt = o->dt_estimate == TLED_DTE_EIGEN &&
+		     (o->dt <= 0 || o->dt_policy == TLED_DT_REDUCE);
+	double sfac = o->dt_safety > 0 && o->dt_safety <= 1 ? o->dt_safety : 0.8;
+	double rq_thr = 1; /* the Rayleigh-quotient watch's factor (below) */
+	s->dt_watch = 0;
 	tled_force_info_t fi = { 0 };
 	tled_cd_info_t ci = { 0 };
 	double err_est = INFINITY;
@@ -520,15 +526,23 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		}
 		if (E0 < 0)
 			E0 = fi.W;
-		/* adaptive damping: Rayleigh quotient of the last increment */
-		if (o->damping < 0 && have_prev && it > ramp + 1) {
+		/* Rayleigh quotient of the last increment du = dt v,
+		 * rq = du . (f - fprev) / du . M du (1/s^2): the adaptive
+		 * damping's omega_min^2 and the time step's watch (below) */
+		double rq = -1;
+		if (have_prev && ((o->damping < 0 && it > ramp + 1) || autodt)) {
 			double num = 0, den = 0;
 			ENG(E.rayleigh(E.ctx, dt, &num, &den));
+			if (den > 0 && num > 0)
+				rq = num / den;
+		}
+		/* adaptive damping */
+		if (o->damping < 0 && have_prev && it > ramp + 1) {
 			/* a Rayleigh quotient never falls below omega_min^2, so
 			 * the running minimum approaches it from above; as the
 			 * slowest mode comes to dominate the increments */
-			if (den > 0 && num > 0 && num / den < lam)
-				lam = num / den;
+			if (rq > 0 && rq < lam)
+				lam = rq;
 			if (s->lmax > 0 && lam < 1e-10 * s->lmax)
 				lam = 1e-10 * s->lmax;
 			if (it % 10 == 0)
@@ -645,18 +659,50 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		 * the lobulated phantom and BraTS pat0001-0002). */
 		int squeezed = isfinite(fi.Jmin) && fi.Jmin < 0.25 &&
 			       fi.Jmin < 0.7 * jmin_est;
-		if (o->dt_estimate == TLED_DTE_EIGEN &&
-		    (o->dt <= 0 || o->dt_policy == TLED_DT_REDUCE) &&
+		/* Stiffening that the smallest det F does not report (issue
+		 * 23, point 7).  The squeeze test watches one number, and the
+		 * stiffening need not be where it is: a CSF cube squeezed
+		 * through a 1000-iteration ramp raised omega_max^2 1.8x while
+		 * its least det F was still 0.28 (the tangent kappa/2 (1 +
+		 * 1/J^2) of many points, none below 0.25), the step was above
+		 * the critical one, and a point inverted at the default
+		 * dt_safety (lib/tled/tests/test_barrier.c, 2026-11-26).  The
+		 * energy blow-up of the default phantom's graded model on the
+		 * GPU host (bench/tled/results.md, "The trade, extended") was
+		 * diagnosed as the same: compressed parenchyma away from the
+		 * least det F (in the CSF) raised omega_max^2 from 2.35e7 to
+		 * 3.83e7 1/s^2 within one ramp.  The watch: rq is a Rayleigh
+		 * quotient of the stiffness between the last two states, at
+		 * most about omega_max^2, and in dynamic relaxation the slow
+		 * modes dominate the increments (rq 200-300 against
+		 * omega_max^2 4 647 1/s^2 in that cube) unless a mode the step
+		 * cannot carry grows: it is amplified every step (1.5x at
+		 * omega dt = 2.04) and soon dominates du.  rq above
+		 * (2 dt_safety / dt)^2, the omega_max^2 this step was sized
+		 * for, re-estimates now.  During a ramp the driven nodes'
+		 * motion (and the growth's) enters f - fprev but not du, so rq
+		 * bounds nothing there: a re-estimate that does not confirm
+		 * the stiffening doubles the threshold for the rest of the
+		 * call.  After the ramp rq is a lower bound of omega_max^2 as
+		 * Lanczos' largest Ritz value is, and the larger is taken. */
+		double lam_dt = 4 * sfac * sfac / (dt * dt);
+		int stiffer = autodt && rq > rq_thr * lam_dt;
+		if (autodt &&
 		    ((ramp && it == ramp + 1) || (it > ramp + 1 && it % 1000 == 0) ||
-		     squeezed)) {
+		     squeezed || stiffer)) {
 			jmin_est = fi.Jmin;
 			double lmx, lmn;
 			ENG(E.end(E.ctx, s));
 			if (!tled_solver_eigs(s, o, &lmx, &lmn) && lmx > 0) {
+				if (stiffer) {
+					s->dt_watch++;
+					if (it > ramp + 1 && rq > lmx)
+						lmx = s->lmax = rq;
+					else if (lmx < rq_thr * lam_dt)
+						rq_thr *= 2;
+				}
 				double dc = 2 / sqrt(lmx);
-				double sf = o->dt_safety > 0 && o->dt_safety <= 1
-						    ? o->dt_safety
-						    : 0.8;
+				double sf = sfac;
 				if (sf * dc < dt) {
 					dt = sf * dc;
 					s->dt_crit = s->dt_eigen = dc;

@@ -219,6 +219,8 @@ struct tled_solver {
 	double dt_eigen;    /* s, 2/sqrt(lmax) */
 	int64_t nfree;
 	int64_t contacts;   /* projections in the last relax */
+	int dt_watch;       /* re-estimates of the step the last relax made on
+	                       its Rayleigh-quotient watch (tled_relax) */
 	double *part;       /* chunked-reduction partials (tled_solve.c) */
 	int64_t *ctb;       /* contact: TLED_CT_K cached candidate boundary
 	                       nodes per node (nearest first, -1 = none) */

@@ -19,10 +19,17 @@
  *                       the solver (tled_relax): with the stage's default
  *                       law it stays upright (min det F 0.143), with the
  *                       quadratic law its middle collapses nearly
- *                       isotropically (min det F 0.016).
+ *                       isotropically (min det F 0.016);
+ *   test_squeeze_default_step  the same squeeze at the stage's default
+ *                       dt_safety (0.8): the tangent stiffens 1.8x
+ *                       within the ramp, above what the step was sized
+ *                       for, where no point's det F has fallen below
+ *                       0.25; tled_relax's Rayleigh-quotient watch
+ *                       re-estimates the step in time.
  *
- * Both fail when the barrier is removed (the log arm of tled_law.h made
- * quadratic, or the stage's default switched).  tled_cuda runs the same
+ * The first two fail when the barrier is removed (the log arm of
+ * tled_law.h made quadratic, or the stage's default switched), the third
+ * without the watch (an inverted point at iteration 556).  tled_cuda runs the same
  * file through its backend (plugins/tled_cuda/tests/test_barrier.c).
  * Run: build/tests/libtled_test_barrier
  */
@@ -40,6 +47,18 @@
 static const armstg_param_t stage_params[] = {
 #include "tled/tled_params.inc"
 };
+
+/* the stage's default of a PT_DOUBLE parameter */
+static double stage_default_num(const char *name)
+{
+	for (size_t i = 0; i < sizeof stage_params / sizeof *stage_params; i++)
+		if (strcmp(stage_params[i].name, name) == 0) {
+			assert_int_equal(stage_params[i].type, PT_DOUBLE);
+			return atof(stage_params[i].def);
+		}
+	fail_msg("the stage has no parameter %s", name);
+	return NAN;
+}
 
 /* the enum tled_vol the stage uses when a graph does not set
  * `volumetric`: the index of its default among its choices */
@@ -204,11 +223,15 @@ typedef struct sq_res {
 	int rc, converged, iters;
 	char err[512];
 	double jmin, W;
+	int watch;    /* re-estimates on the Rayleigh-quotient watch */
+	double dt0;   /* s: the step the call started with */
+	double dt;    /* s: the step at its end */
+	double dtc;   /* s: 2 / omega_max of the final state (Lanczos) */
 	int nlow;     /* points with det F < 0.05 */
 	double iso;   /* tr C / (3 J^(2/3)) at the lowest point (1: isotropic) */
 } sq_res_t;
 
-static void squeeze(int vol, sq_res_t *r)
+static void squeeze(int vol, double safety, sq_res_t *r)
 {
 	memset(r, 0, sizeof *r);
 	synth_cloud_t c = { 0 };
@@ -255,11 +278,22 @@ static void squeeze(int vol, sq_res_t *r)
 	so.tol = 1e-3 * TLED_MM;
 	so.max_iter = 20000;
 	so.ramp_iter = 1000;
-	so.dt_safety = 0.3;
+	so.dt_safety = safety;
 	tled_relax_stats_t st;
 	memset(&st, 0, sizeof st);
+	/* the step at the start: tled_relax picks it the same way */
+	double lmx, lmn;
+	tled_solver_update_active(&s);
+	assert_int_equal(tled_solver_eigs(&s, &so, &lmx, &lmn), 0);
+	r->dt0 = safety * 2 / sqrt(lmx);
 	r->rc = tled_relax(&s, &so, tgt, "squeeze", &st, r->err,
 			   sizeof r->err);
+	r->watch = s.dt_watch;
+	r->dt = st.dt;
+	if (r->rc == 0) {
+		assert_int_equal(tled_solver_eigs(&s, &so, &lmx, &lmn), 0);
+		r->dtc = 2 / sqrt(lmx);
+	}
 	r->converged = st.converged;
 	r->iters = st.iters;
 	r->W = st.W;
@@ -301,7 +335,7 @@ static void test_barrier_squeeze(void **state)
 	sq_res_t r[2];
 	for (int k = 0; k < 2; k++) {
 		int vol = k == 0 ? vdef : TLED_VOL_QUAD;
-		squeeze(vol, &r[k]);
+		squeeze(vol, 0.3, &r[k]);
 		print_message("%s law%s: rc %d, %s in %d iterations, min det F "
 			      "%.4f, %d points below 0.05, tr C / (3 J^(2/3)) "
 			      "%.3f at the lowest, W %.4g J%s%s\n",
@@ -328,11 +362,56 @@ static void test_barrier_squeeze(void **state)
 	}
 }
 
+/* 3. The step's watch.  The log squeeze above at the stage's default
+ * dt_safety (0.8) instead of 0.3: the step starts at 0.8 x 2/omega_max of
+ * the unloaded cube (0.0235 s); by iteration 553 of the 1000-iteration
+ * ramp the tangent kappa/2 (1 + 1/J^2) of the compressed points has
+ * raised omega_max^2 1.8x (4 647 -> 8 516 1/s^2, Lanczos), beyond the
+ * 1/0.8^2 = 1.56x margin, while the least det F was 0.28: the squeeze test
+ * (det F below 0.25) and the ramp's-end re-estimate had not yet run, and
+ * without the watch a point inverts at iteration 556 (measured
+ * 2026-11-26 at main d3da1e3; "the step deforms the tissue too much").
+ * With it the increment's Rayleigh quotient (200-300 1/s^2 until then)
+ * jumps to 6 304 > 4 647 at iteration 553 and the step is re-estimated
+ * then and at the squeezes after it.  Measured (tled_cpu, 1 thread):
+ * converged in 1 741 iterations (3 260 at dt_safety 0.3), min det F 0.126,
+ * no point below 0.05, the watch fired once, the step 0.0235 -> 0.0121 s,
+ * at the end 0.805 x 2/omega_max of the final state (the last estimate
+ * was of a state a little less compressed).  Asserted: converged, min
+ * det F above 0.1, no point below 0.05, the watch fired, the step
+ * shortened below 0.7 x its start and at the end below 0.85 x the final
+ * critical step, fewer than 2 500 iterations. */
+static void test_squeeze_default_step(void **state)
+{
+	TLED_TEST_REQUIRE();
+	(void)state;
+	double sf = stage_default_num("dt_safety");
+	sq_res_t r;
+	squeeze(TLED_VOL_LOG, sf, &r);
+	print_message("log law, dt_safety %.2f: rc %d, %s in %d iterations, "
+		      "min det F %.4f, %d points below 0.05, watch %d, step "
+		      "%.4g -> %.4g s (%.3f x 2/omega_max at the end)%s%s\n",
+		      sf, r.rc, r.converged ? "converged" : "not converged",
+		      r.iters, r.jmin, r.nlow, r.watch, r.dt0, r.dt,
+		      r.dtc > 0 ? r.dt / r.dtc : NAN, r.rc ? ": " : "",
+		      r.rc ? r.err : "");
+	assert_true(sf >= 0.79 && sf <= 0.81);
+	assert_int_equal(r.rc, 0);
+	assert_true(r.converged);
+	assert_true(r.jmin > 0.1);
+	assert_int_equal(r.nlow, 0);
+	assert_true(r.watch >= 1);
+	assert_true(r.dt < 0.7 * r.dt0);
+	assert_true(r.dt < 0.85 * r.dtc);
+	assert_true(r.iters < 2500);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_law_limit),
 		cmocka_unit_test(test_barrier_squeeze),
+		cmocka_unit_test(test_squeeze_default_step),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
