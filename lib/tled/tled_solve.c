@@ -19,7 +19,15 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
+/* monotonic wall clock, s (tled_solver_t.tm) */
+static double now_s(void)
+{
+	struct timespec t;
+	clock_gettime(CLOCK_MONOTONIC, &t);
+	return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
 
 static void cpu_forces(void *ctx, const tled_model_t *m, const uint8_t *ipact,
 		       const double *u, double *VP, double *f,
@@ -269,7 +277,18 @@ static int he_grow(void *ctx, double r)
 static int he_forces(void *ctx, tled_force_info_t *fi)
 {
 	host_eng_t *e = ctx;
-	e->hops->forces(e->hops->ctx, e->s->m, e->s->ipact, e->s->u, e->s->VP, e->s->f, fi);
+	tled_solver_t *s = e->s;
+	if (e->hops->forces == cpu_forces) {
+		/* the reference's two halves, timed apart */
+		double t0 = now_s();
+		tled_ip_stress_c(s->m, s->ipact, s->u, s->VP, fi);
+		double t1 = now_s();
+		tled_gather_c(s->m, s->ipact, s->VP, s->f);
+		s->tm[TLED_TM_STRESS] += t1 - t0;
+		s->tm[TLED_TM_GATHER] += now_s() - t1;
+		return 0;
+	}
+	e->hops->forces(e->hops->ctx, s->m, s->ipact, s->u, s->VP, s->f, fi);
 	return 0;
 }
 
@@ -380,6 +399,13 @@ static tled_ops_t engine_of(const tled_ops_t *ops, host_eng_t *he)
 }
 
 /* the error of a failed engine call, named with the relax call's tag */
+/* ENG with the call's wall time added to s->tm[k] */
+#define ENGT(k, call)                                                          \
+	do {                                                                   \
+		double t_ = now_s();                                           \
+		ENG(call);                                                     \
+		s->tm[k] += now_s() - t_;                                      \
+	} while (0)
 #define ENG(call)                                                              \
 	do {                                                                   \
 		if ((call) != 0) {                                             \
@@ -429,7 +455,10 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		tled_solver_impose(s);
 	}
 	double dt;
-	if (tled_solver_pick_dt(s, o, &dt, err, errsize))
+	double tpk = now_s();
+	int pick_rc = tled_solver_pick_dt(s, o, &dt, err, errsize);
+	s->tm[TLED_TM_EIGS] += now_s() - tpk;
+	if (pick_rc)
 		return -1;
 	st->dt = dt;
 	st->dt_crit = s->dt_crit;
@@ -489,6 +518,10 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	if (E.begin(E.ctx, s, ebc ? NULL : target, grow ? o->ipg_to : NULL))
 		return tled_errf(err, errsize, "%s: %s backend: %s", tag,
 			    E.name ? E.name : "cpu", E.strerror(E.ctx));
+	double tloop = now_s(), tpart0 = 0; /* the loop's time, s->tm's parts */
+	for (int k = 0; k < TLED_TM_N; k++)
+		if (k != TLED_TM_REST)
+			tpart0 += s->tm[k];
 	for (it = 1; it <= o->max_iter; it++) {
 		double r = !target && !grow ? 1 : it > ramp ? 1 : (double)it / ramp;
 		/* growth stretches (linear ramp); the strain energy they add
@@ -502,7 +535,10 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		/* prescribed displacements of driven nodes (linear ramp) */
 		if (!ebc && target && it <= ramp + 1)
 			ENG(E.drive(E.ctx, r, &Wext));
-		ENG(E.rforces(E.ctx, &fi));
+		if (E.ctx == &he)
+			ENG(E.rforces(E.ctx, &fi)); /* timed in he_forces */
+		else
+			ENGT(TLED_TM_FORCES, E.rforces(E.ctx, &fi));
 		if (fi.nbad > 0) {
 			int64_t p = fi.ip_bad;
 			E.end(E.ctx, s);
@@ -548,7 +584,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			if (it % 10 == 0)
 				c = 2 * sqrt(lam);
 		}
-		ENG(E.rstep(E.ctx, dt, c, &ci));
+		ENGT(TLED_TM_STEP, E.rstep(E.ctx, dt, c, &ci));
 		if (hostcon && (s->nc > 0 || o->contact))
 			ENG(E.end(E.ctx, s));
 		if (ebc && s->nc > 0 && ci.node_nan < 0) {
@@ -621,13 +657,14 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			 * against the brain boundary drifted out and back for
 			 * ever (10 000 iterations per growth step, phantom) */
 			int64_t nc = 0;
-			double vm = ci.vmax;
+			double vm = ci.vmax, tc0 = now_s();
 			if (hostcon)
 				he_contact(&(host_eng_t){ .s = s }, o->contact_stick ? dt : 0,
 					   &nc, &vm);
 			else
 				ENG(E.rcontact(E.ctx, o->contact_stick ? dt : 0,
 					       &nc, &vm));
+			s->tm[TLED_TM_CONTACT] += now_s() - tc0;
 			s->contacts += nc;
 			/* the outward velocity the last step gave a node in
 			 * contact was removed with it: measure the distance to
@@ -691,9 +728,11 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		    ((ramp && it == ramp + 1) || (it > ramp + 1 && it % 1000 == 0) ||
 		     squeezed || stiffer)) {
 			jmin_est = fi.Jmin;
-			double lmx, lmn;
+			double lmx, lmn, te0 = now_s();
 			ENG(E.end(E.ctx, s));
-			if (!tled_solver_eigs(s, o, &lmx, &lmn) && lmx > 0) {
+			int eigs_rc = tled_solver_eigs(s, o, &lmx, &lmn);
+			s->tm[TLED_TM_EIGS] += now_s() - te0;
+			if (!eigs_rc && lmx > 0) {
 				if (stiffer) {
 					s->dt_watch++;
 					if (it > ramp + 1 && rq > lmx)
@@ -742,6 +781,13 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		}
 		if (nconv >= 5)
 			break;
+	}
+	{
+		double tpart = 0;
+		for (int k = 0; k < TLED_TM_N; k++)
+			if (k != TLED_TM_REST)
+				tpart += s->tm[k];
+		s->tm[TLED_TM_REST] += now_s() - tloop - (tpart - tpart0);
 	}
 	if (it > o->max_iter)
 		it = o->max_iter;

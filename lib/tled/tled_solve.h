@@ -190,6 +190,14 @@ struct tled_solver_opts {
 
 void tled_solver_opts_default(tled_solver_opts_t *o);
 
+/* the parts of tled_relax's wall time (tled_solver_t.tm; the growth logs
+ * them at -v): the internal forces (on the host engine split into the
+ * integration points' stresses and the nodal gather), the central-
+ * difference update, the contact, the time-step estimates (Lanczos), and
+ * the rest of the loop (ramps, Rayleigh quotient, watchdogs, logs) */
+enum { TLED_TM_STRESS, TLED_TM_GATHER, TLED_TM_FORCES, TLED_TM_STEP,
+       TLED_TM_CONTACT, TLED_TM_EIGS, TLED_TM_REST, TLED_TM_N };
+
 #define TLED_CHOL_MAX 2500 /* largest constraint set factored densely */
 
 struct tled_solver {
@@ -227,6 +235,8 @@ struct tled_solver {
 	double *ctq, *ctgap;/* their query point (3n, m) and the distance gap
 	                       between the K-th and the first (m) */
 	double *ctd;        /* the first distance (m) */
+	double tm[TLED_TM_N]; /* s: wall time of tled_relax's parts, summed
+	                         over every call since init (TLED_TM_*) */
 };
 
 typedef struct tled_relax_stats {
