@@ -537,13 +537,15 @@ out:
 }
 
 /* z = D^-1 r + R A_c^-1 R^T r (3 components); in the singular case the
- * coarse part is projected off the null space like r */
+ * coarse part is projected off the null space like r; *tsolve += the
+ * coarse part's wall time, s */
 static void precond(const corr_ctx_t *cx, const coarse_t *C, const double *dg,
-		    int singular, const double *r, double *z)
+		    int singular, const double *r, double *z, double *tsolve)
 {
 	const tled_model_t *m = cx->m;
 	int64_t n = m->n, nc = C->nc;
 	if (nc > 0) {
+		double tc0 = omp_get_wtime();
 		/* R^T r, gathered per coarse point (coarse_transpose) */
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
 		for (int64_t c = 0; c < nc; c++) {
@@ -574,6 +576,7 @@ static void precond(const corr_ctx_t *cx, const coarse_t *C, const double *dg,
 		}
 		if (singular)
 			null_project(m, cx->con, z);
+		*tsolve += omp_get_wtime() - tc0;
 	} else {
 		memset(z, 0, (size_t)(3 * n) * sizeof *z);
 	}
@@ -667,6 +670,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 	}
 	m->corr_nc = C.nc;
 	m->t_coarse = omp_get_wtime() - t0;
+	m->t_csolve = m->t_capply = 0;
 	double *z = malloc((size_t)(3 * n) * sizeof *z);
 	if (!z) {
 		free(dg);
@@ -677,7 +681,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 	}
 	/* z = B r, rz = r . z per component */
 	double rz[3] = { 0, 0, 0 };
-	precond(&cx, &C, dg, singular, r, z);
+	precond(&cx, &C, dg, singular, r, z, &m->t_csolve);
 	for (int64_t a = 0; a < n; a++)
 		for (int c = 0; c < 3; c++) {
 			d[3 * a + c] = z[3 * a + c];
@@ -693,7 +697,9 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 				done = 0;
 		if (done)
 			break;
+		double ta0 = omp_get_wtime();
 		corr_apply(&cx, d, q, ent_ip);
+		m->t_capply += omp_get_wtime() - ta0;
 		double dq[3] = { 0, 0, 0 };
 		for (int64_t a = 0; a < n; a++)
 			for (int c = 0; c < 3; c++)
@@ -711,7 +717,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 			}
 		if (singular && it % 20 == 19)
 			null_project(m, con, r);
-		precond(&cx, &C, dg, singular, r, z);
+		precond(&cx, &C, dg, singular, r, z, &m->t_csolve);
 		for (int64_t a = 0; a < n; a++)
 			for (int c = 0; c < 3; c++) {
 				rn[c] += r[3 * a + c] * r[3 * a + c];

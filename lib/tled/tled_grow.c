@@ -351,8 +351,11 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 				      i ? ", " : "", tled_phase_name[i],
 				      m.t_phase[i]);
 		H->log(st, LOG_DEBUG, "model build phases: %s; consistency "
-		       "correction: %d CG iterations, residual %.2e", ph,
-		       m.corr_iters, m.corr_rel);
+		       "correction: %d CG iterations, residual %.2e; coarse "
+		       "level %lld unknowns, built in %.2f s, solves %.2f s, "
+		       "operator %.2f s", ph, m.corr_iters, m.corr_rel,
+		       (long long)m.corr_nc, m.t_coarse, m.t_csolve,
+		       m.t_capply);
 	}
 	/* seed clusters much denser than the other nodes give one-sided,
 	 * extrapolating MLS supports around them: the first growth steps
@@ -715,10 +718,12 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	       t_relax, tled_grow_now() - t_built - t_relax);
 	H->log(st, LOG_DEBUG, "relaxation time: stresses %.2f s, gather %.2f "
 	       "s, forces (resident backend) %.2f s, update %.2f s, contact "
-	       "%.2f s, time-step estimates %.2f s, rest of the loop %.2f s "
-	       "(%d threads)", s.tm[TLED_TM_STRESS], s.tm[TLED_TM_GATHER],
+	       "%.2f s, time-step estimates %.2f s (%lld, %lld Lanczos "
+	       "steps), rest of the loop %.2f s (%d threads)",
+	       s.tm[TLED_TM_STRESS], s.tm[TLED_TM_GATHER],
 	       s.tm[TLED_TM_FORCES], s.tm[TLED_TM_STEP], s.tm[TLED_TM_CONTACT],
-	       s.tm[TLED_TM_EIGS], s.tm[TLED_TM_REST], m.nthreads);
+	       s.tm[TLED_TM_EIGS], (long long)s.neigs, (long long)s.nlanczos,
+	       s.tm[TLED_TM_REST], m.nthreads);
 	itab = itl.oom ? NULL : iter_table(H, &itl);
 	if (!itab)
 		goto oom;

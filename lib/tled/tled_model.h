@@ -270,6 +270,8 @@ typedef struct tled_model {
 	int64_t corr_nc;    /* coarse unknowns of its preconditioner (0: none) */
 	double t_coarse;    /* s: coarse assembly + Cholesky, within the
 	                       correction's phase time */
+	double t_csolve;    /* s: the CG's coarse solves (R A_c^-1 R^T r) */
+	double t_capply;    /* s: the CG's operator applications */
 	double dt_wave;     /* h_min / c_max, s */
 	uint64_t gen;       /* build number, unique per process: a backend
 	                       that copies the model (tled_cuda) re-uploads

@@ -235,6 +235,8 @@ struct tled_solver {
 	double *ctq, *ctgap;/* their query point (3n, m) and the distance gap
 	                       between the K-th and the first (m) */
 	double *ctd;        /* the first distance (m) */
+	int64_t neigs, nlanczos; /* time-step estimates and their Lanczos
+	                            steps since init */
 	double tm[TLED_TM_N]; /* s: wall time of tled_relax's parts, summed
 	                         over every call since init (TLED_TM_*) */
 };

@@ -210,6 +210,8 @@ int tled_solver_eigs(tled_solver_t *s, const tled_solver_opts_t *o,
 	free(v0);
 	free(v1);
 	free(w);
+	s->neigs++;
+	s->nlanczos += k < kmax ? k + 1 : kmax;
 	*lmax = top;
 	*lmin = bot;
 	s->lmax = top;
