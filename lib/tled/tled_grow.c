@@ -717,7 +717,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	       "%.2f s, layer tests and bookkeeping %.2f s", t_built - t0,
 	       t_relax, tled_grow_now() - t_built - t_relax);
 	H->log(st, LOG_DEBUG, "relaxation time: stresses %.2f s, gather %.2f "
-	       "s, forces (resident backend) %.2f s, update %.2f s, contact "
+	       "s, forces (fused or resident backend) %.2f s, update %.2f s, contact "
 	       "%.2f s, time-step estimates %.2f s (%lld, %lld Lanczos "
 	       "steps), rest of the loop %.2f s (%d threads)",
 	       s.tm[TLED_TM_STRESS], s.tm[TLED_TM_GATHER],

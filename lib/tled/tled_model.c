@@ -168,6 +168,9 @@ void tled_model_free(tled_model_t *m)
 	free(m->nent);
 	free(m->gdN);
 	free(m->gip);
+	free(m->ipn32);
+	free(m->gip32);
+	tled_model_fb_free(m);
 	free(m->bnode);
 	free(m->bX);
 	free(m->bn);
@@ -283,12 +286,128 @@ static int boundary_setup(tled_model_t *m, const tled_grid_t *ng)
 	return rc;
 }
 
+void tled_model_fb_free(tled_model_t *m)
+{
+	free(m->fb_loc);
+	free(m->fb_ptr);
+	free(m->fs_ptr);
+	free(m->fs_slot);
+	free(m->fb_buf);
+	free(m->fb_w);
+	free(m->fb_i);
+	m->fb_loc = NULL;
+	m->fb_ptr = m->fs_ptr = m->fs_slot = m->fb_i = NULL;
+	m->fb_buf = m->fb_w = NULL;
+	m->fb_n = m->fb_size = 0;
+}
+
+/* ips per block of the fused forces: at least TLED_FB_MIN, at most about
+ * TLED_FB_MAXN blocks (load balance over the threads; larger blocks
+ * share more of their nodes' slots) */
+#define TLED_FB_MIN 512
+#define TLED_FB_MAXN 256
+
+/* the fused forces' blocks (tled_model.h fb_*); 0, or -1 out of memory
+ * (then none: the forces take the stress + gather path) */
+int tled_model_fb_build(tled_model_t *m)
+{
+	tled_model_fb_free(m);
+	int64_t nip = m->nip, n = m->n;
+	if (nip <= 0 || n <= 0)
+		return 0;
+	int64_t bs = (nip + TLED_FB_MAXN - 1) / TLED_FB_MAXN;
+	if (bs < TLED_FB_MIN)
+		bs = TLED_FB_MIN;
+	int64_t nb = (nip + bs - 1) / bs, ne = m->ipptr[nip];
+	m->fb_n = nb;
+	m->fb_size = bs;
+	m->fb_loc = malloc((size_t)(ne ? ne : 1) * sizeof *m->fb_loc);
+	m->fb_ptr = calloc((size_t)nb + 1, sizeof *m->fb_ptr);
+	m->fs_ptr = calloc((size_t)n + 1, sizeof *m->fs_ptr);
+	m->fb_w = malloc((size_t)(2 * nb) * sizeof *m->fb_w);
+	m->fb_i = malloc((size_t)(3 * nb) * sizeof *m->fb_i);
+	if (!m->fb_loc || !m->fb_ptr || !m->fs_ptr || !m->fb_w || !m->fb_i)
+		goto oom;
+	int fail = 0;
+	/* slots: each block's distinct nodes in first-appearance order */
+#pragma omp parallel num_threads(m->nthreads) reduction(| : fail)
+	{
+		int32_t *mark = malloc((size_t)n * sizeof *mark);
+		if (!mark)
+			fail = 1;
+		else
+			for (int64_t a = 0; a < n; a++)
+				mark[a] = -1;
+#pragma omp for schedule(dynamic, 1)
+		for (int64_t b = 0; b < nb; b++) {
+			if (!mark)
+				continue;
+			int64_t p0 = b * bs, p1 = p0 + bs < nip ? p0 + bs : nip;
+			int32_t k = 0;
+			for (int64_t e = m->ipptr[p0]; e < m->ipptr[p1]; e++) {
+				int64_t a = m->ipnode[e];
+				if (mark[a] < 0)
+					mark[a] = k++;
+				m->fb_loc[e] = mark[a];
+			}
+			m->fb_ptr[b + 1] = k;
+			for (int64_t e = m->ipptr[p0]; e < m->ipptr[p1]; e++)
+				mark[m->ipnode[e]] = -1;
+		}
+		free(mark);
+	}
+	if (fail)
+		goto oom;
+	for (int64_t b = 0; b < nb; b++)
+		m->fb_ptr[b + 1] += m->fb_ptr[b];
+	int64_t ns = m->fb_ptr[nb];
+	m->fs_slot = malloc((size_t)(ns ? ns : 1) * sizeof *m->fs_slot);
+	m->fb_buf = malloc((size_t)(3 * (ns ? ns : 1)) * sizeof *m->fb_buf);
+	if (!m->fs_slot || !m->fb_buf)
+		goto oom;
+	/* node -> slots, in block order: each block's slot k is the node of
+	 * its first entry with fb_loc k */
+	for (int64_t b = 0; b < nb; b++) {
+		int64_t p0 = b * bs, p1 = p0 + bs < nip ? p0 + bs : nip;
+		int32_t next = 0;
+		for (int64_t e = m->ipptr[p0]; e < m->ipptr[p1]; e++)
+			if (m->fb_loc[e] == next) {
+				m->fs_ptr[m->ipnode[e] + 1]++;
+				next++;
+			}
+	}
+	for (int64_t a = 0; a < n; a++)
+		m->fs_ptr[a + 1] += m->fs_ptr[a];
+	int64_t *fill = malloc((size_t)n * sizeof *fill);
+	if (!fill)
+		goto oom;
+	memcpy(fill, m->fs_ptr, (size_t)n * sizeof *fill);
+	for (int64_t b = 0; b < nb; b++) {
+		int64_t p0 = b * bs, p1 = p0 + bs < nip ? p0 + bs : nip;
+		int32_t next = 0;
+		for (int64_t e = m->ipptr[p0]; e < m->ipptr[p1]; e++)
+			if (m->fb_loc[e] == next) {
+				m->fs_slot[fill[m->ipnode[e]]++] =
+					m->fb_ptr[b] + next;
+				next++;
+			}
+	}
+	free(fill);
+	return 0;
+oom:
+	tled_model_fb_free(m);
+	return -1;
+}
+
 int tled_model_gather_index(tled_model_t *m)
 {
 	free(m->gdN);
 	free(m->gip);
+	free(m->ipn32);
+	free(m->gip32);
 	m->gdN = NULL;
 	m->gip = NULL;
+	m->ipn32 = m->gip32 = NULL;
 	if (!m->nptr || !m->nent || !m->dN || !m->entip)
 		return 0;
 	int64_t ne = m->nptr[m->n];
@@ -308,6 +427,23 @@ int tled_model_gather_index(tled_model_t *m)
 		m->gdN[3 * t] = m->dN[3 * e];
 		m->gdN[3 * t + 1] = m->dN[3 * e + 1];
 		m->gdN[3 * t + 2] = m->dN[3 * e + 2];
+	}
+	if (m->n <= INT32_MAX && m->nip <= INT32_MAX) {
+		m->ipn32 = malloc((size_t)(ne ? ne : 1) * sizeof *m->ipn32);
+		m->gip32 = malloc((size_t)(ne ? ne : 1) * sizeof *m->gip32);
+		if (!m->ipn32 || !m->gip32) {
+			free(m->ipn32);
+			free(m->gip32);
+			m->ipn32 = m->gip32 = NULL;
+			return 0; /* optional: the loops read the 64-bit ones */
+		}
+#pragma omp parallel for schedule(static) num_threads(m->nthreads)
+		for (int64_t t = 0; t < ne; t++) {
+			m->ipn32[t] = (int32_t)m->ipnode[t];
+			m->gip32[t] = (int32_t)m->gip[t];
+		}
+		if (!m->fb_loc) /* kept from the correction (tled_corr.c) */
+			tled_model_fb_build(m); /* optional as well */
 	}
 	return 0;
 }

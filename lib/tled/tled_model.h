@@ -233,6 +233,24 @@ typedef struct tled_model {
 	 * by hand (the gather then reads through nent: the same sums) */
 	double *gdN;        /* 3 per entry, 1/m */
 	int64_t *gip;       /* entries */
+	/* 32-bit copies of ipnode and gip for the host's step loops
+	 * (tled_step.c: 4 B less read per entry in each of the stress and the
+	 * gather, which are bound by memory bandwidth on 16 cores); built with
+	 * gdN when n and nip fit, else NULL (the loops read the 64-bit ones) */
+	int32_t *ipn32, *gip32;
+	/* the host's fused forces (tled_forces_fused_c): the ips in fb_n
+	 * blocks of fb_size consecutive ips (fixed by nip, not by the thread
+	 * count); block b's distinct support nodes have slots fb_ptr[b] ..
+	 * fb_ptr[b+1]-1 (first appearance in ip order), fb_loc[e] is entry
+	 * e's slot within its block; node a's slots, in block order, are
+	 * fs_slot[fs_ptr[a] .. fs_ptr[a+1]-1].  fb_buf (3 per slot), fb_w (2
+	 * per block) and fb_i (3 per block) are the evaluation's scratch.
+	 * Built with gdN when ipn32 is; NULL otherwise (stress + gather). */
+	int64_t fb_n, fb_size;
+	int32_t *fb_loc;
+	int64_t *fb_ptr, *fs_ptr, *fs_slot;
+	double *fb_buf, *fb_w;
+	int64_t *fb_i;
 
 	tled_material_t mat[MAT_N];
 	int nthreads;
@@ -312,6 +330,10 @@ double tled_weight(double r, double *dwdr);
 /* Sum over ips of V * dN_a (3n): the integration-constraint residual. */
 /* (re)build gdN and gip from nent, entip and dN: 0, or -1 out of memory */
 int tled_model_gather_index(tled_model_t *m);
+/* builds (0; -1 out of memory, then none) or frees the fused forces'
+ * blocks (without them the forces take stress + gather) */
+int tled_model_fb_build(tled_model_t *m);
+void tled_model_fb_free(tled_model_t *m);
 void tled_model_gradsum(const tled_model_t *m, double *g);
 
 /* Signed distance of y (m) beyond the brain boundary, measured along the

@@ -278,6 +278,12 @@ static int he_forces(void *ctx, tled_force_info_t *fi)
 {
 	host_eng_t *e = ctx;
 	tled_solver_t *s = e->s;
+	if (e->hops->forces == cpu_forces && s->m->fb_loc) {
+		double t0 = now_s();
+		tled_forces_fused_c(s->m, s->ipact, s->u, s->VP, s->f, fi);
+		s->tm[TLED_TM_FORCES] += now_s() - t0;
+		return 0;
+	}
 	if (e->hops->forces == cpu_forces) {
 		/* the reference's two halves, timed apart */
 		double t0 = now_s();

@@ -191,8 +191,8 @@ struct tled_solver_opts {
 void tled_solver_opts_default(tled_solver_opts_t *o);
 
 /* the parts of tled_relax's wall time (tled_solver_t.tm; the growth logs
- * them at -v): the internal forces (on the host engine split into the
- * integration points' stresses and the nodal gather), the central-
+ * them at -v): the internal forces (on the host engine fused, or split
+ * into the integration points' stresses and the nodal gather), the central-
  * difference update, the contact, the time-step estimates (Lanczos), and
  * the rest of the loop (ramps, Rayleigh quotient, watchdogs, logs) */
 enum { TLED_TM_STRESS, TLED_TM_GATHER, TLED_TM_FORCES, TLED_TM_STEP,

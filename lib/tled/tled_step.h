@@ -41,7 +41,13 @@ void tled_ip_stress_c(const tled_model_t *m, const uint8_t *ipact,
 /* f: 3n internal forces (N), all nodes */
 void tled_gather_c(const tled_model_t *m, const uint8_t *ipact,
 		   const double *VP, double *f);
-/* both: f = internal forces at u */
+/* both in one pass over the entries, per block of integration points
+ * (the model's fb_* arrays, tled_model_gather_index); the same terms */
+void tled_forces_fused_c(const tled_model_t *m, const uint8_t *ipact,
+			 const double *u, double *VP, double *f,
+			 tled_force_info_t *info);
+/* f = internal forces at u: fused when the model has blocks, else
+ * tled_ip_stress_c then tled_gather_c */
 void tled_forces_c(const tled_model_t *m, const uint8_t *ipact,
 		   const double *u, double *VP, double *f,
 		   tled_force_info_t *info);
