@@ -176,11 +176,14 @@ const armstg_plugin_t *armstg_plugin_entry(const armstg_host_t *host,
  * ports; the array itself may be NULL when there are none).  outputs:
  * d->n_outputs slots that receive new references (caller unrefs), or NULL.
  * Returns 0 or the stage's negative code; err receives the message.
- * outdir: folder for relative sink paths (NULL = ".").
+ * outdir: folder for relative sink paths (NULL = ".").  nthreads > 0: the
+ * stage's thread count (host->threads), else the default.
  */
-static inline int tu_run_in(const armstg_plugin_t *d, const char *const *params,
-			    const msg_t *const *inputs, msg_t **outputs,
-			    const char *outdir, char *err, size_t errsize)
+static inline int tu_run_in_nt(const armstg_plugin_t *d,
+			       const char *const *params,
+			       const msg_t *const *inputs, msg_t **outputs,
+			       const char *outdir, int nthreads, char *err,
+			       size_t errsize)
 {
 	char e[1024] = "";
 	int rc = 0;
@@ -188,6 +191,8 @@ static inline int tu_run_in(const armstg_plugin_t *d, const char *const *params,
 	rt_stage_t *s = stage_new(d, d->name);
 	if (!s)
 		return ARMSTG_ENOMEM;
+	if (nthreads > 0)
+		stage_set_threads(s, nthreads);
 	if (outdir)
 		stage_set_outdir(s, outdir);
 	for (int i = 0; params && params[i]; i++) {
@@ -228,6 +233,24 @@ out:
 	if (err && errsize)
 		snprintf(err, errsize, "%s", e);
 	return rc;
+}
+
+static inline int tu_run_in(const armstg_plugin_t *d, const char *const *params,
+			    const msg_t *const *inputs, msg_t **outputs,
+			    const char *outdir, char *err, size_t errsize)
+{
+	return tu_run_in_nt(d, params, inputs, outputs, outdir, 0, err,
+			    errsize);
+}
+
+/* tu_run with the stage's thread count set (host->threads; 0: the
+ * default, omp_get_max_threads()) */
+static inline int tu_run_nt(const armstg_plugin_t *d, const char *const *params,
+			    const msg_t *const *inputs, msg_t **outputs,
+			    int nthreads, char *err, size_t errsize)
+{
+	return tu_run_in_nt(d, params, inputs, outputs, NULL, nthreads, err,
+			    errsize);
 }
 
 static inline int tu_run(const armstg_plugin_t *d, const char *const *params,

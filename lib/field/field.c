@@ -156,60 +156,98 @@ void fimg_free(fimg_t *f)
 	f->d = NULL;
 }
 
-int fimg_from_vol(fimg_t *f, const vol_t *v)
+/* elements per chunk of the conversions' parallel loops (256 KiB of
+ * floats: a chunk is one thread's, whole pages) */
+#define CONV_CHUNK 65536
+
+int fimg_from_vol_nt(fimg_t *f, const vol_t *v, int nthreads)
 {
 	fgrid_t g;
 	memset(f, 0, sizeof *f);
 	if (!v || fgrid_from_vol(v, &g))
 		return ARMSTG_EINVAL;
+	if (!vol_dtype_size(v->dtype))
+		return ARMSTG_EINVAL;
 	int rc = fimg_alloc(f, &g, v->nc);
 	if (rc)
 		return rc;
-	int64_t n = fgrid_nvox(&g) * v->nc;
-	switch (v->dtype) {
-	case DT_F32:
-		memcpy(f->d, v->data, (size_t)n * sizeof(float));
-		break;
-	case DT_F64: {
-		const double *s = v->data;
-		for (int64_t e = 0; e < n; e++)
-			f->d[e] = (float)s[e];
-		break;
-	}
-	default:
-		if (!vol_dtype_size(v->dtype)) {
-			fimg_free(f);
-			return ARMSTG_EINVAL;
+	const int64_t n = fgrid_nvox(&g) * v->nc;
+	const int64_t nch = (n + CONV_CHUNK - 1) / CONV_CHUNK;
+	float *d = f->d;
+	/* element by element: the same values on any thread count */
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static)
+	for (int64_t c = 0; c < nch; c++) {
+		const int64_t e0 = c * CONV_CHUNK,
+			      e1 = e0 + CONV_CHUNK < n ? e0 + CONV_CHUNK : n;
+		switch (v->dtype) {
+		case DT_F32:
+			memcpy(d + e0, (const float *)v->data + e0,
+			       (size_t)(e1 - e0) * sizeof(float));
+			break;
+		case DT_F64: {
+			const double *s = v->data;
+			for (int64_t e = e0; e < e1; e++)
+				d[e] = (float)s[e];
+			break;
 		}
-		for (int64_t e = 0; e < n; e++)
-			f->d[e] = (float)vol_get(v, e);
+		case DT_U8: {
+			const uint8_t *s = v->data;
+			for (int64_t e = e0; e < e1; e++)
+				d[e] = (float)s[e];
+			break;
+		}
+		case DT_I16: {
+			const int16_t *s = v->data;
+			for (int64_t e = e0; e < e1; e++)
+				d[e] = (float)s[e];
+			break;
+		}
+		default:
+			for (int64_t e = e0; e < e1; e++)
+				d[e] = (float)vol_get(v, e);
+		}
+	}
+	return 0;
+}
+
+int fimg_from_vol(fimg_t *f, const vol_t *v)
+{
+	return fimg_from_vol_nt(f, v, 1);
+}
+
+int fimg_to_vol_nt(const fimg_t *f, vol_t *v, int nthreads)
+{
+	if (v->nx != f->g.nx || v->ny != f->g.ny || v->nz != f->g.nz ||
+	    v->nc != f->nc || !vol_dtype_size(v->dtype))
+		return ARMSTG_EINVAL;
+	const int64_t n = fgrid_nvox(&f->g) * f->nc;
+	const int64_t nch = (n + CONV_CHUNK - 1) / CONV_CHUNK;
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static)
+	for (int64_t c = 0; c < nch; c++) {
+		const int64_t e0 = c * CONV_CHUNK,
+			      e1 = e0 + CONV_CHUNK < n ? e0 + CONV_CHUNK : n;
+		switch (v->dtype) {
+		case DT_F32:
+			memcpy((float *)v->data + e0, f->d + e0,
+			       (size_t)(e1 - e0) * sizeof(float));
+			break;
+		case DT_F64: {
+			double *o = v->data;
+			for (int64_t e = e0; e < e1; e++)
+				o[e] = f->d[e];
+			break;
+		}
+		default:
+			for (int64_t e = e0; e < e1; e++)
+				vol_set(v, e, f->d[e]);
+		}
 	}
 	return 0;
 }
 
 int fimg_to_vol(const fimg_t *f, vol_t *v)
 {
-	if (v->nx != f->g.nx || v->ny != f->g.ny || v->nz != f->g.nz ||
-	    v->nc != f->nc)
-		return ARMSTG_EINVAL;
-	int64_t n = fgrid_nvox(&f->g) * f->nc;
-	switch (v->dtype) {
-	case DT_F32:
-		memcpy(v->data, f->d, (size_t)n * sizeof(float));
-		break;
-	case DT_F64: {
-		double *o = v->data;
-		for (int64_t e = 0; e < n; e++)
-			o[e] = f->d[e];
-		break;
-	}
-	default:
-		if (!vol_dtype_size(v->dtype))
-			return ARMSTG_EINVAL;
-		for (int64_t e = 0; e < n; e++)
-			vol_set(v, e, f->d[e]);
-	}
-	return 0;
+	return fimg_to_vol_nt(f, v, 1);
 }
 
 /* ------------------------------------------------------------------ */
@@ -218,6 +256,12 @@ int fimg_to_vol(const fimg_t *f, vol_t *v)
 
 int field_check_vol(const vol_t *v, const char *what, int nc_want,
 		    int min_dim, char *err, size_t errsize)
+{
+	return field_check_vol_nt(v, what, nc_want, min_dim, 1, err, errsize);
+}
+
+int field_check_vol_nt(const vol_t *v, const char *what, int nc_want,
+		       int min_dim, int nthreads, char *err, size_t errsize)
 {
 	fgrid_t g;
 	if (!v || v->base.magic != MSG_MAGIC || v->base.type != MSG_VOLUME) {
@@ -253,19 +297,34 @@ int field_check_vol(const vol_t *v, const char *what, int nc_want,
 		return ARMSTG_EINVAL;
 	}
 	if (v->dtype == DT_F32 || v->dtype == DT_F64) {
-		int64_t n = vol_nvox(v) * v->nc, bad = -1;
-		if (v->dtype == DT_F32) {
-			const float *d = v->data;
-			for (int64_t e = 0; e < n && bad < 0; e++)
-				if (!isfinite(d[e]))
-					bad = e;
-		} else {
-			const double *d = v->data;
-			for (int64_t e = 0; e < n && bad < 0; e++)
-				if (!isfinite(d[e]))
-					bad = e;
+		const int64_t n = vol_nvox(v) * v->nc;
+		const int64_t nch = (n + CONV_CHUNK - 1) / CONV_CHUNK;
+		/* the first bad element: the least index of any chunk's first */
+		int64_t bad = INT64_MAX;
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static) \
+	reduction(min : bad)
+		for (int64_t c = 0; c < nch; c++) {
+			const int64_t e0 = c * CONV_CHUNK,
+				      e1 = e0 + CONV_CHUNK < n ? e0 + CONV_CHUNK : n;
+			if (bad < e0)
+				continue;
+			if (v->dtype == DT_F32) {
+				const float *d = v->data;
+				for (int64_t e = e0; e < e1; e++)
+					if (!isfinite(d[e])) {
+						bad = e;
+						break;
+					}
+			} else {
+				const double *d = v->data;
+				for (int64_t e = e0; e < e1; e++)
+					if (!isfinite(d[e])) {
+						bad = e;
+						break;
+					}
+			}
 		}
-		if (bad >= 0) {
+		if (bad != INT64_MAX) {
 			int64_t nv = vol_nvox(v), r = bad % nv;
 			snprintf(err, errsize,
 				 "%s contains NaN or Inf (first at voxel "
@@ -288,9 +347,11 @@ int field_vol_all_zero(const vol_t *v)
 	return 1;
 }
 
-static int64_t count_pos(const fimg_t *f)
+static int64_t count_pos(const fimg_t *f, int nthreads)
 {
 	int64_t n = fgrid_nvox(&f->g), c = 0;
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static) \
+	reduction(+ : c)
 	for (int64_t e = 0; e < n; e++)
 		c += f->d[e] > 0;
 	return c;
@@ -300,15 +361,15 @@ int field_mask_from_vol(const vol_t *m, const char *what, int min_dim,
 			const fgrid_t *target, fimg_t *out, int nthreads,
 			char *err, size_t errsize)
 {
-	int rc = field_check_vol(m, what, 1, min_dim, err, errsize);
+	int rc = field_check_vol_nt(m, what, 1, min_dim, nthreads, err, errsize);
 	if (rc)
 		return rc;
 	fimg_t raw;
-	if ((rc = fimg_from_vol(&raw, m))) {
+	if ((rc = fimg_from_vol_nt(&raw, m, nthreads))) {
 		snprintf(err, errsize, "%s: out of memory", what);
 		return rc;
 	}
-	if (!count_pos(&raw)) {
+	if (!count_pos(&raw, nthreads)) {
 		fimg_free(&raw);
 		snprintf(err, errsize,
 			 "%s is empty (no voxel > 0): nothing to register",
@@ -328,7 +389,7 @@ int field_mask_from_vol(const vol_t *m, const char *what, int min_dim,
 				 "memory)", what);
 			return rc;
 		}
-		if (!count_pos(out)) {
+		if (!count_pos(out, nthreads)) {
 			fimg_free(out);
 			snprintf(err, errsize,
 				 "%s does not overlap the fixed volume in world "
@@ -337,6 +398,7 @@ int field_mask_from_vol(const vol_t *m, const char *what, int min_dim,
 		}
 	}
 	const int64_t nv = fgrid_nvox(&out->g);
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static)
 	for (int64_t e = 0; e < nv; e++)
 		out->d[e] = out->d[e] > 0 ? 1.0f : 0.0f;
 	return 0;
@@ -561,6 +623,143 @@ int fimg_compose(const fimg_t *outer, const fimg_t *inner, fimg_t *out,
 						d[q] + img_linf_f32(outer->d + q * nvo, &s));
 			}
 	return 0;
+}
+
+/*
+ * One voxel of fimg_compose's loop with the inner field's vector d (its
+ * floats as doubles) given: outer sampled at x + d with edge clamping, its
+ * values read as floats times osc when SCALED (the 2^-n of a scaling read
+ * on the fly: the same floats as scaled in place), out = (float)(d + sample).
+ * SCALED is a literal at every use (the loops carry no test on it: GCC
+ * outlines OpenMP regions into functions where an argument is no constant).
+ */
+#define COMPOSE_AT(SCALED, M, og, od, nvo, osc, i, j, k, d, out)             \
+	do {                                                                 \
+		double p_[3] = { (i), (j), (k) }, c_[3], dv_[3];             \
+		aff_apply((M), p_, c_);                                      \
+		aff_apply_vec((og)->w2v, (d), dv_);                          \
+		c_[0] += dv_[0];                                             \
+		c_[1] += dv_[1];                                             \
+		c_[2] += dv_[2];                                             \
+		img_linf_t s_;                                               \
+		lin_at((og), c_, IMG_EDGE_CLAMP, &s_);                       \
+		for (int q_ = 0; q_ < 3; q_++) {                             \
+			const float *f_ = (od) + q_ * (nvo);                 \
+			float v_ = 0;                                        \
+			if (SCALED) {                                        \
+				IMG_UNROLL8                                  \
+				for (int t_ = 0; t_ < 8; t_++)               \
+					v_ += s_.w[t_] * (f_[s_.o[t_]] * (osc)); \
+			} else {                                             \
+				v_ = img_linf_f32(f_, &s_);                  \
+			}                                                    \
+			(out)[q_] = (float)((d)[q_] + v_);                   \
+		}                                                            \
+	} while (0)
+
+/*
+ * y = x o x (x read times xs when SCALED), and, with S, y = s o (x o x)
+ * row by row: the row of x o x in a buffer of the thread (never written
+ * as a field), then the row of the composition (two plain loops per row;
+ * one loop holding both stencils ran 25 % slower on one thread).
+ */
+#define SQUARE_ROWS(NAME, SCALED, S)                                         \
+static int NAME(const double M[16], const double Ms[16], const fimg_t *x,    \
+		const fimg_t *s, fimg_t *y, float xs, int nthreads)          \
+{                                                                            \
+	const fgrid_t *g = &x->g;                                            \
+	const int64_t nv = fgrid_nvox(g);                                    \
+	const int64_t nvs = (S) ? fgrid_nvox(&s->g) : 0;                     \
+	const int nx = g->nx;                                                \
+	int fail = 0;                                                        \
+	_Pragma("omp parallel num_threads(NT(nthreads))")                    \
+	{                                                                    \
+		float *eb = (S) ? malloc(sizeof(float) * 3 * (size_t)nx)     \
+				: NULL;                                      \
+		if ((S) && !eb) {                                            \
+			_Pragma("omp atomic write")                          \
+			fail = 1;                                            \
+		}                                                            \
+		_Pragma("omp for schedule(static)")                          \
+		for (int64_t r = 0; r < (int64_t)g->ny * g->nz; r++) {       \
+			if ((S) && !eb)                                      \
+				continue;                                    \
+			const int j = (int)(r % g->ny), k = (int)(r / g->ny);\
+			for (int i = 0; i < nx; i++) {                       \
+				const int64_t e = r * nx + i;                \
+				double d[3];                                 \
+				float o[3];                                  \
+				for (int q = 0; q < 3; q++)                  \
+					d[q] = (SCALED) ? x->d[e + q * nv] * xs \
+							: x->d[e + q * nv];  \
+				COMPOSE_AT(SCALED, M, g, x->d, nv, xs, i, j, \
+					   k, d, o);                         \
+				if (S) {                                     \
+					eb[i] = o[0];                        \
+					eb[i + nx] = o[1];                   \
+					eb[i + 2 * nx] = o[2];               \
+				} else {                                     \
+					for (int q = 0; q < 3; q++)          \
+						y->d[e + q * nv] = o[q];     \
+				}                                            \
+			}                                                    \
+			if (!(S))                                            \
+				continue;                                    \
+			for (int i = 0; i < nx; i++) {                       \
+				const int64_t e = r * nx + i;                \
+				const double d[3] = { eb[i], eb[i + nx],     \
+						      eb[i + 2 * nx] };      \
+				float o[3];                                  \
+				COMPOSE_AT(0, Ms, &s->g, s->d, nvs, 1.0f, i, \
+					   j, k, d, o);                      \
+				for (int q = 0; q < 3; q++)                  \
+					y->d[e + q * nv] = o[q];             \
+			}                                                    \
+		}                                                            \
+		free(eb);                                                    \
+	}                                                                    \
+	return fail ? ARMSTG_ENOMEM : 0;                                     \
+}
+
+SQUARE_ROWS(square_scaled, 1, 0)
+SQUARE_ROWS(square_plain, 0, 0)
+SQUARE_ROWS(square_compose_scaled, 1, 1)
+SQUARE_ROWS(square_compose_plain, 0, 1)
+
+int fimg_compose_exp(const fimg_t *s, fimg_t *a, fimg_t *b, int n,
+		     fimg_t **res, int nthreads)
+{
+	if (!s || !a || !b || !res || s->nc != 3 || a->nc != 3 || b->nc != 3 ||
+	    n < 0 || n > 30 || !fgrid_same(&a->g, &b->g, 0) ||
+	    !fgrid_same(&a->g, &s->g, 0) || a->d == b->d || a->d == s->d ||
+	    b->d == s->d)
+		return ARMSTG_EINVAL;
+	if (n == 0) {
+		/* s o v written into v (read at its own voxel only) */
+		*res = a;
+		return fimg_compose(s, a, a, nthreads);
+	}
+	const fgrid_t *g = &a->g;
+	const float sc = (float)ldexp(1.0, -n);
+	double M[16], Ms[16];
+	aff3_mul(g->w2v, g->v2w, M);
+	aff3_mul(s->g.w2v, g->v2w, Ms);
+	fimg_t *x = a, *y = b; /* x: the current u_i, y: where u_{i+1} goes */
+	/* the first n - 1 squarings, the first one reading v scaled */
+	for (int it = 0; it < n - 1; it++) {
+		if (it == 0)
+			square_scaled(M, Ms, x, s, y, sc, nthreads);
+		else
+			square_plain(M, Ms, x, s, y, 1.0f, nthreads);
+		fimg_t *t = x;
+		x = y;
+		y = t;
+	}
+	/* the last squaring, e(x) = u(x) + u(x + u(x)), and s(x + e(x)) in
+	 * the same pass: e is never written */
+	*res = y;
+	return n == 1 ? square_compose_scaled(M, Ms, x, s, y, sc, nthreads)
+		      : square_compose_plain(M, Ms, x, s, y, 1.0f, nthreads);
 }
 
 void fimg_field_maxnorm(const fimg_t *u, double *max_mm, double *max_vox)
@@ -1079,16 +1278,16 @@ int field_warp_vol(const vol_t *src, const vol_t *u, int interp,
 	int rc;
 	if (!src || !out || src->nc != out->nc || fgrid_from_vol(out, &og))
 		return ARMSTG_EINVAL;
-	if ((rc = fimg_from_vol(&s, src)))
+	if ((rc = fimg_from_vol_nt(&s, src, nthreads)))
 		goto done;
-	if (u && (rc = fimg_from_vol(&fu, u)))
+	if (u && (rc = fimg_from_vol_nt(&fu, u, nthreads)))
 		goto done;
 	if ((rc = fimg_alloc(&o, &og, src->nc)))
 		goto done;
 	rc = fimg_resample(&s, u ? &fu : NULL, interp, (float)outside, &o,
 			   nthreads);
 	if (!rc)
-		rc = fimg_to_vol(&o, out);
+		rc = fimg_to_vol_nt(&o, out, nthreads);
 done:
 	fimg_free(&s);
 	fimg_free(&fu);
@@ -1101,11 +1300,12 @@ int field_compose_vol(const vol_t *outer, const vol_t *inner, vol_t *out,
 {
 	fimg_t a = { 0 }, b = { 0 };
 	int rc;
-	if ((rc = fimg_from_vol(&a, outer)) || (rc = fimg_from_vol(&b, inner)))
+	if ((rc = fimg_from_vol_nt(&a, outer, nthreads)) ||
+	    (rc = fimg_from_vol_nt(&b, inner, nthreads)))
 		goto done;
 	if ((rc = fimg_compose(&a, &b, &b, nthreads)))
 		goto done;
-	rc = fimg_to_vol(&b, out);
+	rc = fimg_to_vol_nt(&b, out, nthreads);
 done:
 	fimg_free(&a);
 	fimg_free(&b);
@@ -1120,11 +1320,12 @@ int field_invert_vol(const vol_t *u, vol_t *out, int max_iter,
 	int rc;
 	if (!out || fgrid_from_vol(out, &og))
 		return ARMSTG_EINVAL;
-	if ((rc = fimg_from_vol(&a, u)) || (rc = fimg_alloc(&o, &og, 3)))
+	if ((rc = fimg_from_vol_nt(&a, u, nthreads)) ||
+	    (rc = fimg_alloc(&o, &og, 3)))
 		goto done;
 	if ((rc = fimg_invert(&a, &o, max_iter, tol_mm, stats, nthreads)))
 		goto done;
-	rc = fimg_to_vol(&o, out);
+	rc = fimg_to_vol_nt(&o, out, nthreads);
 done:
 	fimg_free(&a);
 	fimg_free(&o);
@@ -1136,11 +1337,12 @@ int field_jacobian_vol(const vol_t *u, vol_t *out, field_jac_stats_t *stats,
 {
 	fimg_t a = { 0 }, o = { 0 };
 	int rc;
-	if ((rc = fimg_from_vol(&a, u)) || (rc = fimg_alloc(&o, &a.g, 1)))
+	if ((rc = fimg_from_vol_nt(&a, u, nthreads)) ||
+	    (rc = fimg_alloc(&o, &a.g, 1)))
 		goto done;
 	if ((rc = fimg_jacobian(&a, &o, stats, nthreads)))
 		goto done;
-	rc = fimg_to_vol(&o, out);
+	rc = fimg_to_vol_nt(&o, out, nthreads);
 done:
 	fimg_free(&a);
 	fimg_free(&o);

@@ -87,10 +87,13 @@ typedef struct fimg {
 
 int fimg_alloc(fimg_t *f, const fgrid_t *g, int nc); /* zero-filled */
 void fimg_free(fimg_t *f);                           /* tolerates zeroed */
-/* Copy of v converted to float (any dtype). */
+/* Copy of v converted to float (any dtype); _nt on nthreads threads (the
+ * same values: element by element). */
 int fimg_from_vol(fimg_t *f, const vol_t *v);
+int fimg_from_vol_nt(fimg_t *f, const vol_t *v, int nthreads);
 /* Write f into v (same sizes and nc; v's dtype, rounded for integers). */
 int fimg_to_vol(const fimg_t *f, vol_t *v);
+int fimg_to_vol_nt(const fimg_t *f, vol_t *v, int nthreads);
 
 /* ---- volume checks (for clear errors) ---- */
 /*
@@ -102,6 +105,9 @@ int fimg_to_vol(const fimg_t *f, vol_t *v);
  */
 int field_check_vol(const vol_t *v, const char *what, int nc_want,
 		    int min_dim, char *err, size_t errsize);
+/* the same, the NaN/Inf scan on nthreads threads (the same first voxel) */
+int field_check_vol_nt(const vol_t *v, const char *what, int nc_want,
+		       int min_dim, int nthreads, char *err, size_t errsize);
 /* 1 when every value of component-0 (all components for fields) is 0. */
 int field_vol_all_zero(const vol_t *v);
 
@@ -179,6 +185,20 @@ int fimg_smooth(fimg_t *f, double sigma_mm, int nthreads);
  */
 int fimg_compose(const fimg_t *outer, const fimg_t *inner, fimg_t *out,
 		 int nthreads);
+
+/*
+ * The diffeomorphic demons update s o exp(v) (Vercauteren et al. 2007):
+ * exp(v) by n squarings of v / 2^n, then out(x) = e(x) + s(x + e(x)),
+ * e = exp(v).  The same floats as scaling v in place by 2^-n (n >= 1),
+ * n calls fimg_compose(u, u, next) and fimg_compose(s, e, e), with the
+ * scaling read on the fly and the last squaring fused with the composition
+ * (e is never stored): two passes over the field fewer, one read of it
+ * less.  a holds v and b is scratch (both overwritten, one grid with s,
+ * nc 3, three different buffers); *res gets the one (a or b) that holds
+ * the result.  n = 0: out = s o v in a.  0 or ARMSTG_EINVAL.
+ */
+int fimg_compose_exp(const fimg_t *s, fimg_t *a, fimg_t *b, int n,
+		     fimg_t **res, int nthreads);
 
 /*
  * Exponential of a stationary velocity field v by scaling and squaring

@@ -81,6 +81,14 @@
  *   does not apply to a correlation gradient).  The update then goes
  *   through the same diffeomorphic composition and field smoothing.  The
  *   convergence test watches 1 - mean CC in place of the MSE.
+ *
+ * Threads: every result (the field, the warped image, each figure of the
+ * table but its seconds) is the same bits on any thread count: sums over
+ * voxels (the cost, the mean update) are taken per row of the level grid,
+ * then over the rows in order, and everything else is per voxel or a
+ * maximum (test_threads).  s o exp(u) is one pass of lib/field
+ * (fimg_compose_exp: the scaling read on the fly, the last squaring fused
+ * with the composition, the same floats as the separate steps).
  */
 #include <math.h>
 #include <stddef.h>
@@ -247,11 +255,13 @@ static double now_s(void)
 	return t.tv_sec + 1e-9 * t.tv_nsec;
 }
 
-/* min/max of an image; 0 when constant */
-static void minmax(const fimg_t *f, float *lo, float *hi)
+/* min/max of an image (exact on any thread count) */
+static void minmax(const fimg_t *f, float *lo, float *hi, int nt)
 {
 	int64_t n = fgrid_nvox(&f->g);
 	float a = f->d[0], b = f->d[0];
+#pragma omp parallel for num_threads(nt) schedule(static) \
+	reduction(min : a) reduction(max : b)
 	for (int64_t e = 1; e < n; e++) {
 		if (f->d[e] < a)
 			a = f->d[e];
@@ -262,10 +272,11 @@ static void minmax(const fimg_t *f, float *lo, float *hi)
 	*hi = b;
 }
 
-static void rescale(fimg_t *f, float lo, float hi)
+static void rescale(fimg_t *f, float lo, float hi, int nt)
 {
 	int64_t n = fgrid_nvox(&f->g);
 	float s = 1.0f / (hi - lo);
+#pragma omp parallel for num_threads(nt) schedule(static)
 	for (int64_t e = 0; e < n; e++)
 		f->d[e] = (f->d[e] - lo) * s;
 }
@@ -277,21 +288,37 @@ static void rescale(fimg_t *f, float lo, float hi)
  */
 #define NQ 65
 #define NBIN 4096
-static void quantiles(const fimg_t *f, float lo, float hi, double *q)
+static int quantiles(const fimg_t *f, float lo, float hi, double *q, int nt)
 {
 	int64_t n = fgrid_nvox(&f->g), cnt = 0;
+	/* the mean in one sequential sum (about 10 ms at 1 mm; the bits the
+	 * quantiles have always had) */
 	double mean = 0;
 	for (int64_t e = 0; e < n; e++)
 		mean += f->d[e];
 	mean /= (double)n;
 	int64_t *h = calloc(NBIN, sizeof *h);
+	if (!h)
+		return ARMSTG_ENOMEM;
 	double w = (hi - lo) / NBIN;
-	for (int64_t e = 0; e < n; e++) {
-		if (!(f->d[e] > mean))
-			continue;
-		int b = (int)((f->d[e] - lo) / w);
-		h[b < 0 ? 0 : b >= NBIN ? NBIN - 1 : b]++;
-		cnt++;
+	/* counts: integers, the same on any thread count */
+#pragma omp parallel num_threads(nt)
+	{
+		int64_t hl[NBIN] = { 0 }, cl = 0;
+#pragma omp for schedule(static) nowait
+		for (int64_t e = 0; e < n; e++) {
+			if (!(f->d[e] > mean))
+				continue;
+			int b = (int)((f->d[e] - lo) / w);
+			hl[b < 0 ? 0 : b >= NBIN ? NBIN - 1 : b]++;
+			cl++;
+		}
+#pragma omp critical(demons_quantiles)
+		{
+			for (int b = 0; b < NBIN; b++)
+				h[b] += hl[b];
+			cnt += cl;
+		}
 	}
 	int64_t acc = 0;
 	int b = 0;
@@ -309,19 +336,21 @@ static void quantiles(const fimg_t *f, float lo, float hi, double *q)
 	}
 	q[0] = q[0] < mean ? mean : q[0];
 	free(h);
+	return 0;
 }
 
 /* map moving intensities onto the fixed ones: piecewise linear between
  * matching quantiles, the background (min) onto the fixed min */
-static void match_hist(fimg_t *m, float mlo, float mhi, float flo, float fhi,
-		       const fimg_t *fx)
+static int match_hist(fimg_t *m, float mlo, float mhi, float flo, float fhi,
+		      const fimg_t *fx, int nt)
 {
 	double qm[NQ + 1], qf[NQ + 1];
-	quantiles(m, mlo, mhi, qm + 1);
-	quantiles(fx, flo, fhi, qf + 1);
+	if (quantiles(m, mlo, mhi, qm + 1, nt) || quantiles(fx, flo, fhi, qf + 1, nt))
+		return ARMSTG_ENOMEM;
 	qm[0] = mlo;
 	qf[0] = flo;
 	int64_t n = fgrid_nvox(&m->g);
+#pragma omp parallel for num_threads(nt) schedule(static)
 	for (int64_t e = 0; e < n; e++) {
 		double v = m->d[e];
 		int k = 0;
@@ -345,6 +374,7 @@ static void match_hist(fimg_t *m, float mlo, float mhi, float flo, float fhi,
 		}
 		m->d[e] = (float)out;
 	}
+	return 0;
 }
 
 /* resample a (field or image) src onto grid g, edge-clamped */
@@ -456,40 +486,55 @@ static int resample_clamp(const fimg_t *src, const fgrid_t *g, fimg_t *out,
 	return 0;
 }
 
+/* dst[0..n-1] = src, in chunks over the threads */
+static void copy_par(float *dst, const float *src, int64_t n, int nt)
+{
+	const int64_t ch = 65536, nch = (n + ch - 1) / ch;
+#pragma omp parallel for num_threads(nt) schedule(static)
+	for (int64_t c = 0; c < nch; c++)
+		memcpy(dst + c * ch, src + c * ch,
+		       sizeof(float) * (size_t)(c * ch + ch < n ? ch : n - c * ch));
+}
+
 /*
  * crop=true: the bounding box lo..hi (voxels, inclusive) of mask > 0 on
  * its grid, grown by margin voxels and clipped to the grid; 1 when it is
  * smaller than the grid, 0 when the whole grid is needed (or the mask is
  * empty).
  */
-static int mask_box(const fimg_t *m, int margin, int lo[3], int hi[3])
+static int mask_box(const fimg_t *m, int margin, int lo[3], int hi[3], int nt)
 {
 	const fgrid_t *g = &m->g;
 	const int n[3] = { g->nx, g->ny, g->nz };
-	for (int a = 0; a < 3; a++) {
-		lo[a] = n[a];
-		hi[a] = -1;
-	}
-	for (int k = 0; k < n[2]; k++)
-		for (int j = 0; j < n[1]; j++) {
-			const float *row = m->d + ((int64_t)k * n[1] + j) * n[0];
-			int i0 = -1, i1 = -1;
-			for (int i = 0; i < n[0]; i++)
-				if (row[i] > 0) {
-					if (i0 < 0)
-						i0 = i;
-					i1 = i;
-				}
-			if (i0 < 0)
-				continue;
-			const int idx[3][2] = { { i0, i1 }, { j, j }, { k, k } };
-			for (int a = 0; a < 3; a++) {
-				if (idx[a][0] < lo[a])
-					lo[a] = idx[a][0];
-				if (idx[a][1] > hi[a])
-					hi[a] = idx[a][1];
+	int l0 = n[0], l1 = n[1], l2 = n[2], h0 = -1, h1 = -1, h2 = -1;
+	/* extremes: the same on any thread count */
+#pragma omp parallel for num_threads(nt) schedule(static) \
+	reduction(min : l0, l1, l2) reduction(max : h0, h1, h2)
+	for (int64_t r = 0; r < (int64_t)n[1] * n[2]; r++) {
+		const int j = (int)(r % n[1]), k = (int)(r / n[1]);
+		const float *row = m->d + r * n[0];
+		int i0 = -1, i1 = -1;
+		for (int i = 0; i < n[0]; i++)
+			if (row[i] > 0) {
+				if (i0 < 0)
+					i0 = i;
+				i1 = i;
 			}
-		}
+		if (i0 < 0)
+			continue;
+		l0 = i0 < l0 ? i0 : l0;
+		h0 = i1 > h0 ? i1 : h0;
+		l1 = j < l1 ? j : l1;
+		h1 = j > h1 ? j : h1;
+		l2 = k < l2 ? k : l2;
+		h2 = k > h2 ? k : h2;
+	}
+	lo[0] = l0;
+	lo[1] = l1;
+	lo[2] = l2;
+	hi[0] = h0;
+	hi[1] = h1;
+	hi[2] = h2;
 	if (hi[0] < 0)
 		return 0;
 	int64_t nbox = 1;
@@ -600,7 +645,26 @@ typedef struct level {
 	 * stencil (no force, no window sum reads W outside the mask) */
 	int wlo[3], whi[3];
 	float *sums; /* metric=lncc: the 6 window sums, one level's buffer */
+	/* per row (j, k) of the level grid: partial sums and counts, added
+	 * in row order afterwards, so that the costs and statistics are the
+	 * same bits on any thread count */
+	double *rsum;
+	int64_t *rcnt;
 } level_t;
+
+/* the rows' sums and counts in row order */
+static void rows_total(const level_t *L, double *sum, int64_t *cnt)
+{
+	const int64_t nr = (int64_t)L->g.ny * L->g.nz;
+	double s = 0;
+	int64_t n = 0;
+	for (int64_t r = 0; r < nr; r++) {
+		s += L->rsum[r];
+		n += L->rcnt[r];
+	}
+	*sum = s;
+	*cnt = n;
+}
 
 static void level_free(level_t *L)
 {
@@ -611,6 +675,10 @@ static void level_free(level_t *L)
 	fimg_free(&L->WM);
 	free(L->sums);
 	L->sums = NULL;
+	free(L->rsum);
+	L->rsum = NULL;
+	free(L->rcnt);
+	L->rcnt = NULL;
 }
 
 /*
@@ -634,12 +702,11 @@ static void compute_force(const demons_priv_t *p, const level_t *L,
 	const float *FM = L->FM.d, *WM = L->WM.d;
 	const int sym = p->force == FORCE_SYMMETRIC;
 	const double thr = p->diff_threshold;
-	double s2 = 0;
-	int64_t nu = 0;
-#pragma omp parallel for num_threads(nt) schedule(static) \
-	reduction(+ : s2, nu)
-	for (int k = 0; k < nz; k++)
-		for (int j = 0; j < ny; j++)
+#pragma omp parallel for num_threads(nt) schedule(static)
+	for (int64_t r = 0; r < (int64_t)ny * nz; r++) {
+		const int j = (int)(r % ny), k = (int)(r / ny);
+		double s2 = 0;
+		int64_t nu = 0;
 			for (int i = 0; i < nx; i++) {
 				int64_t e = ((int64_t)k * ny + j) * nx + i;
 				U->d[e] = U->d[e + nv] = U->d[e + 2 * nv] = 0;
@@ -694,8 +761,10 @@ static void compute_force(const demons_priv_t *p, const level_t *L,
 				U->d[e + nv] = (float)(f * J[1]);
 				U->d[e + 2 * nv] = (float)(f * J[2]);
 			}
-	*ssd = s2;
-	*nused = nu;
+		L->rsum[r] = s2;
+		L->rcnt[r] = nu;
+	}
+	rows_total(L, ssd, nused);
 }
 
 /*
@@ -736,12 +805,11 @@ static int compute_force_lncc(const demons_priv_t *p, const level_t *L,
 		for (int c = 0; c < 3; c++)
 			Li[a][c] = g->w2v[a * 4 + c];
 	const double nmin = 0.25 * pow(2 * p->radius + 1, 3);
-	double sc = 0;
-	int64_t nu = 0;
-#pragma omp parallel for num_threads(nt) schedule(static) \
-	reduction(+ : sc, nu)
-	for (int k = 0; k < nz; k++)
-		for (int j = 0; j < ny; j++)
+#pragma omp parallel for num_threads(nt) schedule(static)
+	for (int64_t r = 0; r < (int64_t)ny * nz; r++) {
+		const int j = (int)(r % ny), k = (int)(r / ny);
+		double sc = 0;
+		int64_t nu = 0;
 			for (int i = 0; i < nx; i++) {
 				int64_t e = ((int64_t)k * ny + j) * nx + i;
 				U->d[e] = U->d[e + nv] = U->d[e + 2 * nv] = 0;
@@ -792,60 +860,71 @@ static int compute_force_lncc(const demons_priv_t *p, const level_t *L,
 					U->d[e + c * nv] = (float)(coef * sw);
 				}
 			}
-	*score = sc;
-	*nused = nu;
+		L->rsum[r] = sc;
+		L->rcnt[r] = nu;
+	}
+	rows_total(L, score, nused);
 	return 0;
 }
 
-static void update_stats(const fimg_t *U, double *mean, double *max, int nt)
+/*
+ * One pass over the update U (nc 3): scaled in place by scale (when
+ * scale != 1: the LNCC step), then its mean length over nonzero vectors and
+ * largest length (mm), and its largest length in voxels of its grid (the
+ * number of squarings of the exponential): what the table reports and
+ * fimg_field_maxnorm gives, in one read.  Sums per row of the level grid
+ * (U's grid), then over the rows in order; maxima exact.
+ */
+static void update_stats(fimg_t *U, const level_t *L, float scale,
+			 double *mean, double *max, double *max_vox, int nt)
 {
-	const int64_t nv = fgrid_nvox(&U->g);
-	double s = 0, m = 0;
-	int64_t n = 0;
+	const fgrid_t *g = &U->g;
+	const int64_t nv = fgrid_nvox(g);
+	double m = 0, mv = 0;
 #pragma omp parallel for num_threads(nt) schedule(static) \
-	reduction(+ : s, n) reduction(max : m)
-	for (int64_t e = 0; e < nv; e++) {
-		double a = U->d[e], b = U->d[e + nv], c = U->d[e + 2 * nv];
-		double r = sqrt(a * a + b * b + c * c);
-		if (r > 0) {
-			s += r;
-			n++;
+	reduction(max : m, mv)
+	for (int64_t r = 0; r < (int64_t)g->ny * g->nz; r++) {
+		double s = 0;
+		int64_t n = 0;
+		for (int64_t e = r * g->nx; e < (r + 1) * g->nx; e++) {
+			if (scale != 1.0f) {
+				U->d[e] *= scale;
+				U->d[e + nv] *= scale;
+				U->d[e + 2 * nv] *= scale;
+			}
+			double d[3] = { U->d[e], U->d[e + nv], U->d[e + 2 * nv] }, c[3];
+			double q = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+			if (q > 0) {
+				s += q;
+				n++;
+			}
+			if (q > m)
+				m = q;
+			aff_apply_vec(g->w2v, d, c);
+			double v2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+			if (v2 > mv)
+				mv = v2;
 		}
-		if (r > m)
-			m = r;
+		L->rsum[r] = s;
+		L->rcnt[r] = n;
 	}
+	double s;
+	int64_t n;
+	rows_total(L, &s, &n);
 	*mean = n ? s / (double)n : 0;
 	*max = m;
+	*max_vox = sqrt(mv);
 }
 
-/* scaling and squaring into B using A as scratch (A is destroyed);
- * on return *res points at the buffer holding exp(u) (A or B). */
-static void exp_inplace(fimg_t *A, fimg_t *B, fimg_t **res, int nt)
+/* squarings of the exponential: the update's largest vector, mvox voxels,
+ * scaled to at most half a voxel (with max_step 1 the LNCC update comes out
+ * as 1 + 1e-8 voxel and must not cost a second squaring) */
+static int squarings(double mvox)
 {
-	double mvox;
-	fimg_field_maxnorm(A, NULL, &mvox);
 	int n = 0;
-	/* the force bounds |u| by max_step: with max_step 1, |u| comes out
-	 * as 1 + 1e-8 voxel and must not cost a second squaring */
 	while (mvox / ldexp(1.0, n) > 0.5 * (1 + 1e-4) && n < 30)
 		n++;
-	if (n == 0) {
-		*res = A;
-		return;
-	}
-	const int64_t ne = fgrid_nvox(&A->g) * 3;
-	const float s = (float)ldexp(1.0, -n);
-#pragma omp parallel for num_threads(nt) schedule(static)
-	for (int64_t e = 0; e < ne; e++)
-		A->d[e] *= s;
-	fimg_t *a = A, *b = B;
-	for (int i = 0; i < n; i++) {
-		fimg_compose(a, a, b, nt);
-		fimg_t *t = a;
-		a = b;
-		b = t;
-	}
-	*res = a;
+	return n;
 }
 
 static int add_row(armstg_stage_t *st, tab_t *t, int level, int it,
@@ -886,11 +965,11 @@ static int demons_process(armstg_stage_t *st)
 	int rc = 0;
 	const double t0 = now_s();
 
-	if (field_check_vol(vf, "fixed volume", 1, 2, err, sizeof err) ||
-	    field_check_vol(vm, "moving volume", 1, 2, err, sizeof err))
+	if (field_check_vol_nt(vf, "fixed volume", 1, 2, nt, err, sizeof err) ||
+	    field_check_vol_nt(vm, "moving volume", 1, 2, nt, err, sizeof err))
 		return FAIL(ARMSTG_EINVAL, "%s", err);
-	if (vinit && field_check_vol(vinit, "initial_field", 3, 2, err,
-				     sizeof err))
+	if (vinit && field_check_vol_nt(vinit, "initial_field", 3, 2, nt, err,
+					sizeof err))
 		return FAIL(ARMSTG_EINVAL, "%s", err);
 
 	fimg_t F0 = { 0 }, M0 = { 0 }, FM0 = { 0 }, MM0 = { 0 }, init = { 0 };
@@ -900,7 +979,8 @@ static int demons_process(armstg_stage_t *st)
 	tab_t *tab = NULL;
 	vol_t *ofield = NULL, *owarp = NULL;
 
-	if ((rc = fimg_from_vol(&F0, vf)) || (rc = fimg_from_vol(&M0, vm))) {
+	if ((rc = fimg_from_vol_nt(&F0, vf, nt)) ||
+	    (rc = fimg_from_vol_nt(&M0, vm, nt))) {
 		rc = FAIL(rc, "out of memory reading the inputs");
 		goto out;
 	}
@@ -912,16 +992,16 @@ static int demons_process(armstg_stage_t *st)
 		goto out;
 	}
 	float flo, fhi, mlo, mhi;
-	minmax(&F0, &flo, &fhi);
-	minmax(&M0, &mlo, &mhi);
+	minmax(&F0, &flo, &fhi, nt);
+	minmax(&M0, &mlo, &mhi, nt);
 	if ((fhi > flo) && (mhi > mlo) && p->normalize == NORM_LOCAL) {
 		if ((rc = local_normalise(&F0, p->local_sigma, nt)) ||
 		    (rc = local_normalise(&M0, p->local_sigma, nt))) {
 			rc = FAIL(rc, "out of memory (normalize=local)");
 			goto out;
 		}
-		minmax(&F0, &flo, &fhi);
-		minmax(&M0, &mlo, &mhi);
+		minmax(&F0, &flo, &fhi, nt);
+		minmax(&M0, &mlo, &mhi, nt);
 	}
 	if (!(fhi > flo) || !(mhi > mlo)) {
 		int fx = !(fhi > flo);
@@ -933,12 +1013,15 @@ static int demons_process(armstg_stage_t *st)
 		goto out;
 	}
 	if (p->normalize == NORM_HIST || p->normalize == NORM_LOCAL) {
-		match_hist(&M0, mlo, mhi, flo, fhi, &F0);
-		rescale(&F0, flo, fhi);
-		rescale(&M0, flo, fhi);
+		if ((rc = match_hist(&M0, mlo, mhi, flo, fhi, &F0, nt))) {
+			rc = FAIL(rc, "out of memory (normalize)");
+			goto out;
+		}
+		rescale(&F0, flo, fhi, nt);
+		rescale(&M0, flo, fhi, nt);
 	} else if (p->normalize == NORM_MINMAX) {
-		rescale(&F0, flo, fhi);
-		rescale(&M0, mlo, mhi);
+		rescale(&F0, flo, fhi, nt);
+		rescale(&M0, mlo, mhi, nt);
 	}
 	if ((vfm && (rc = field_mask_from_vol(vfm, "fixed_mask", 2, &F0.g, &FM0,
 					      nt, err, sizeof err))) ||
@@ -947,7 +1030,7 @@ static int demons_process(armstg_stage_t *st)
 		rc = FAIL(rc, "%s", err);
 		goto out;
 	}
-	if (vinit && (rc = fimg_from_vol(&init, vinit))) {
+	if (vinit && (rc = fimg_from_vol_nt(&init, vinit, nt))) {
 		rc = FAIL(rc, "out of memory (initial_field)");
 		goto out;
 	}
@@ -998,8 +1081,8 @@ static int demons_process(armstg_stage_t *st)
 			rc = FAIL(rc, "out of memory (level %d)", l);
 			goto out;
 		}
-		memcpy(Fs.d, F0.d, sizeof(float) * fgrid_nvox(&F0.g));
-		memcpy(L.M.d, M0.d, sizeof(float) * fgrid_nvox(&M0.g));
+		copy_par(Fs.d, F0.d, fgrid_nvox(&F0.g), nt);
+		copy_par(L.M.d, M0.d, fgrid_nvox(&M0.g), nt);
 		fimg_smooth(&Fs, sig_f, nt);
 		fimg_smooth(&L.M, sig_m, nt);
 		fimg_resample(&Fs, NULL, FIELD_LINEAR, 0, &L.F, nt);
@@ -1033,7 +1116,7 @@ static int demons_process(armstg_stage_t *st)
 					   (int)ceil(3 * sg_fluid / spmin) +
 					   (int)ceil(3 * sg_field / spmin) + 2;
 			int hi[3];
-			if (mask_box(&L.FM, margin, crop_lo, hi)) {
+			if (mask_box(&L.FM, margin, crop_lo, hi, nt)) {
 				fgrid_t gc;
 				sub_grid(&g, crop_lo, hi, &gc);
 				if ((rc = crop_img(&L.F, crop_lo, &gc, nt)) ||
@@ -1051,6 +1134,11 @@ static int demons_process(armstg_stage_t *st)
 			rc = FAIL(rc, "out of memory (mask)");
 			goto out;
 		}
+		if (!(L.rsum = malloc(sizeof(double) * (size_t)g.ny * g.nz)) ||
+		    !(L.rcnt = malloc(sizeof(int64_t) * (size_t)g.ny * g.nz))) {
+			rc = FAIL(ARMSTG_ENOMEM, "out of memory (level %d)", l + 1);
+			goto out;
+		}
 		if (p->metric == METRIC_LNCC &&
 		    !(L.sums = malloc(sizeof(float) * 6 * (size_t)fgrid_nvox(&g)))) {
 			rc = FAIL(ARMSTG_ENOMEM, "out of memory (lncc sums, level %d)",
@@ -1061,7 +1149,7 @@ static int demons_process(armstg_stage_t *st)
 		 * sum is zero outside the fixed mask, the gradients read one
 		 * voxel beyond it; outside the block W stays NaN (outside the
 		 * moving image) and WM 0 */
-		if (!L.FM.d || !mask_box(&L.FM, 1, L.wlo, L.whi)) {
+		if (!L.FM.d || !mask_box(&L.FM, 1, L.wlo, L.whi, nt)) {
 			L.wlo[0] = L.wlo[1] = L.wlo[2] = 0;
 			L.whi[0] = g.nx - 1;
 			L.whi[1] = g.ny - 1;
@@ -1069,6 +1157,7 @@ static int demons_process(armstg_stage_t *st)
 		}
 		{
 			const int64_t nvl = fgrid_nvox(&g);
+#pragma omp parallel for num_threads(nt) schedule(static)
 			for (int64_t e = 0; e < nvl; e++)
 				L.W.d[e] = NAN;
 		}
@@ -1148,6 +1237,7 @@ static int demons_process(armstg_stage_t *st)
 			double mse = ssd / (double)nused;
 			if (sg_fluid > 0)
 				fimg_smooth(&A, sg_fluid, nt);
+			float sc = 1.0f;
 			if (lncc) {
 				/* the step: the level's first update is scaled to
 				 * max_step voxels at its largest, later ones by
@@ -1160,21 +1250,16 @@ static int demons_process(armstg_stage_t *st)
 				if (mvox > 0) {
 					if (!(lscale > 0))
 						lscale = p->max_step / mvox;
-					const float sc = (float)fmin(lscale,
-								     p->max_step / mvox);
-					const int64_t ne = fgrid_nvox(&g) * 3;
-#pragma omp parallel for num_threads(nt) schedule(static)
-					for (int64_t e = 0; e < ne; e++)
-						A.d[e] *= sc;
+					sc = (float)fmin(lscale, p->max_step / mvox);
 				}
 			}
-			double mu, mx;
-			update_stats(&A, &mu, &mx, nt);
+			double mu, mx, mvox;
+			update_stats(&A, &L, sc, &mu, &mx, &mvox, nt);
 			if (p->update == UPD_DIFFEO) {
+				/* s <- s o exp(u): scaling and squaring fused
+				 * with the composition (lib/field) */
 				fimg_t *v;
-				exp_inplace(&A, &B, &v, nt);
-				/* s <- s o v, written into v, then swapped */
-				fimg_compose(&S, v, v, nt);
+				fimg_compose_exp(&S, &A, &B, squarings(mvox), &v, nt);
 				fimg_t t = S;
 				S = *v;
 				*v = t;
@@ -1230,19 +1315,19 @@ static int demons_process(armstg_stage_t *st)
 		rc = FAIL(ARMSTG_ENOMEM, "out of memory (outputs)");
 		goto out;
 	}
-	fimg_to_vol(&S, ofield);
+	fimg_to_vol_nt(&S, ofield, nt);
 	ofield->intent = 1007;
 	{
 		/* warped: the original (unnormalised) moving volume */
 		fimg_t Mr = { 0 }, Wr = { 0 };
-		if ((rc = fimg_from_vol(&Mr, vm)) ||
+		if ((rc = fimg_from_vol_nt(&Mr, vm, nt)) ||
 		    (rc = fimg_alloc(&Wr, &F0.g, 1))) {
 			fimg_free(&Mr);
 			rc = FAIL(rc, "out of memory (warped)");
 			goto out;
 		}
 		fimg_resample(&Mr, &S, FIELD_LINEAR, 0, &Wr, nt);
-		fimg_to_vol(&Wr, owarp);
+		fimg_to_vol_nt(&Wr, owarp, nt);
 		fimg_free(&Mr);
 		fimg_free(&Wr);
 	}

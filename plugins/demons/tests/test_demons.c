@@ -802,6 +802,72 @@ static void test_convergence(void **state)
 	reg_free(&o0);
 }
 
+/*
+ * The result does not depend on the thread count: the field, the warped
+ * image and every figure of the table (but the seconds) bit for bit on 1,
+ * 2, 3 and 4 threads (3 splits the slices unevenly), for the two settings
+ * of the graphs: SSD demons on masks with the convergence stop (the
+ * tumour-to-atlas stage) and LNCC with both masks (the final
+ * registration).  Sums over voxels run in a fixed order (per slice, then
+ * over slices), so the costs the convergence test compares are the same
+ * bits on any thread count.
+ */
+static int same_bits(const vol_t *a, const vol_t *b)
+{
+	return a->nx == b->nx && a->ny == b->ny && a->nz == b->nz &&
+	       a->nc == b->nc && a->dtype == b->dtype &&
+	       !memcmp(a->data, b->data,
+		       (size_t)vol_nvox(a) * a->nc * vol_dtype_size(a->dtype));
+}
+
+static void test_threads(void **state)
+{
+	fixture_t *fx = *state;
+	char e[1024];
+	vol_t *mm = make_img(fx->moving->affine, FX + 4, FY - 2, FZ + 2, 0, 1);
+	const char *ssd[] = { "levels=3", "iterations=30,20,10", "normalize=minmax",
+			      "sigma_field=3", NULL };
+	const char *lncc[] = { "levels=3", "iterations=40,30,10", "metric=lncc",
+			       "normalize=minmax", "sigma_unit=voxel",
+			       "sigma_fluid=3", "sigma_field=1.5", NULL };
+	for (int m = 0; m < 2; m++) {
+		reg_out_t o[4] = { 0 };
+		for (int t = 0; t < 4; t++) {
+			const msg_t *in[5] = { &fx->fixed->base, &fx->moving->base,
+					       &fx->fmask->base, &mm->base, NULL };
+			msg_t *out[3] = { 0 };
+			assert_int_equal(tu_run_nt(TU_PLUGIN(), m ? lncc : ssd, in,
+						   out, t + 1, e, sizeof e), 0);
+			o[t].field = (vol_t *)out[OUT_FIELD];
+			o[t].warped = (vol_t *)out[OUT_WARPED];
+			o[t].tab = (tab_t *)out[OUT_TABLE];
+		}
+		const tab_t *t0 = o[0].tab;
+		for (int t = 1; t < 4; t++) {
+			assert_true(same_bits(o[0].field, o[t].field));
+			assert_true(same_bits(o[0].warped, o[t].warped));
+			assert_int_equal(o[t].tab->nrows, t0->nrows);
+			assert_int_equal(o[t].tab->ncols, t0->ncols);
+			for (int c = 0; c < t0->ncols; c++) {
+				const tab_col_t *a = &t0->col[c];
+				const tab_col_t *b = tab_col(o[t].tab, a->name);
+				assert_non_null(b);
+				if (a->type != TAB_NUM || !strcmp(a->name, "seconds"))
+					continue;
+				for (int64_t r = 0; r < t0->nrows; r++)
+					assert_memory_equal(&a->num[r], &b->num[r],
+							    sizeof(double));
+			}
+		}
+		print_message("%s: %lld iterations, %s %.9g, the same bits on 1-4 "
+			      "threads\n", m ? "lncc" : "ssd", (long long)t0->nrows,
+			      m ? "lncc" : "mse", tab_col(t0, m ? "lncc" : "mse")->num[t0->nrows - 2]);
+		for (int t = 0; t < 4; t++)
+			reg_free(&o[t]);
+	}
+	msg_unref(&mm->base);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -818,6 +884,7 @@ int main(void)
 		cmocka_unit_test(test_sigma_image_voxel),
 		cmocka_unit_test(test_smooth_subvoxel),
 		cmocka_unit_test(test_convergence),
+		cmocka_unit_test(test_threads),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
