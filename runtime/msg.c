@@ -94,6 +94,9 @@ vol_t *vol_convert(const vol_t *v, int dtype)
 		return NULL;
 	c->intent = v->intent;
 	int64_t n = vol_nvox(v) * v->nc;
+	/* element by element on the calling stage's threads (its OpenMP
+	 * default, stage_process): the same volume on any count */
+#pragma omp parallel for schedule(static) if (n > 65536)
 	for (int64_t e = 0; e < n; e++)
 		vol_set(c, e, vol_get(v, e));
 	return c;

@@ -35,7 +35,9 @@
  * Writing
  *   - 3-D (nc == 1) or 5-D (nx,ny,nz,1,nc); data type kept; voxel units mm;
  *     scl_slope 1, scl_inter 0; native byte order; .nii.gz when the path ends
- *     in .gz.  3-component volumes (fields) get intent NIFTI_INTENT_VECTOR and
+ *     in .gz: gzip level 6 in members of 1 MiB compressed in parallel
+ *     (vol_write_nifti_nt; one stream to every gzip reader, the same file
+ *     on any thread count; write_gz_members).  3-component volumes (fields) get intent NIFTI_INTENT_VECTOR and
  *     LPS vectors (x, y negated): the convention antsApplyTransforms, ITK and
  *     Slicer read.  Other volumes keep vol_t.intent.
  *   - sform = the affine, sform_code NIFTI_XFORM_SCANNER_ANAT (1).  The qform
@@ -800,8 +802,150 @@ static int zwrite(znzFile f, const void *p, size_t n)
 	return 0;
 }
 
+/*
+ * .nii.gz in parallel: the file's bytes (header, extension, data with the
+ * vectors' x and y negated) cut into pieces of GZ_PIECE bytes, each
+ * compressed by one thread into a complete gzip member (deflate level 6,
+ * zlib's default, as nibabel and ITK write), the members written in order.
+ * A gzip file may hold several members, read as one stream (RFC 1952 2.2;
+ * gzip, zlib's gzread, hence niftilib and ITK, Python's gzip hence
+ * nibabel; pigz writes files so): the same bytes come back.  The pieces
+ * and the compression do not depend on the thread count, so neither does
+ * the file.  A piece of 1 MiB costs under 0.1 % of compression against one
+ * stream (a member forgets the 32 KiB window of the previous one).
+ */
+#define GZ_PIECE ((size_t)1 << 20)
+
+typedef struct nii_bytes {
+	const unsigned char *head; /* header, extender, extension */
+	size_t nhead;
+	const vol_t *v;
+	size_t es;                 /* bytes per element */
+	int64_t nneg;              /* elements negated (x, y of vectors) */
+	size_t total;
+} nii_bytes_t;
+
+/* bytes [off, off + len) of the file into out */
+static void nii_fill(const nii_bytes_t *b, size_t off, size_t len,
+		     unsigned char *out)
+{
+	size_t o = 0;
+	if (off < b->nhead) {
+		size_t k = b->nhead - off < len ? b->nhead - off : len;
+		memcpy(out, b->head + off, k);
+		o = k;
+	}
+	if (o == len)
+		return;
+	/* data bytes [d0, d0 + n); pieces and the header keep elements whole
+	 * (nhead and GZ_PIECE are multiples of 16) */
+	const size_t d0 = off + o - b->nhead, n = len - o;
+	memcpy(out + o, (const unsigned char *)b->v->data + d0, n);
+	const int64_t e0 = (int64_t)(d0 / b->es), ne = (int64_t)(n / b->es);
+	for (int64_t e = 0; e < ne && e0 + e < b->nneg; e++) {
+		if (b->es == sizeof(float)) {
+			float x;
+			memcpy(&x, out + o + (size_t)e * b->es, sizeof x);
+			x = -x;
+			memcpy(out + o + (size_t)e * b->es, &x, sizeof x);
+		} else {
+			double x;
+			memcpy(&x, out + o + (size_t)e * b->es, sizeof x);
+			x = -x;
+			memcpy(out + o + (size_t)e * b->es, &x, sizeof x);
+		}
+	}
+}
+
+/* one piece as a gzip member into *out (malloc'd), *nout bytes; 0 or -1 */
+static int gz_member(const unsigned char *in, size_t n, unsigned char **out,
+		     size_t *nout)
+{
+	z_stream z;
+	memset(&z, 0, sizeof z);
+	*out = NULL;
+	if (deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) !=
+	    Z_OK)
+		return -1;
+	size_t cap = deflateBound(&z, (uLong)n);
+	unsigned char *o = malloc(cap);
+	if (!o) {
+		deflateEnd(&z);
+		return -1;
+	}
+	z.next_in = (Bytef *)in;
+	z.avail_in = (uInt)n;
+	z.next_out = o;
+	z.avail_out = (uInt)cap;
+	int rc = deflate(&z, Z_FINISH);
+	*nout = z.total_out;
+	deflateEnd(&z);
+	if (rc != Z_STREAM_END) {
+		free(o);
+		return -1;
+	}
+	*out = o;
+	return 0;
+}
+
+/* write the file's bytes to f as gzip members, nthreads at a time */
+static int write_gz_members(FILE *f, const nii_bytes_t *b, int nthreads)
+{
+	const size_t npiece = (b->total + GZ_PIECE - 1) / GZ_PIECE;
+	const int nt = nthreads > 0 ? nthreads : 1;
+	/* a batch of pieces at a time: memory 2 MiB a piece in flight */
+	const size_t batch = 4 * (size_t)nt;
+	unsigned char **zo = calloc(batch, sizeof *zo);
+	size_t *zn = calloc(batch, sizeof *zn);
+	int bad = !zo || !zn;
+	for (size_t p0 = 0; !bad && p0 < npiece; p0 += batch) {
+		const size_t np = npiece - p0 < batch ? npiece - p0 : batch;
+		int fail = 0;
+#pragma omp parallel num_threads(nt)
+		{
+			unsigned char *in = malloc(GZ_PIECE);
+			if (!in) {
+#pragma omp atomic write
+				fail = 1;
+			}
+#pragma omp for schedule(static, 1)
+			for (size_t q = 0; q < np; q++) {
+				if (!in)
+					continue;
+				const size_t off = (p0 + q) * GZ_PIECE;
+				const size_t len = b->total - off < GZ_PIECE
+							   ? b->total - off
+							   : GZ_PIECE;
+				nii_fill(b, off, len, in);
+				if (gz_member(in, len, &zo[q], &zn[q])) {
+#pragma omp atomic write
+					fail = 1;
+				}
+			}
+			free(in);
+		}
+		for (size_t q = 0; q < np; q++) {
+			if (!fail && !bad && fwrite(zo[q], 1, zn[q], f) != zn[q])
+				bad = 1;
+			free(zo[q]);
+			zo[q] = NULL;
+		}
+		if (fail)
+			bad = 1;
+	}
+	free(zo);
+	free(zn);
+	return bad ? -1 : 0;
+}
+
 int vol_write_nifti(const char *path, const vol_t *v, char *err,
 		    size_t errsize)
+{
+	return vol_write_nifti_nt(path, v, 1, err, errsize);
+}
+
+int vol_write_nifti_nt(const char *path, const vol_t *v, int nthreads,
+		       char *err, size_t errsize)
 {
 	if (err && errsize)
 		err[0] = 0;
@@ -915,8 +1059,36 @@ int vol_write_nifti(const char *path, const vol_t *v, char *err,
 
 	int gz = ends_with(path, ".gz");
 	errno = 0;
-	/* gzip level 6 (zlib's default), as nibabel and ITK write */
-	znzFile f = znzopen(path, gz ? "wb6" : "wb", gz);
+	if (gz) {
+		/* gzip members compressed in parallel (write_gz_members) */
+		unsigned char head[348 + 4 + sizeof ext];
+		memcpy(head, &h, 348);
+		memcpy(head + 348, extender, 4);
+		memcpy(head + 352, ext, (size_t)esize);
+		const size_t es = vol_dtype_size(v->dtype);
+		const nii_bytes_t b = {
+			.head = head, .nhead = 352 + (size_t)esize, .v = v,
+			.es = es, .nneg = is_vec ? 2 * vol_nvox(v) : 0,
+			.total = 352 + (size_t)esize +
+				 (size_t)vol_nvox(v) * v->nc * es };
+		FILE *fp = fopen(path, "wb");
+		if (!fp)
+			return ferr(err, errsize, ARMSTG_EIO,
+				    "cannot create '%s': %s", path,
+				    strerror(errno ? errno : EIO));
+		int bad = write_gz_members(fp, &b, nthreads);
+		int saved = errno;
+		if (fclose(fp) != 0)
+			bad = 1;
+		if (bad) {
+			unlink(path);
+			return ferr(err, errsize, ARMSTG_EIO,
+				    "cannot write '%s': %s", path,
+				    strerror(saved ? saved : EIO));
+		}
+		return 0;
+	}
+	znzFile f = znzopen(path, "wb", 0);
 	if (znz_isnull(f))
 		return ferr(err, errsize, ARMSTG_EIO, "cannot create '%s': %s",
 			    path, strerror(errno ? errno : EIO));

@@ -55,6 +55,10 @@ int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize);
 /* writes exactly path (callers wanting atomicity write a temp name) */
 int vol_write_nifti(const char *path, const vol_t *v, char *err,
 		    size_t errsize);
+/* the same, .nii.gz compressed on nthreads threads (the same file bytes on
+ * any thread count) */
+int vol_write_nifti_nt(const char *path, const vol_t *v, int nthreads,
+		       char *err, size_t errsize);
 int ps_read_h5(const char *path, ps_t **out, char *err, size_t errsize);
 int ps_write_h5(const char *path, const ps_t *p, char *err, size_t errsize);
 int tab_read_file(const char *path, tab_t **out, char *err, size_t errsize);

@@ -246,8 +246,10 @@ static int h_vol_read(armstg_stage_t *st, const char *path, vol_t **out)
 	return 0;
 }
 
-typedef int (*writer_fn)(const char *path, const void *obj, char *err,
-			 size_t errsize);
+typedef int (*writer_fn)(const char *path, const void *obj, int nthreads,
+			 char *err, size_t errsize);
+
+static int h_threads(armstg_stage_t *st);
 
 /* Every sink write: a temporary name in the target folder, renamed when the
  * run succeeds (see h_out_path). */
@@ -258,7 +260,7 @@ static int write_via_tmp(armstg_stage_t *st, const char *path, writer_fn w,
 	int rc = h_out_path(st, path, tmp, sizeof tmp);
 	if (rc)
 		return rc;
-	rc = w(tmp, obj, e, sizeof e);
+	rc = w(tmp, obj, h_threads(st), e, sizeof e);
 	if (rc) {
 		unlink(tmp);
 		return fail_tmp(st, rc, e, tmp);
@@ -266,17 +268,18 @@ static int write_via_tmp(armstg_stage_t *st, const char *path, writer_fn w,
 	return 0;
 }
 
-static int w_vol(const char *p, const void *o, char *e, size_t n)
+/* .nii.gz compressed on the stage's threads */
+static int w_vol(const char *p, const void *o, int nt, char *e, size_t n)
 {
-	return vol_write_nifti(p, o, e, n);
+	return vol_write_nifti_nt(p, o, nt, e, n);
 }
 
-static int w_ps(const char *p, const void *o, char *e, size_t n)
+static int w_ps(const char *p, const void *o, int nt, char *e, size_t n)
 {
 	return ps_write_h5(p, o, e, n);
 }
 
-static int w_tab(const char *p, const void *o, char *e, size_t n)
+static int w_tab(const char *p, const void *o, int nt, char *e, size_t n)
 {
 	return tab_write_file(p, o, e, n);
 }
@@ -766,7 +769,17 @@ int stage_process(rt_stage_t *s, const msg_t *const *inputs)
 	}
 	drop_outputs(s);
 	s->pub.in = inputs;
+#ifdef _OPENMP
+	/* the stage's share of the threads is also the OpenMP default of
+	 * what it runs (a parallel region without num_threads, the host's
+	 * conversions): no stage of a --jobs run takes every core */
+	const int nt_prev = omp_get_max_threads();
+	omp_set_num_threads(s->threads > 0 ? s->threads : 1);
+#endif
 	int rc = d->process(&s->pub);
+#ifdef _OPENMP
+	omp_set_num_threads(nt_prev);
+#endif
 	s->pub.in = NULL;
 	if (rc) {
 		if (rc > 0)
