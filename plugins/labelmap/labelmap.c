@@ -139,11 +139,17 @@ static int check_finite(armstg_stage_t *st, const vol_t *v, const char *what)
 	int64_t n = vol_nvox(v) * v->nc;
 	if (v->dtype != DT_F32 && v->dtype != DT_F64)
 		return 0;
+	/* the first bad element on any thread count (the least index) */
+	int64_t bad = INT64_MAX;
+#pragma omp parallel for num_threads(st->host->threads(st)) \
+	schedule(static) reduction(min : bad)
 	for (int64_t e = 0; e < n; e++)
-		if (!isfinite(vol_get(v, e)))
-			return st->host->fail(st, ARMSTG_EINVAL,
-					      "%s contains NaN or Inf (element "
-					      "%lld)", what, (long long)e);
+		if (e < bad && !isfinite(vol_get(v, e)))
+			bad = e;
+	if (bad != INT64_MAX)
+		return st->host->fail(st, ARMSTG_EINVAL,
+				      "%s contains NaN or Inf (element %lld)",
+				      what, (long long)bad);
 	return 0;
 }
 
@@ -540,6 +546,7 @@ static int process(armstg_stage_t *st)
 		if (!o)
 			return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
 		uint8_t *d = o->data;
+#pragma omp parallel for num_threads(st->host->threads(st)) schedule(static)
 		for (int64_t e = 0; e < nv; e++) {
 			d[e] = (uint8_t)lset_has_value(&ls, vol_get(in, e));
 		}
@@ -561,6 +568,9 @@ static int process(armstg_stage_t *st)
 			return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
 		int16_t *d = o->data;
 		int64_t painted = 0;
+		/* voxel by voxel: the same volume on any thread count */
+#pragma omp parallel for num_threads(st->host->threads(st)) \
+	schedule(static) collapse(2) reduction(+ : painted)
 		for (int k = 0; k < in->nz; k++)
 			for (int j = 0; j < in->ny; j++)
 				for (int i = 0; i < in->nx; i++) {
