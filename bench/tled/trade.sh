@@ -68,7 +68,8 @@
 # semi-automatic mask (BraTS); dice_tumour = grown tumour in patient space
 # against the tumour core; jac_min = least det J of the total warp in the
 # brain; ncc_band = the [tune] score; error = the first error line of a
-# failed run, the growth's saturation warnings, or a note.
+# failed run, the growth's saturation warnings, how often the solver's
+# step watch shortened the time step (tled_relax), or a note.
 set -u
 ORIG=$PWD
 SELF=$(cd "$(dirname "$0")" && pwd)/$(basename "$0")
@@ -159,6 +160,9 @@ one() {
 		sub(/ of the step, where.*/, " of the step", s)
 		sub(/ \(estimated error/, " (error", s)
 		if (++nsat <= 3) sat = sat (sat == "" ? "" : " | ") substr(s, 1, 160) }
+	k == "log" && /^\[grow@/ && /the time step re-estimated [0-9]+ time/ {
+		n = split($0, a, " ")
+		for (i = 1; i < n; i++) if (a[i] == "re-estimated") nw += a[i+1] }
 	(k == "log" || k == "evallog") && /error:|failed/ && first == "" {
 		first = $0; gsub(/\t/, " ", first); first = substr(first, 1, 300) }
 	k == "run" && $1 == "grow" { gs = $4 }
@@ -173,6 +177,7 @@ one() {
 		if (st != "ok" && first != "") addnote(first)
 		if (st == "failed" && first == "") addnote("exit status " rc)
 		if (sat != "") addnote(sat)
+		if (nw > 0) addnote("time step re-estimated " nw "x by the step watch")
 		if (note != "") addnote(note)
 		gsub(/[\t\r\n]/, " ", err)
 		print c, kind, sp, rn, rf, mx, be, pm, th, st, num(nodes), num(bs),

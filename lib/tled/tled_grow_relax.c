@@ -44,11 +44,12 @@
 static int relax_sub(tled_solver_t *s, const tled_solver_opts_t *so,
 		     const double *tgt, const char *tag, tled_relax_stats_t *rs,
 		     char *err, size_t errsize, int depth, int *nsub,
-		     double *done)
+		     double *done, int *nwatch)
 {
 	tled_iter_log_t *lg = so->itlog;
 	int64_t mark = lg ? lg->nrow : 0;
 	int r = tled_relax(s, so, tgt, tag, rs, err, errsize);
+	*nwatch += s->dt_watch;
 	if (!r)
 		*done += 1.0 / (double)(1 << depth);
 	/* the iteration log keeps the calls whose result stands (a failed
@@ -86,12 +87,13 @@ static int relax_sub(tled_solver_t *s, const tled_solver_opts_t *so,
 	snprintf(tag2, sizeof tag2, "%s, half %d/2 (depth %d)", tag, 1, depth + 1);
 	tled_relax_stats_t r1;
 	(*nsub)++;
-	r = relax_sub(s, so, mid, tag2, &r1, err, errsize, depth + 1, nsub, done);
+	r = relax_sub(s, so, mid, tag2, &r1, err, errsize, depth + 1, nsub, done,
+		      nwatch);
 	if (!r) {
 		snprintf(tag2, sizeof tag2, "%s, half %d/2 (depth %d)", tag, 2,
 			 depth + 1);
 		r = relax_sub(s, so, tgt, tag2, rs, err, errsize, depth + 1, nsub,
-			      done);
+			      done, nwatch);
 		rs->iters += r1.iters;
 		rs->jmin = isnan(rs->jmin) ? r1.jmin : fmin(rs->jmin, r1.jmin);
 	} else {
@@ -109,11 +111,18 @@ int tled_grow_relax_step(armstg_stage_t *st, tled_solver_t *s,
 {
 	const armstg_host_t *H = st->host;
 	memset(rs, 0, sizeof *rs);
-	int nsub = 0;
+	int nsub = 0, nwatch = 0;
 	double done = 0;
 	if (so->itlog)
 		so->itlog->it0 = 0;
-	int r = relax_sub(s, so, tgt, tag, rs, err, errsize, 0, &nsub, &done);
+	int r = relax_sub(s, so, tgt, tag, rs, err, errsize, 0, &nsub, &done,
+			  &nwatch);
+	/* the step's watch (tled_relax): stiffening that no det F reported */
+	if (nwatch > 0)
+		H->log(st, LOG_INFO, "%s: the time step re-estimated %d time%s "
+		       "as the increments' Rayleigh quotient rose above what "
+		       "it was sized for (now %.4g s)", tag, nwatch,
+		       nwatch > 1 ? "s" : "", rs->dt);
 	if (nsub > 0 && !r)
 		H->log(st, LOG_INFO, "%s: an integration point inverted; "
 		       "replayed in %d sub-steps (min det F %.3f)", tag,
