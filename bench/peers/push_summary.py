@@ -6,7 +6,10 @@ depth, and the depth each [tune] rule picks.
 Reads OUT/dD/real.tsv (the error against the truth on the phantoms, the
 ventricle MSD on the real cases), the run's own tables OUT/dD/CASE/armstg/
 metrics.tsv (ncc band, jac_min mask), masseffect.tsv (stage `mass`: the
-growth's shift of the atlas ventricles away from the tumour, `shift grown`)
+growth's shift of the atlas ventricles away from the tumour, `shift grown`,
+and the ventricle it moved into the patient's tumour + edema, `intrusion
+ventricles`; from remass/masseffect.tsv when bench/peers/remass.py made one
+for a run older than that row)
 and masseffect_registered.tsv (stage `mass_reg`: the registered atlas's
 ventricle Dice, `dice ventricles`), and OUT/prep/real.tsv (direct demons).
 
@@ -28,6 +31,7 @@ import sys
 #        [(table, metric, structure, op, number), ...] = require)
 NCC = ("metrics", "ncc", "band", "max", 0.0003)
 FOLD = ("metrics", "jac_min", "mask", ">", 0)
+INTRUSION = float(os.environ.get("INTRUSION", "0.1"))  # ml
 RULES = {
     "ncc, 1.5-9 (as shipped before)": ((1.5, 3, 4.5, 6, 7.5, 9),) + NCC + ([FOLD],),
     "ncc, 0-9": (None,) + NCC + ([FOLD],),
@@ -37,6 +41,12 @@ RULES = {
         [FOLD, ("mass", "shift", "grown", ">=", 0)],),
     "mass_reg Dice, 0-9": (None, "mass_reg", "dice", "ventricles", "max", 0.002,
                            [("mass_reg", "jac_min", "field", ">", 0)]),
+    # graphs/armstg.ini since 2026-11-26: no depth that moves the atlas's
+    # ventricles into the patient's tumour + edema
+    "ncc, 0-9, intrusion <= %g ml" % INTRUSION: (None,) + NCC + (
+        [FOLD, ("mass", "intrusion", "ventricles", "<=", INTRUSION)],),
+    "ncc, 0-6, intrusion <= %g ml" % INTRUSION: ((0, 1.5, 3, 4.5, 6),) + NCC + (
+        [FOLD, ("mass", "intrusion", "ventricles", "<=", INTRUSION)],),
 }
 FILES = dict(metrics="metrics.tsv", mass="masseffect.tsv",
              mass_reg="masseffect_registered.tsv")
@@ -102,11 +112,13 @@ def main():
                 continue
             a = os.path.join(out, n, case, meth)
             T = {k: table(os.path.join(a, f)) for k, f in FILES.items()}
+            if os.path.exists(os.path.join(a, "remass", FILES["mass"])):
+                T["mass"] = table(os.path.join(a, "remass", FILES["mass"]))
             T["row"] = r
             cases.setdefault(case, {})[d] = T
     cols = ["case", "depth_mm", "err_band_mm", "vs_direct (err; real: MSD)", "vent_msd_mm",
             "ncc_band", "jac_min_mask", "mass_reg_dice", "shift_grown_mm",
-            "jac_min_growth"]
+            "jac_min_growth", "intrusion_ml"]
     if md:
         print("| " + " | ".join(cols) + " |")
         print("|" + "---|" * len(cols))
@@ -127,7 +139,8 @@ def main():
                  "%.3f" % T["metrics"].get(("jac_min", "mask"), float("nan")),
                  "%.4f" % T["mass_reg"].get(("dice", "ventricles"), float("nan")),
                  "%.2f" % T["mass"].get(("shift", "grown"), float("nan")),
-                 "%.3f" % T["mass"].get(("jac_min", "field"), float("nan"))]
+                 "%.3f" % T["mass"].get(("jac_min", "field"), float("nan")),
+                 "%.3f" % T["mass"].get(("intrusion", "ventricles"), float("nan"))]
             print(("| " + " | ".join(f) + " |") if md else "\t".join(f))
     print()
     head = ["case", "direct demons"] + list(RULES)

@@ -201,6 +201,36 @@ static int jac_min(const vol_t *f, const vol_t *mask, int nthreads,
 	return rc == ARMSTG_ENOMEM ? rc : 0;
 }
 
+/* The atlas's ventricles inside the patient's tumour + edema (`exclude`,
+ * where the patient's own images show no ventricle), before and after the
+ * growth, ml: `volume ventricles_in_exclude`, `volume grown_in_exclude`
+ * (with `grown`) and `intrusion ventricles` = grown - atlas, the ventricle
+ * a push moved INTO the patient's tumour and edema (> 0) or out of it
+ * (< 0).  A push that stretches the soft ventricles into the region where
+ * the patient has tumour (BraTS 2013 pat0003: the ventricle next to the
+ * tumour is compressed in the patient and widened by the growth) makes the
+ * atlas less like the patient there; graphs/armstg.ini's [tune] drops such
+ * depths (require).  0 or a negative code. */
+static int rows_in_exclude(ctx_t *c, const vol_t *vent, const vol_t *gv,
+			   const vol_t *ex, double dv)
+{
+	int64_t nv = vol_nvox(vent), na = 0, ng = 0;
+	for (int64_t e = 0; e < nv; e++)
+		if (vol_get(ex, e) > 0) {
+			na += vol_get(vent, e) > 0;
+			ng += gv && vol_get(gv, e) > 0;
+		}
+	int rc = row(c, "volume", "ventricles_in_exclude", (double)na * dv,
+		     "ml");
+	if (!rc && gv)
+		rc = row(c, "volume", "grown_in_exclude", (double)ng * dv,
+			 "ml");
+	if (!rc && gv)
+		rc = row(c, "intrusion", "ventricles", (double)(ng - na) * dv,
+			 "ml");
+	return rc;
+}
+
 static int process(armstg_stage_t *st)
 {
 	const priv_t *p = st->priv;
@@ -280,6 +310,10 @@ static int process(armstg_stage_t *st)
 	const vol_t *fl = (const vol_t *)st->in[IN_FLAIR];
 	const vol_t *ex = (const vol_t *)st->in[IN_EXCL];
 	const vol_t *br = (const vol_t *)st->in[IN_BRAIN];
+	if (ex && (rc = rows_in_exclude(&c, vent,
+					(const vol_t *)st->in[IN_GROWN], ex,
+					dv)))
+		goto out;
 	if (t1 || fl) {
 		int64_t nv = vol_nvox(vent);
 		cand = malloc((size_t)nv);

@@ -17,6 +17,9 @@
  *     Dice with the patient's found ventricles than the true ones (the
  *     [tune] score, goal max);
  *   - jac_min field of a linear field is its exact determinant;
+ *   - the ventricles in the excluded region (tumour + edema) before and
+ *     after a push, and their difference (intrusion), counted exactly on
+ *     boxes;
  *   - the real-anatomy phantom (SRI24 with pat0001's tumour, 5 mm; needs
  *     ../shared/data): measured shift within 1 mm of the true one, and
  *     the true ventricles overlap the found ones better than the atlas's;
@@ -201,6 +204,82 @@ static void test_jacobian(void **state)
 	msg_unref(&f->base);
 }
 
+/* value of row (metric, structure) of a masseffect table, NAN if absent */
+static double tab_value(const tab_t *tb, const char *metric,
+			const char *structure)
+{
+	const tab_col_t *m = tab_col(tb, "metric"), *s = tab_col(tb, "structure"),
+			*v = tab_col(tb, "value");
+	for (int64_t r = 0; r < tb->nrows; r++)
+		if (!strcmp(m->str[r], metric) && !strcmp(s->str[r], structure))
+			return v->num[r];
+	return NAN;
+}
+
+/* 1 in the box [i0, i1] x [j0, j1] x [k0, k1] (voxel indices) */
+static void box(vol_t *v, int i0, int i1, int j0, int j1, int k0, int k1)
+{
+	for (int k = k0; k <= k1; k++)
+		for (int j = j0; j <= j1; j++)
+			for (int i = i0; i <= i1; i++)
+				((uint8_t *)v->data)[vol_idx(v, i, j, k)] = 1;
+}
+
+/* The ventricles inside the patient's tumour + edema, counted exactly on a
+ * 2 mm grid (8 mm^3 = 0.008 ml a voxel): ventricles i 2-5, j k 2-5 (64
+ * voxels), exclude i 4-7, j k 2-5: 2 x 4 x 4 = 32 voxels in it, 0.256 ml;
+ * a `grown` moved one voxel toward the exclude region (i 3-6) has 48
+ * there, 0.384 ml: intrusion +0.128 ml; moved away (i 1-4) 16, 0.128 ml:
+ * intrusion -0.128 ml.  Without `grown`, only the atlas's row. */
+static void test_intrusion(void **state)
+{
+	(void)state;
+	static const double LPS2[16] = { -2, 0, 0, 10, 0, -2, 0, 30, 0, 0, 2,
+					 -5, 0, 0, 0, 1 };
+	vol_t *a = vol_new(10, 10, 10, 1, DT_U8, LPS2);
+	vol_t *t = vol_new(10, 10, 10, 1, DT_U8, LPS2);
+	vol_t *x = vol_new(10, 10, 10, 1, DT_U8, LPS2);
+	vol_t *in = vol_new(10, 10, 10, 1, DT_U8, LPS2);
+	vol_t *away = vol_new(10, 10, 10, 1, DT_U8, LPS2);
+	box(a, 2, 5, 2, 5, 2, 5);
+	box(t, 7, 8, 3, 4, 3, 4);
+	box(x, 4, 7, 2, 5, 2, 5);
+	box(in, 3, 6, 2, 5, 2, 5);
+	box(away, 1, 4, 2, 5, 2, 5);
+	const vol_t *grown[3] = { in, away, NULL };
+	const double want[3] = { 0.128, -0.128, NAN };
+	for (int c = 0; c < 3; c++) {
+		const msg_t *ins_[8] = { &a->base, &t->base, NULL, NULL,
+					 grown[c] ? &grown[c]->base : NULL,
+					 &x->base, NULL, NULL };
+		msg_t *out[2] = { NULL, NULL };
+		char err[1024];
+		if (tu_run(TU_PLUGIN(), NULL, ins_, out, err, sizeof err))
+			fail_msg("%s", err);
+		const tab_t *tb = (const tab_t *)out[0];
+		double va = tab_value(tb, "volume", "ventricles_in_exclude");
+		double vg = tab_value(tb, "volume", "grown_in_exclude");
+		double in_ = tab_value(tb, "intrusion", "ventricles");
+		print_message("grown %s: atlas %.3f ml, grown %.3f ml in the "
+			      "excluded region, intrusion %+.3f ml\n",
+			      c == 0 ? "toward" : c == 1 ? "away" : "absent",
+			      va, vg, in_);
+		assert_float_equal(va, 0.256, 1e-12);
+		if (grown[c]) {
+			assert_float_equal(in_, want[c], 1e-12);
+			assert_float_equal(vg, 0.256 + want[c], 1e-12);
+		} else {
+			assert_true(isnan(in_) && isnan(vg));
+		}
+		msg_unref(out[0]);
+	}
+	msg_unref(&a->base);
+	msg_unref(&t->base);
+	msg_unref(&x->base);
+	msg_unref(&in->base);
+	msg_unref(&away->base);
+}
+
 /* The real-anatomy phantom: SRI24 with BraTS 2013 pat0001's manual tumour,
  * the phantom's own elastic mass effect (5 mm), no inter-subject
  * deformation, patient and atlas on the atlas's grid (orientation LAS). */
@@ -309,6 +388,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_known_shift),
 		cmocka_unit_test(test_jacobian),
+		cmocka_unit_test(test_intrusion),
 		cmocka_unit_test(test_real_anatomy),
 		cmocka_unit_test(test_refusals),
 	};
