@@ -131,6 +131,7 @@ static void field_grad(const ls_incl_grid_t *g, const double *v, double *gv)
 	const int *n = g->n;
 	double inv[16];
 	aff_invert(g->A, inv);
+#pragma omp parallel for schedule(static)
 	for (int e = 0; e < n[2]; e++)
 		for (int b = 0; b < n[1]; b++)
 			for (int a = 0; a < n[0]; a++) {
@@ -175,9 +176,12 @@ static double mean_dist(const double *p, const double *q, int64_t n)
  * point, with the deformation gradient J (row-major 3x3 per point);
  * returns the mean speed |v| / vbar at the midpoints */
 static double flow_step(const samp_t *SV, const samp_t *SG, double ivb,
-			double dt, double *p, double *J, int64_t n)
+			double dt, double *p, double *J, double *spd, int64_t n)
 {
-	double sp = 0;
+	/* point by point on the stage's threads (its OpenMP default); the
+	 * speeds summed afterwards in point order: the same bits on any
+	 * thread count */
+#pragma omp parallel for schedule(static)
 	for (int64_t i = 0; i < n; i++) {
 		double *x = p + 3 * i, v1[3], xm[3], v2[3], G[9], Jn[9];
 		sample(SV, x, v1);
@@ -197,8 +201,11 @@ static double flow_step(const samp_t *SV, const samp_t *SG, double ivb,
 		memcpy(Ji, Jn, sizeof Jn);
 		for (int c = 0; c < 3; c++)
 			x[c] -= dt * ivb * v2[c];
-		sp += ivb * sqrt(v2[0] * v2[0] + v2[1] * v2[1] + v2[2] * v2[2]);
+		spd[i] = ivb * sqrt(v2[0] * v2[0] + v2[1] * v2[1] + v2[2] * v2[2]);
 	}
+	double sp = 0;
+	for (int64_t i = 0; i < n; i++)
+		sp += spd[i];
 	return n ? sp / (double)n : 0;
 }
 
@@ -300,10 +307,11 @@ int ls_incl_flow(const ls_incl_grid_t *g, const double *x0, const double *n0,
 	double *prev = malloc((size_t)ns * 3 * sizeof *prev);
 	double *J = malloc((size_t)ns * 9 * sizeof *J);
 	double *nk = malloc((size_t)ns * 3 * sizeof *nk);
+	double *spd = malloc((size_t)(ns ? ns : 1) * sizeof *spd);
 	int64_t *nbs = NULL, *nbl = NULL;
 	int rc = -1;
 	*nlayers = 1;
-	if (!v || !gv || !p || !prev || !J || !nk || ls_incl_field(g, v))
+	if (!v || !gv || !p || !prev || !J || !nk || !spd || ls_incl_field(g, v))
 		goto out;
 	field_grad(g, v, gv);
 	/* the layer normals: principal axes of each point's layer-0
@@ -348,13 +356,14 @@ int ls_incl_flow(const ls_incl_grid_t *g, const double *x0, const double *n0,
 			double dt = rem / fmax(speed, 1e-9);
 			if (dt > hstep)
 				dt = hstep;
-			speed = flow_step(&SV, &SG, ivb, dt, p, J, ns);
+			speed = flow_step(&SV, &SG, ivb, dt, p, J, spd, ns);
 			if (!(speed > 1e-6))
 				break; /* the flow has stopped */
 		}
 		if (!(speed > 1e-6) || it >= 100000)
 			break;
 		depth += m;
+#pragma omp parallel for schedule(static)
 		for (int64_t i = 0; i < ns; i++) {
 			/* n_k ~ J^-T n_0 = cofactor(J) n_0 (det J > 0) */
 			const double *a = J + 9 * i, *q = n0 + 3 * i;
@@ -391,5 +400,6 @@ out:
 	free(prev);
 	free(J);
 	free(nk);
+	free(spd);
 	return rc;
 }

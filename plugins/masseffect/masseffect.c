@@ -67,6 +67,7 @@
 #include "armstg/volmath.h"
 #include "field/field.h"
 #include "img/morph.h"
+#include "img/select.h"
 
 typedef struct {
 	double search_mm, level;
@@ -143,12 +144,6 @@ static int64_t centroid(const vol_t *v, double c[3])
 	return n;
 }
 
-static int cmp_d(const void *a, const void *b)
-{
-	double x = *(const double *)a, y = *(const double *)b;
-	return (x > y) - (x < y);
-}
-
 /* the q-quantile (0..1) of img over the voxels where sel[e] == want; -1
  * out of memory, 1 none selected */
 static int quantile(const vol_t *img, const uint8_t *sel, uint8_t want,
@@ -166,8 +161,9 @@ static int quantile(const vol_t *img, const uint8_t *sel, uint8_t want,
 	for (int64_t e = 0; e < nv; e++)
 		if (sel[e] == want)
 			x[m++] = vol_get(img, e);
-	qsort(x, (size_t)m, sizeof *x, cmp_d);
-	*out = x[(int64_t)(q * (double)(m - 1) + 0.5)];
+	/* the order statistic a sort would put there, without the sort
+	 * (1.4 M brain voxels on a 1 mm case) */
+	*out = img_select_k(x, (size_t)m, (size_t)(q * (double)(m - 1) + 0.5));
 	free(x);
 	return 0;
 }

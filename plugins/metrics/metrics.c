@@ -204,9 +204,12 @@ static int labels_on(mctx_t *c, int in, const vol_t *ref, int is_mask,
 			  "%s: grid differs from the reference grid: "
 			  "resampled by nearest neighbour through world "
 			  "coordinates", name);
-	if (is_mask)
+	if (is_mask) {
+		int32_t *o = *out;
+#pragma omp parallel for schedule(static)
 		for (int64_t e = 0; e < n; e++)
-			(*out)[e] = (*out)[e] != 0;
+			o[e] = o[e] != 0;
+	}
 	return 0;
 }
 

@@ -9,44 +9,10 @@
 
 #include "armstg/plugin.h"
 #include "img/edt.h"
+#include "img/select.h"
 #include "mtx.h"
 
 /* ---- quantiles ---- */
-
-static void swapd(double *a, double *b)
-{
-	double t = *a;
-	*a = *b;
-	*b = t;
-}
-
-/* k-th smallest of a[0..n-1] (0-based), N. Wirth's selection ("Algorithms
- * + Data Structures = Programs", 1976, section 2.3.4).  Afterwards a[k] is
- * in place: a[0..k-1] <= a[k] <= a[k+1..n-1]. */
-static double select_k(double *a, size_t n, size_t k)
-{
-	int64_t l = 0, m = (int64_t)n - 1, kk = (int64_t)k;
-	while (l < m) {
-		double x = a[kk];
-		int64_t i = l, j = m;
-		do {
-			while (a[i] < x)
-				i++;
-			while (x < a[j])
-				j--;
-			if (i <= j) {
-				swapd(&a[i], &a[j]);
-				i++;
-				j--;
-			}
-		} while (i <= j);
-		if (j < kk)
-			l = i;
-		if (kk < i)
-			m = j;
-	}
-	return a[kk];
-}
 
 double mtx_quantile(double *a, size_t n, double q)
 {
@@ -58,10 +24,10 @@ double mtx_quantile(double *a, size_t n, double q)
 		q = 1;
 	double h = (double)(n - 1) * q;
 	size_t lo = (size_t)floor(h);
-	double x0 = select_k(a, n, lo);
+	double x0 = img_select_k(a, n, lo);
 	if (lo + 1 >= n || h == (double)lo)
 		return x0;
-	/* after select, a[lo+1..] are >= x0: their minimum is order stat lo+1 */
+	/* after img_select_k, a[lo+1..] are >= x0: their minimum is order stat lo+1 */
 	double x1 = a[lo + 1];
 	for (size_t i = lo + 2; i < n; i++)
 		if (a[i] < x1)

@@ -66,20 +66,27 @@ int mtx_labels_on(const vol_t *src, const vol_t *ref, const char *what,
 		    "%s: expected a label volume (1 component), got %d "
 		    "components", what, src->nc);
 	int64_t ns = vol_nvox(src);
-	/* check every source value once: NaN or out of int32 range */
+	/* check every source value once: NaN or out of int32 range (the
+	 * loops here run on the stage's threads, its OpenMP default; the
+	 * first bad voxel is the least index on any count) */
+	int64_t bad = INT64_MAX;
+#pragma omp parallel for schedule(static) reduction(min : bad)
 	for (int64_t e = 0; e < ns; e++) {
 		double x = vol_get(src, e);
-		if (!(x > -2147483648.5 && x < 2147483647.5)) {
-			int i = (int)(e % src->nx),
-			    j = (int)(e / src->nx % src->ny),
-			    k = (int)(e / ((int64_t)src->nx * src->ny));
-			ERR(ARMSTG_EINVAL,
-			    "%s: voxel (%d,%d,%d) holds %g, not a label "
-			    "value", what, i, j, k, x);
-		}
+		if (e < bad && !(x > -2147483648.5 && x < 2147483647.5))
+			bad = e;
+	}
+	if (bad != INT64_MAX) {
+		const int64_t e = bad;
+		int i = (int)(e % src->nx), j = (int)(e / src->nx % src->ny),
+		    k = (int)(e / ((int64_t)src->nx * src->ny));
+		ERR(ARMSTG_EINVAL,
+		    "%s: voxel (%d,%d,%d) holds %g, not a label value", what,
+		    i, j, k, vol_get(src, e));
 	}
 	*resampled = 0;
 	if (vol_same_grid(src, ref, 1e-6)) {
+#pragma omp parallel for schedule(static)
 		for (int64_t e = 0; e < ns; e++)
 			out[e] = (int32_t)lround(vol_get(src, e));
 		return 0;
@@ -89,6 +96,7 @@ int mtx_labels_on(const vol_t *src, const vol_t *ref, const char *what,
 		ERR(ARMSTG_EINVAL, "%s: singular affine", what);
 	*resampled = 1;
 	int64_t inside = 0;
+#pragma omp parallel for schedule(static) collapse(2) reduction(+ : inside)
 	for (int k = 0; k < ref->nz; k++)
 		for (int j = 0; j < ref->ny; j++)
 			for (int i = 0; i < ref->nx; i++) {
@@ -119,22 +127,24 @@ int mtx_field_on(const vol_t *src, const vol_t *ref, const char *what,
 		    "%s: expected a displacement field (3 components), got %d",
 		    what, src->nc);
 	int64_t ns = vol_nvox(src);
-	for (int64_t e = 0; e < 3 * ns; e++) {
-		double x = vol_get(src, e);
-		if (!isfinite(x)) {
-			int64_t v = e % ns;
-			ERR(ARMSTG_EINVAL,
-			    "%s: component %d at voxel (%d,%d,%d) is not finite "
-			    "(%g)",
-			    what, (int)(e / ns), (int)(v % src->nx),
-			    (int)(v / src->nx % src->ny),
-			    (int)(v / ((int64_t)src->nx * src->ny)), x);
-		}
+	int64_t bad = INT64_MAX;
+#pragma omp parallel for schedule(static) reduction(min : bad)
+	for (int64_t e = 0; e < 3 * ns; e++)
+		if (e < bad && !isfinite(vol_get(src, e)))
+			bad = e;
+	if (bad != INT64_MAX) {
+		const int64_t e = bad, v = e % ns;
+		ERR(ARMSTG_EINVAL,
+		    "%s: component %d at voxel (%d,%d,%d) is not finite (%g)",
+		    what, (int)(e / ns), (int)(v % src->nx),
+		    (int)(v / src->nx % src->ny),
+		    (int)(v / ((int64_t)src->nx * src->ny)), vol_get(src, e));
 	}
 	*resampled = 0;
 	*n_outside = 0;
 	int64_t nr = vol_nvox(ref);
 	if (vol_same_grid(src, ref, 1e-6)) {
+#pragma omp parallel for schedule(static)
 		for (int64_t e = 0; e < 3 * ns; e++)
 			out[e] = (float)vol_get(src, e);
 		return 0;
@@ -144,6 +154,7 @@ int mtx_field_on(const vol_t *src, const vol_t *ref, const char *what,
 		ERR(ARMSTG_EINVAL, "%s: singular affine", what);
 	*resampled = 1;
 	int64_t outside = 0;
+#pragma omp parallel for schedule(static) collapse(2) reduction(+ : outside)
 	for (int k = 0; k < ref->nz; k++)
 		for (int j = 0; j < ref->ny; j++)
 			for (int i = 0; i < ref->nx; i++) {
