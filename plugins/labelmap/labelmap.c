@@ -333,7 +333,9 @@ static int op_points(armstg_stage_t *st)
 			st->host->msg_unref(&o->base);
 		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
 	}
+	const int nt = st->host->threads(st);
 	/* 1. exact squared distance to the nearest point, up to cap */
+#pragma omp parallel for num_threads(nt) schedule(static)
 	for (int64_t e = 0; e < nv; e++)
 		g[e] = cap * cap;
 	int64_t used = 0;
@@ -418,6 +420,7 @@ static int op_points(armstg_stage_t *st)
 	}
 	free(queue);
 	/* 3. x is outside iff |x-y|^2 < (d_P(y) - keep)^2 for some y in O */
+#pragma omp parallel for num_threads(nt) schedule(static)
 	for (int64_t e = 0; e < nv; e++) {
 		if (out_o[e]) {
 			double w = sqrt(g[e]) - keep;
@@ -427,14 +430,17 @@ static int op_points(armstg_stage_t *st)
 		}
 	}
 	free(out_o);
-	/* g <- min over the grid of |x-y|^2 + g(y) (lib/img, FH 2012) */
-	if (img_dt_sq(g, dim, sp, 1)) {
+	/* g <- min over the grid of |x-y|^2 + g(y) (lib/img, FH 2012; the
+	 * same on any thread count) */
+	if (img_dt_sq(g, dim, sp, nt)) {
 		free(g);
 		st->host->msg_unref(&o->base);
 		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
 	}
 	uint8_t *d = o->data;
 	int64_t cnt = 0;
+#pragma omp parallel for num_threads(nt) schedule(static) collapse(2) \
+	reduction(+ : cnt)
 	for (int k = 0; k < rdim[2]; k++)
 		for (int j = 0; j < rdim[1]; j++)
 			for (int i = 0; i < rdim[0]; i++) {

@@ -171,18 +171,26 @@ static int smp_process(armstg_stage_t *st)
 		rc = H->fail(st, ARMSTG_ENOMEM, "out of memory");
 		goto out;
 	}
+	/* voxel by voxel on the stage's threads; the first NaN is the
+	 * least index on any count */
+	int64_t nan_at = INT64_MAX;
+#pragma omp parallel for num_threads(H->threads(st)) schedule(static) \
+	reduction(min : nan_at)
 	for (int64_t v = 0; v < nv; v++) {
 		double l = vol_get(lab, v), x = vol_get(img, v);
 		if (isnan(l) || isnan(x)) {
-			rc = H->fail(st, ARMSTG_EINVAL,
-				     "%s contains NaN (voxel %lld)",
-				     isnan(l) ? "labels" : "image",
-				     (long long)v);
-			goto out;
+			nan_at = v < nan_at ? v : nan_at;
+			continue;
 		}
 		long li = lround(l);
 		cls[v] = li == 0 ? 0 : (li > 0 && li < 256 && csf[li]) ? 2 : 1;
 		im[v] = (float)x;
+	}
+	if (nan_at != INT64_MAX) {
+		rc = H->fail(st, ARMSTG_EINVAL, "%s contains NaN (voxel %lld)",
+			     isnan(vol_get(lab, nan_at)) ? "labels" : "image",
+			     (long long)nan_at);
+		goto out;
 	}
 	if (tum) {
 		if (tum->nc != 1) {
@@ -204,6 +212,8 @@ static int smp_process(armstg_stage_t *st)
 			goto out;
 		}
 		int64_t cnt = 0;
+#pragma omp parallel for num_threads(H->threads(st)) schedule(static) \
+	collapse(2) reduction(+ : cnt)
 		for (int k = 0; k < lab->nz; k++)
 			for (int j = 0; j < lab->ny; j++)
 				for (int i = 0; i < lab->nx; i++) {
