@@ -82,6 +82,14 @@
  *   through the same diffeomorphic composition and field smoothing.  The
  *   convergence test watches 1 - mean CC in place of the MSE.
  *
+ * fixed_label and moving_label (optional, together) add the label term of
+ * demons_label.c: a demons step between the two regions' clamped signed
+ * distances, added to the image term's update at each iteration, so that
+ * the moving region (the tumour grown in the atlas) is carried onto the
+ * fixed one (the patient's tumour) where the masks leave the images out.
+ * Its cost (the mean distance between the two boundaries, mm) enters the
+ * convergence test: a level stops only when neither cost still improves.
+ *
  * Threads: every result (the field, the warped image, each figure of the
  * table but its seconds) is the same bits on any thread count: sums over
  * voxels (the cost, the mean update) are taken per row of the level grid,
@@ -102,6 +110,7 @@
 #include "field/field.h"
 #include "img/box.h"
 #include "img/sample.h"
+#include "demons_label.h"
 
 #define MAX_LEVELS 8
 
@@ -110,7 +119,7 @@ enum { METRIC_SSD, METRIC_LNCC };
 enum { UPD_DIFFEO, UPD_ADDITIVE };
 enum { NORM_HIST, NORM_MINMAX, NORM_NONE, NORM_LOCAL };
 enum { SIGMA_MM, SIGMA_VOXEL, SIGMA_IMAGE_VOXEL };
-enum { IN_FIXED, IN_MOVING, IN_FMASK, IN_MMASK, IN_INIT };
+enum { IN_FIXED, IN_MOVING, IN_FMASK, IN_MMASK, IN_INIT, IN_FLABEL, IN_MLABEL };
 enum { OUT_FIELD, OUT_WARPED, OUT_TABLE };
 
 typedef struct demons_priv {
@@ -131,6 +140,10 @@ typedef struct demons_priv {
 	int metric;
 	int radius;          /* voxels of the level (lncc window) */
 	int crop;
+	double label_weight;
+	double label_reach;  /* mm */
+	int label_levels;
+	int label_where;
 	/* parsed in init */
 	int niter[MAX_LEVELS];
 	int nlist;
@@ -144,6 +157,11 @@ static const armstg_port_t demons_inputs[] = {
 	  "forces only where the warped moving mask is > 0" },
 	{ "initial_field", MSG_VOLUME, 1,
 	  "starting displacement field (RAS mm, any grid)" },
+	{ "fixed_label", MSG_VOLUME, 1,
+	  "a region of the fixed volume (> 0, e.g. the patient's tumour) that "
+	  "moving_label is carried onto (with moving_label; demons_label.c)" },
+	{ "moving_label", MSG_VOLUME, 1,
+	  "the same region in the moving volume (> 0, any grid)" },
 };
 
 static const armstg_port_t demons_outputs[] = {
@@ -228,6 +246,23 @@ static const armstg_param_t demons_params[] = {
 	  "plus a margin of the smoothing and window widths (the brain is "
 	  "about 1/3 of a BraTS box), the field beyond it continued by its "
 	  "edge values; false: the whole fixed grid", NULL, OFF(crop), 0 },
+	{ "label_weight", PT_DOUBLE, "1", 0, 100, "",
+	  "with fixed_label and moving_label: weight of the label term's "
+	  "update (a demons step between the two regions' signed distances) "
+	  "added to the image term's at every iteration; 0: the labels are "
+	  "ignored", NULL, OFF(label_weight), 0 },
+	{ "label_reach", PT_DOUBLE, "5", 0.5, 200, "mm",
+	  "the label term acts within this distance of either region's "
+	  "boundary (the signed distances are clamped there)", NULL,
+	  OFF(label_reach), 0 },
+	{ "label_levels", PT_INT, "1", 0, MAX_LEVELS, "levels",
+	  "the label term acts on this many of the finest levels (0: all; "
+	  "on a coarse level its pull is spread by that level's smoothing "
+	  "far beyond the region)", NULL, OFF(label_levels), 0 },
+	{ "label_where", PT_ENUM, "all", 0, 0, "",
+	  "where the label term pushes: all (within label_reach of either "
+	  "boundary) or unmasked (there, and only where a mask leaves the "
+	  "images out: no image force)", "all|unmasked", OFF(label_where), 0 },
 };
 
 #define FAIL(code, ...) st->host->fail(st, code, __VA_ARGS__)
@@ -958,6 +993,8 @@ static int demons_process(armstg_stage_t *st)
 	const vol_t *vfm = (const vol_t *)st->in[IN_FMASK];
 	const vol_t *vmm = (const vol_t *)st->in[IN_MMASK];
 	const vol_t *vinit = (const vol_t *)st->in[IN_INIT];
+	const vol_t *vfl = (const vol_t *)st->in[IN_FLABEL];
+	const vol_t *vml = (const vol_t *)st->in[IN_MLABEL];
 	int nt = h->threads ? h->threads(st) : 1;
 	if (nt < 1)
 		nt = 1;
@@ -971,11 +1008,19 @@ static int demons_process(armstg_stage_t *st)
 	if (vinit && field_check_vol_nt(vinit, "initial_field", 3, 2, nt, err,
 					sizeof err))
 		return FAIL(ARMSTG_EINVAL, "%s", err);
+	if (!vfl != !vml)
+		return FAIL(ARMSTG_EINVAL,
+			    "%s is connected but %s is not: the label term needs "
+			    "both regions", vfl ? "fixed_label" : "moving_label",
+			    vfl ? "moving_label" : "fixed_label");
 
 	fimg_t F0 = { 0 }, M0 = { 0 }, FM0 = { 0 }, MM0 = { 0 }, init = { 0 };
 	fimg_t S = { 0 }, A = { 0 }, B = { 0 }, Sfull = { 0 };
 	level_t L = { 0 };
+	dlabel_t DL = { 0 };
+	int use_label = 0; /* the label term is on */
 	double *best = NULL; /* the level's compared cost after each iteration */
+	double *lbest = NULL; /* the same for the label term's cost */
 	tab_t *tab = NULL;
 	vol_t *ofield = NULL, *owarp = NULL;
 
@@ -1033,6 +1078,20 @@ static int demons_process(armstg_stage_t *st)
 	if (vinit && (rc = fimg_from_vol_nt(&init, vinit, nt))) {
 		rc = FAIL(rc, "out of memory (initial_field)");
 		goto out;
+	}
+	if (vfl && p->label_weight > 0) {
+		const char *empty = NULL;
+		rc = dlabel_init(&DL, vfl, vml, &F0.g, p->label_reach, nt, &empty,
+				 err, sizeof err);
+		if (rc < 0) {
+			rc = FAIL(rc, "%s", err);
+			goto out;
+		}
+		if (rc == 1)
+			h->log(st, LOG_WARN, "%s is empty: registering without "
+			       "the label term", empty);
+		use_label = rc == 0;
+		rc = 0;
 	}
 
 	/* levels: the coarsest keeps at least 4 voxels along every axis */
@@ -1181,7 +1240,11 @@ static int demons_process(armstg_stage_t *st)
 				block_copy(&Sfull, &S, crop_lo, nt);
 		}
 		if (rc || (rc = fimg_alloc(&A, &g, 3)) ||
-		    (rc = fimg_alloc(&B, &g, 3))) {
+		    (rc = fimg_alloc(&B, &g, 3)) ||
+		    (use_label && (rc = dlabel_level(&DL, &g, sig_f, sig_m, &S,
+						     p->label_levels &&
+						     l < nlev - p->label_levels,
+						     sg_fluid, nt)))) {
 			rc = FAIL(ARMSTG_ENOMEM, "out of memory (fields, level %d)",
 				  l);
 			goto out;
@@ -1193,8 +1256,10 @@ static int demons_process(armstg_stage_t *st)
 		/* the cost the convergence test compares after each
 		 * iteration (tol_best: the best so far) */
 		free(best);
+		free(lbest);
 		best = malloc(sizeof(double) * (size_t)(iters[l] > 0 ? iters[l] : 1));
-		if (!best) {
+		lbest = malloc(sizeof(double) * (size_t)(iters[l] > 0 ? iters[l] : 1));
+		if (!best || !lbest) {
 			rc = FAIL(ARMSTG_ENOMEM, "out of memory (level %d)", l + 1);
 			goto out;
 		}
@@ -1253,6 +1318,28 @@ static int demons_process(armstg_stage_t *st)
 					sc = (float)fmin(lscale, p->max_step / mvox);
 				}
 			}
+			/* the label term's step, on top of the image term's
+			 * (already scaled: the label step is in mm, bounded by
+			 * sigma_x / 2, and takes no share of the LNCC step) */
+			double ldice = NAN, lcost = NAN;
+			if (use_label && DL.U.d) {
+				if (sc != 1.0f) {
+					const int64_t ne = fgrid_nvox(&g) * 3;
+#pragma omp parallel for num_threads(nt) schedule(static)
+					for (int64_t e = 0; e < ne; e++)
+						A.d[e] *= sc;
+					sc = 1.0f;
+				}
+				if ((rc = dlabel_add_force(&DL, &S,
+							    p->label_where ? &L.FM : NULL,
+							    p->label_where ? &L.WM : NULL,
+							    &A, p->label_weight, sg_fluid,
+							    sx2, &ldice, &lcost, nt))) {
+					rc = FAIL(rc, "out of memory (label term, "
+						  "level %d)", l + 1);
+					goto out;
+				}
+			}
 			double mu, mx, mvox;
 			update_stats(&A, &L, sc, &mu, &mx, &mvox, nt);
 			if (p->update == UPD_DIFFEO) {
@@ -1277,6 +1364,10 @@ static int demons_process(armstg_stage_t *st)
 				rc = FAIL(rc, "out of memory (table)");
 				goto out;
 			}
+			if (use_label) {
+				h->tab_set_num(tab, tab->nrows - 1, "label_dice", ldice);
+				h->tab_set_num(tab, tab->nrows - 1, "label_mm", lcost);
+			}
 			done++;
 			h->progress(st, total ? (double)done / total : 1,
 				    "level %d/%d iter %d/%d %s %.5g mean update "
@@ -1286,10 +1377,19 @@ static int demons_process(armstg_stage_t *st)
 			 * the last tol_window iterations (header) */
 			best[it] = p->tol_best && it > 0 && best[it - 1] < mse
 					   ? best[it - 1] : mse;
+			/* the label term's cost likewise: a level goes on
+			 * while either cost still improves (the regions are
+			 * still being carried together when the images,
+			 * which do not see them, have settled) */
+			lbest[it] = isnan(lcost) ? 0
+				    : p->tol_best && it > 0 && lbest[it - 1] < lcost
+					    ? lbest[it - 1] : lcost;
 			const int k = p->tol_window;
 			if (p->tol > 0 && it >= k) {
 				const double old = best[it - k];
-				if (old > 0 && (old - best[it]) < p->tol * old) {
+				const double lold = lbest[it - k];
+				if (old > 0 && (old - best[it]) < p->tol * old &&
+				    !(lold > 0 && (lold - lbest[it]) >= p->tol * lold)) {
 					h->log(st, LOG_INFO,
 					       "level %d converged after %d "
 					       "iterations (%s %.5g, compared %.5g)",
@@ -1363,7 +1463,9 @@ out:
 	if (tab)
 		h->msg_unref(&tab->base);
 	level_free(&L);
+	dlabel_free(&DL);
 	free(best);
+	free(lbest);
 	fimg_free(&F0);
 	fimg_free(&M0);
 	fimg_free(&FM0);
