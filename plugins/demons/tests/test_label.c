@@ -14,11 +14,17 @@
  * finest level) on a 1.5 mm grid.
  *
  * Asserted: the Dice of the warped moving tumour against the fixed one is
- * below 0.7 without the labels and above 0.9 with them; the table's
+ * below 0.7 without the labels and above 0.9 with them; the field sends
+ * the fixed tumour's centre more than 5 mm from the moving one's without
+ * the labels (5.4 mm for no field), less than 2.5 mm with them (1.8: the
+ * two shapes differ, and inside the tumour the field is what the
+ * smoothing brings in from the outlines); the table's
  * label_dice column follows it; far from both tumours (25 mm) the field
  * changes by less than 0.1 mm on average; no
  * folding; an empty region switches the term off with the same field as
- * without labels; one label without the other is refused.
+ * without labels; one label without the other is refused; the field, the
+ * warped image and every figure of the table (label_dice and label_mm
+ * included) are the same bits on 1, 2 and 3 threads.
  */
 #include <math.h>
 
@@ -208,6 +214,35 @@ static double far_field(const vol_t *field, const vol_t *other)
 	return s / (double)n;
 }
 
+/* where the field sends the fixed tumour's centre: |y + u(y) - (CM + y - CF)|
+ * (mm) at the voxel y nearest CF, the distance from the moving tumour's
+ * centre (the two tumours' centres correspond; 5.4 mm for u = 0) */
+static double centre_error(const vol_t *field)
+{
+	const int64_t nv = vol_nvox(field);
+	const float *u = field->data;
+	double best = 1e30, err = 0;
+	for (int k = 0; k < NZ; k++)
+		for (int j = 0; j < NY; j++)
+			for (int i = 0; i < NX; i++) {
+				double y[3], d2 = 0;
+				vol_to_world(field, i, j, k, y);
+				for (int q = 0; q < 3; q++)
+					d2 += (y[q] - CF[q]) * (y[q] - CF[q]);
+				if (d2 >= best)
+					continue;
+				best = d2;
+				const int64_t e = vol_idx(field, i, j, k);
+				double s = 0;
+				for (int q = 0; q < 3; q++) {
+					double r = y[q] + u[e + q * nv] - (CM[q] + y[q] - CF[q]);
+					s += r * r;
+				}
+				err = sqrt(s);
+			}
+	return err;
+}
+
 static double jac_min(const vol_t *fld)
 {
 	vol_t *j = vol_new(fld->nx, fld->ny, fld->nz, 1, DT_F32, fld->affine);
@@ -233,6 +268,7 @@ static void test_label_carries_tumour(void **state)
 	const double d0 = tumour_dice(x, f0), d1 = tumour_dice(x, f1);
 	const double far0 = far_field(f0, NULL), far1 = far_field(f1, f0);
 	const double j1 = jac_min(f1);
+	const double c0 = centre_error(f0), c1 = centre_error(f1);
 	const tab_col_t *ld = tab_col(t1, "label_dice");
 	assert_non_null(ld);
 	/* the term acts on the finest level only: the coarser levels' rows
@@ -244,14 +280,18 @@ static void test_label_carries_tumour(void **state)
 	print_message("tumour Dice: no labels %.3f, label term %.3f (table: "
 		      "%.3f -> %.3f); 25 mm from the tumours: mean |field| %.3f "
 		      "mm without labels, changed by %.3f mm with them; min "
-		      "Jacobian %.3f\n", d0, d1, ld->num[r0],
-		      ld->num[t1->nrows - 1], far0, far1, j1);
+		      "Jacobian %.3f; the fixed tumour's centre sent %.2f mm "
+		      "from the moving one's without labels, %.2f mm with "
+		      "them\n", d0, d1, ld->num[r0], ld->num[t1->nrows - 1],
+		      far0, far1, j1, c0, c1);
 	assert_true(d0 < 0.7);
 	assert_true(d1 > 0.9);
 	assert_true(ld->num[r0] < 0.7);
 	assert_true(fabs(ld->num[t1->nrows - 1] - d1) < 0.05);
 	assert_true(far1 < 0.1);
 	assert_true(j1 > 0);
+	assert_true(c0 > 5);
+	assert_true(c1 < 2.5);
 	msg_unref(&f0->base);
 	msg_unref(&f1->base);
 	msg_unref(&t1->base);
@@ -304,12 +344,89 @@ static void test_label_refused(void **state)
 	msg_unref(&bad->base);
 }
 
+/*
+ * The same bits on any thread count (as test_demons.c test_threads): the
+ * field, the warped image and every figure of the table but the seconds
+ * on 1, 2 and 3 threads (3 splits the rows unevenly), with the graph's
+ * setting (LNCC, the finest level, 5 mm) and with SSD, the term on every
+ * level and only where a mask leaves the images out.  The label term's
+ * cost, which the convergence test compares, is summed per row, then over
+ * the rows in order.
+ */
+static int same_bits(const vol_t *a, const vol_t *b)
+{
+	return a->nx == b->nx && a->ny == b->ny && a->nz == b->nz &&
+	       a->nc == b->nc && a->dtype == b->dtype &&
+	       !memcmp(a->data, b->data,
+		       (size_t)vol_nvox(a) * a->nc * vol_dtype_size(a->dtype));
+}
+
+static void test_label_threads(void **state)
+{
+	fx_t *x = *state;
+	char e[1024];
+	const char *graph[] = { LNCC, "label_reach=5", "label_levels=1", NULL };
+	const char *ssd[] = { "levels=3", "iterations=20,15,10", "normalize=minmax",
+			      "sigma_field=3", "label_levels=0", "label_reach=8",
+			      "label_where=unmasked", "tol=0.001", NULL };
+	for (int m = 0; m < 2; m++) {
+		msg_t *o[3][3] = { { 0 } };
+		for (int t = 0; t < 3; t++) {
+			const msg_t *in[7] = { &x->f->base, &x->m->base,
+					       &x->fm->base, &x->mm->base, NULL,
+					       &x->ft->base, &x->mt->base };
+			int rc = tu_run_nt(TU_PLUGIN(), m ? ssd : graph, in, o[t],
+					   t + 1, e, sizeof e);
+			if (rc)
+				print_message("error: %s\n", e);
+			assert_int_equal(rc, 0);
+		}
+		const tab_t *t0 = (const tab_t *)o[0][OUT_TABLE];
+		const tab_col_t *ld = tab_col(t0, "label_mm");
+		assert_non_null(ld);
+		int64_t nl = 0;
+		for (int64_t r = 0; r < t0->nrows; r++)
+			nl += !isnan(ld->num[r]);
+		/* the term acted: rows with its cost */
+		assert_true(nl > 0);
+		for (int t = 1; t < 3; t++) {
+			assert_true(same_bits((vol_t *)o[0][OUT_FIELD],
+					      (vol_t *)o[t][OUT_FIELD]));
+			assert_true(same_bits((vol_t *)o[0][OUT_WARPED],
+					      (vol_t *)o[t][OUT_WARPED]));
+			const tab_t *tt = (const tab_t *)o[t][OUT_TABLE];
+			assert_int_equal(tt->nrows, t0->nrows);
+			assert_int_equal(tt->ncols, t0->ncols);
+			for (int c = 0; c < t0->ncols; c++) {
+				const tab_col_t *a = &t0->col[c];
+				const tab_col_t *b = tab_col(tt, a->name);
+				assert_non_null(b);
+				if (a->type != TAB_NUM || !strcmp(a->name, "seconds"))
+					continue;
+				for (int64_t r = 0; r < t0->nrows; r++)
+					assert_memory_equal(&a->num[r], &b->num[r],
+							    sizeof(double));
+			}
+		}
+		print_message("%s: %lld iterations (%lld with the label term), "
+			      "label_mm %.9g at the end, the same bits on 1-3 "
+			      "threads\n", m ? "ssd, every level, unmasked" :
+			      "lncc, the graph's setting", (long long)t0->nrows,
+			      (long long)nl, ld->num[t0->nrows - 1]);
+		for (int t = 0; t < 3; t++)
+			for (int k = 0; k < 3; k++)
+				if (o[t][k])
+					msg_unref(o[t][k]);
+	}
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_label_carries_tumour),
 		cmocka_unit_test(test_label_empty),
 		cmocka_unit_test(test_label_refused),
+		cmocka_unit_test(test_label_threads),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
