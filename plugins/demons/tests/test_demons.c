@@ -110,9 +110,11 @@ static int run_demons(const char *const *params, const vol_t *f,
 		      const vol_t *m, const vol_t *fm, const vol_t *mm,
 		      reg_out_t *o, char *err, size_t errsize)
 {
-	const msg_t *in[5] = { f ? &f->base : NULL, m ? &m->base : NULL,
+	/* every input port (fixed, moving, the masks, initial_field, the two
+	 * labels): tu_run reads as many as the plugin declares */
+	const msg_t *in[7] = { f ? &f->base : NULL, m ? &m->base : NULL,
 			       fm ? &fm->base : NULL, mm ? &mm->base : NULL,
-			       NULL };
+			       NULL, NULL, NULL };
 	msg_t *out[3] = { 0 };
 	int rc = tu_run(TU_PLUGIN(), params, in, out, err, errsize);
 	o->field = (vol_t *)out[OUT_FIELD];
@@ -833,7 +835,7 @@ static void test_threads(void **state)
 	for (int m = 0; m < 2; m++) {
 		reg_out_t o[4] = { 0 };
 		for (int t = 0; t < 4; t++) {
-			const msg_t *in[5] = { &fx->fixed->base, &fx->moving->base,
+			const msg_t *in[7] = { &fx->fixed->base, &fx->moving->base,
 					       &fx->fmask->base, &mm->base, NULL };
 			msg_t *out[3] = { 0 };
 			assert_int_equal(tu_run_nt(TU_PLUGIN(), m ? lncc : ssd, in,

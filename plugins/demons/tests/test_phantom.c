@@ -77,9 +77,9 @@ static void run_case_x(const char *const *pp, const char *const *dp,
 	double sp[3];
 	vol_spacing(fixed, sp);
 	/* masks: forces only in both brains, as the graphs' registration */
-	const msg_t *in[5] = { &fixed->base, &moving->base,
+	const msg_t *in[7] = { &fixed->base, &moving->base,
 			       masks ? &mask->base : NULL,
-			       masks ? po[o_amask] : NULL, NULL };
+			       masks ? po[o_amask] : NULL, NULL, NULL, NULL };
 	msg_t *out[3] = { 0 };
 	rc = tu_run(TU_PLUGIN(), dp, in, out, e, sizeof e);
 	if (rc)
