@@ -12,6 +12,9 @@
  *                       require = [STAGE.PORT:] M2 [S2] OP NUMBER, ...
  *                       (optional: conditions separated by commas),
  *                       tolerance = T (optional, >= 0, the score's units),
+ *                       stop = require, past_peak (optional: skip the
+ *                       values after the first failing require / the
+ *                       first below the best so far by more than T),
  *                       metric_column = C, structure_column = C,
  *                       value_column = C (optional: the score table's
  *                       columns; default metric, structure, value)
@@ -43,7 +46,11 @@
  * warning; if all fail, the run fails.  Ties keep the
  * earlier value; with a tolerance T the earliest candidate whose score is
  * within T of the best is chosen (the score's noise should not pick a
- * later value).  Then
+ * later value).  stop = require (past_peak) skips the candidates after
+ * the first that fails require (after the first that scores worse than
+ * the best so far by more than T): the choice of the whole list when
+ * require fails from some value on and the score has one peak; tune.tsv
+ * lists them as skipped.  Then
  * the normal run (all stages or the targets) with the best value: only it
  * writes files.  OUT/tune.tsv lists the candidates (value, score, wall_s,
  * status, chosen, error); run.tsv gets a row 'tune' with their total time

@@ -106,6 +106,13 @@ typedef struct g_tune {
 	 * dropped like a failed one (g_req_t) */
 	g_req_t req[G_TUNE_NREQ];
 	int nreq;
+	/* stop = require, past_peak (either or both; none: neither, the
+	 * default): the candidates after the first one that fails require
+	 * (stop_require), or after the first one scoring worse than the best
+	 * so far by more than tol (stop_peak), are skipped.  The choice is
+	 * that of the whole list when require fails from some value on and
+	 * the score rises to one peak and falls after it (tune.c). */
+	int stop_require, stop_peak;
 	int search;                /* 1: try the candidates when running */
 	int one_value;             /* no search: the single value is used */
 	char why[512];             /* when present but no search: why */
@@ -244,6 +251,8 @@ typedef struct tune_row {
 	double score;               /* NaN when the candidate failed */
 	double wall_s;
 	int ok, rc;
+	int req_failed;             /* dropped by a condition of require */
+	int skipped;                /* not run: [tune] stop (err says why) */
 	char err[2048];
 } tune_row_t;
 

@@ -106,7 +106,8 @@ tab_t *run_graph_table(const g_run_t *r)
 		if (row->ok)
 			snprintf(sc, sizeof sc, "%.6g", row->score);
 		else
-			snprintf(sc, sizeof sc, "failed: %s", row->err);
+			snprintf(sc, sizeof sc, "%s: %s",
+				 row->skipped ? "skipped" : "failed", row->err);
 		bad = gt_row(tab, "tune", "", "candidate", t->values[k], sc, "",
 			     k == r->best ? "chosen" : "");
 	}

@@ -26,8 +26,12 @@
  * the tuned one and runs for every candidate with the score's stages
  * (e.g. the growth's own measures next to the registration's score).  Ties keep the
  * earlier value; with a tolerance T the earliest candidate whose score is
- * within T of the best is chosen.  tune.tsv lists the candidates
- * (tune_table_write).
+ * within T of the best is chosen.  stop = require and/or past_peak skips
+ * the candidates after the first that fails require, or after the first
+ * that scores worse than the best so far by more than T (tune_stop: the
+ * same choice when require fails from some value on and the score has one
+ * peak).  tune.tsv lists the candidates (tune_table_write), the skipped
+ * ones too.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -46,7 +50,8 @@ static int finite_number(const char *s, double *x)
 static const char *const tune_keys[] = { "param", "values", "score", "metric",
 					 "structure", "goal", "require",
 					 "tolerance", "metric_column",
-					 "structure_column", "value_column" };
+					 "structure_column", "value_column",
+					 "stop" };
 
 /* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
  * with an error reported when the list is empty or has an empty item. */
@@ -240,6 +245,43 @@ static void tune_req_split(graph_t *g, const g_kv_t *rk)
 	}
 }
 
+/* stop = WORD, WORD: require, past_peak, none (blank or comma separated;
+ * none alone). */
+static void tune_stop_parse(graph_t *g, const g_kv_t *sk)
+{
+	g_tune_t *t = &g->tune;
+	int none = 0, n = 0;
+	for (const char *p = sk->val; *p;) {
+		p += strspn(p, " \t,");
+		size_t l = strcspn(p, " \t,");
+		if (!l)
+			break;
+		n++;
+		if (l == 7 && !strncmp(p, "require", l)) {
+			t->stop_require = 1;
+		} else if (l == 9 && !strncmp(p, "past_peak", l)) {
+			t->stop_peak = 1;
+		} else if (l == 4 && !strncmp(p, "none", l)) {
+			none = 1;
+		} else {
+			g_err(g, sk->line, NULL, "stop", "[tune] stop: unknown "
+			      "rule '%.*s' (require: skip the values after "
+			      "the first that fails require; past_peak: after "
+			      "the first that scores worse than the best so "
+			      "far by more than the tolerance; none)", (int)l,
+			      p);
+			return;
+		}
+		p += l;
+	}
+	if (none && n > 1)
+		g_err(g, sk->line, NULL, "stop", "[tune] stop: 'none' cannot "
+		      "go with another rule, got '%s'", sk->val);
+	else if (t->stop_require && !g_kv_find(t->kv, t->nkv, "require"))
+		g_err(g, sk->line, NULL, "stop", "[tune] stop = require needs "
+		      "a require key (the conditions a value must meet)");
+}
+
 /* [tune]: resolve the tuned parameter and the score table, check every
  * candidate with the stage's own parameter parser, and decide whether the
  * run searches (2+ values and no explicit --set of the parameter). */
@@ -265,7 +307,8 @@ void tune_check(graph_t *g)
 			g_err(g, kv->line, NULL, kv->key, "unknown key in "
 			     "[tune] (known: param, values, score, metric, "
 			     "structure, goal, require, tolerance, "
-			     "metric_column, structure_column, value_column)");
+			     "metric_column, structure_column, value_column, "
+			     "stop)");
 		else if (!kv->val[0] && strcmp(kv->key, "values"))
 			g_err(g, kv->line, NULL, kv->key, "empty value");
 	}
@@ -378,6 +421,10 @@ void tune_check(graph_t *g)
 	t->nreq = 0;
 	if (rk && rk->val[0])
 		tune_req_split(g, rk);
+	const g_kv_t *sk2 = g_kv_find(t->kv, t->nkv, "stop");
+	t->stop_require = t->stop_peak = 0;
+	if (sk2 && sk2->val[0])
+		tune_stop_parse(g, sk2);
 	/* a requirement on a table that does not depend on the tuned stage
 	 * is met alike by every value: a mistake (only on an otherwise
 	 * sound graph, as for the score) */
@@ -539,6 +586,56 @@ static int tune_require(const g_run_t *r, char *why, size_t whysize,
 }
 
 /*
+ * [tune] stop, after candidate k (not the last) has run; best is the best
+ * so far (-1: none).  require: k failed a condition of require.
+ * past_peak: k scored worse than the best so far by more than the
+ * tolerance.  Then the candidates after k are marked skipped (r->nrows
+ * covers them) and their count returned; else 0.
+ *
+ * Why the choice is that of the whole list.  require: when a value fails
+ * it, so does every later one (the deeper pushes fold more), so none of
+ * them could be chosen.  past_peak: when the score rises to one peak and
+ * falls after it (in the candidates' order; ties allowed), every later
+ * candidate scores no better than k, so below the best so far by more than
+ * the tolerance: none of them is the best nor within the tolerance of it,
+ * and the rule (the best; the earliest within the tolerance) picks among
+ * the candidates run.  Neither holds for a score with two peaks, or a
+ * condition that later values meet again: the search then misses them.
+ */
+static int tune_stop(g_run_t *r, int k, int best, const char *sel)
+{
+	const g_tune_t *t = &r->g->tune;
+	const tune_row_t *row = &r->rows[k];
+	char why[512];
+	if (t->stop_require && row->req_failed) {
+		snprintf(why, sizeof why, "stop = require: %s failed it",
+			 t->values[k]);
+	} else if (t->stop_peak && row->ok && best >= 0 && best != k &&
+		   (t->goal_max ? row->score < r->rows[best].score - t->tol
+				: row->score > r->rows[best].score + t->tol)) {
+		snprintf(why, sizeof why, "stop = past_peak: %s scored %s "
+			 "%.6g, worse than the best so far (%s: %.6g) by more "
+			 "than the tolerance %g", t->values[k], sel, row->score,
+			 t->values[best], r->rows[best].score, t->tol);
+	} else {
+		return 0;
+	}
+	const g_stage_t *ts = &r->g->stages[t->stage];
+	for (int j = k + 1; j < t->nvalues; j++) {
+		tune_row_t *x = &r->rows[j];
+		x->skipped = 1;
+		x->score = NAN;
+		x->rc = ARMSTG_EINVAL;
+		snprintf(x->err, sizeof x->err, "%s", why);
+	}
+	r->nrows = t->nvalues;
+	rt_log(NULL, LOG_INFO, "tune %s.%s: %d value%s after %s skipped (%s)",
+	       ts->name, t->key, t->nvalues - k - 1,
+	       t->nvalues - k - 1 > 1 ? "s" : "", t->values[k], why);
+	return t->nvalues - k - 1;
+}
+
+/*
  * The [tune] search, before the final run.  Stages the score needs that do
  * not depend on the tuned stage run once (pass 0) and keep their outputs
  * (keep = 1: release_inputs leaves them) for every candidate and for the
@@ -558,6 +655,7 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	signed char *memo = malloc(n);
 	char *down = calloc(n, 1), *fin = calloc(n, 1), *cand = calloc(n, 1);
 	int rc = 0, any = 0, nshared = 0, nper = 0, nok = 0, best = -1;
+	int nskip = 0;
 	free(r->rows);
 	r->rows = calloc((size_t)t->nvalues, sizeof *r->rows);
 	r->nrows = 0;
@@ -635,6 +733,7 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 			}
 			if (!req) {
 				row->rc = ARMSTG_ENUMERIC;
+				row->req_failed = 1;
 			} else if (isfinite(row->score)) {
 				row->ok = 1;
 			} else {
@@ -660,6 +759,10 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 			       "(%.1f s): %s", ts->name, t->key, t->values[k],
 			       row->wall_s, row->err);
 		}
+		if (k + 1 < t->nvalues)
+			nskip = tune_stop(r, k, best, sel);
+		if (nskip)
+			break;
 	}
 	tune_reset(r, down);
 	if (rt_interrupted) {
@@ -686,8 +789,10 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 					    "of %s.%s failed", ts->name,
 					    t->key);
 		for (int k = 0; k < r->nrows && w < errsize; k++)
-			w += (size_t)snprintf(err + w, errsize - w, "%s %s: %s",
+			w += (size_t)snprintf(err + w, errsize - w, "%s %s: %s%s",
 					      k ? ";" : ":", t->values[k],
+					      r->rows[k].skipped ? "skipped, "
+								 : "",
 					      r->rows[k].err);
 		rc = r->rows[0].rc ? r->rows[0].rc : ARMSTG_EINVAL;
 		goto out;
@@ -697,9 +802,9 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 		goto out;
 	r->best = best;
 	rt_log(NULL, LOG_INFO, "tune %s.%s = %s chosen (%s %s %.6g; %d of %d "
-	       "values scored)", ts->name, t->key, t->values[best],
+	       "values scored, %d skipped)", ts->name, t->key, t->values[best],
 	       t->goal_max ? "max" : "min", sel, r->rows[best].score, nok,
-	       t->nvalues);
+	       t->nvalues, nskip);
 out:
 	/* the final run's stages again (run.tsv shows those and the ones
 	 * that ran for the tuning only) */
@@ -734,7 +839,8 @@ int tune_table_write(const g_run_t *run, const char *path)
 		      tab_set_num(tab, row, "score", r->score) ||
 		      tab_set_num(tab, row, "wall_s", r->wall_s) ||
 		      tab_set_str(tab, row, "status",
-				  r->ok ? "ok" : "failed") ||
+				  r->ok ? "ok"
+				  : r->skipped ? "skipped" : "failed") ||
 		      tab_set_num(tab, row, "chosen", k == run->best) ||
 		      (!r->ok && tab_set_str(tab, row, "error", r->err));
 	}

@@ -579,7 +579,17 @@ static void test_set_rules(void **state)
 		  "empty (give one or more values separated by commas)" },
 		{ "tune.steps=3", "key 'steps': unknown key in [tune] (known: "
 		  "param, values, score, metric, structure, goal, require, "
-		  "tolerance, metric_column, structure_column, value_column)" },
+		  "tolerance, metric_column, structure_column, value_column, "
+		  "stop)" },
+		{ "tune.stop=early", "key 'stop': [tune] stop: unknown rule "
+		  "'early' (require: skip the values after the first that "
+		  "fails require; past_peak: after the first that scores "
+		  "worse than the best so far by more than the tolerance; "
+		  "none)" },
+		{ "tune.stop=none, past_peak", "key 'stop': [tune] stop: "
+		  "'none' cannot go with another rule, got 'none, past_peak'" },
+		{ "tune.stop=require", "key 'stop': [tune] stop = require "
+		  "needs a require key (the conditions a value must meet)" },
 		{ "tune.tolerance=nan", "key 'tolerance': [tune] tolerance "
 		  "must be a number >= 0 in the score's units, got 'nan'" },
 		{ "tune.tolerance=-0.1", "key 'tolerance': [tune] tolerance "
@@ -623,6 +633,136 @@ static void test_set_rules(void **state)
 	int st = system(cmd);
 	assert_true(WIFEXITED(st));
 	assert_int_equal(WEXITSTATUS(st), 2);
+}
+
+/* one search with [tune] stop: which candidates ran (sim.count: one line
+ * per run of the tuned stage, the final run's included), which tune.tsv
+ * lists as ok / failed / skipped, and the value chosen */
+typedef struct stopcase {
+	const char *sets[4];
+	const char *status;  /* per candidate: o ok, f failed, s skipped */
+	double chosen;
+} stopcase_t;
+
+static void expect_stop(const stopcase_t *c, const char *skip_err)
+{
+	int ns = 0, nrun = 0, n = (int)strlen(c->status);
+	while (ns < 4 && c->sets[ns])
+		ns++;
+	trun_t r;
+	run_sets(&r, c->sets, ns);
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), c->chosen, 0);
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, n);
+	for (int k = 0; k < n; k++) {
+		const char *want = c->status[k] == 'o' ? "ok"
+				   : c->status[k] == 'f' ? "failed" : "skipped";
+		assert_string_equal(tt.status->str[k], want);
+		if (c->status[k] == 's') {
+			assert_true(isnan(tt.score->num[k]));
+			assert_float_equal(tt.wall->num[k], 0, 0);
+			if (skip_err)
+				assert_string_equal(tt.error->str[k], skip_err);
+		} else {
+			nrun++;
+		}
+	}
+	assert_float_equal(chosen_value(&tt), c->chosen, 0);
+	ttab_free(&tt);
+	/* the candidates run, and the final run */
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), nrun + 1);
+	done(&r);
+}
+
+/* stop = past_peak.  sq near of 1..5 (target 3.2): 4.84 1.44 0.04 0.64
+ * 3.24, one minimum at 3.  Without the key every candidate runs; with it
+ * the search stops at 4 (0.64, worse than 3's 0.04) and skips 5, choosing
+ * 3 as the whole list does.  With a tolerance, a candidate within it of the
+ * best so far does not stop the search (0.6 <= 0.7: 5 runs); in the other
+ * order, and with goal max of -(x - 3.2)^2, the same */
+static void test_stop_past_peak(void **state)
+{
+	(void)state;
+	const stopcase_t c[] = {
+		{ { NULL }, "ooooo", 3 },
+		{ { "tune.stop=past_peak" }, "oooos", 3 },
+		{ { "tune.stop=past_peak", "tune.tolerance=0.5" }, "oooos", 3 },
+		{ { "tune.stop=past_peak", "tune.tolerance=0.7" }, "ooooo", 3 },
+		{ { "tune.stop=past_peak", "tune.values=5,4,3,2,1" }, "oooos",
+		  3 },
+		{ { "tune.stop=past_peak", "tune.metric=neg", "tune.goal=max" },
+		  "oooos", 3 },
+		/* stop = none: as without the key */
+		{ { "tune.stop=none" }, "ooooo", 3 },
+		/* the peak at the first value: only 1 and 2 run */
+		{ { "tune.stop=past_peak", "tune.goal=max" }, "oosss", 1 },
+		/* a failed candidate is no peak and does not stop: 2 fails,
+		 * 3 is still the best, 4 stops */
+		{ { "tune.stop=past_peak", "sim.fail_at=2" }, "ofoos", 3 },
+	};
+	expect_stop(&c[1], "stop = past_peak: 4 scored sq 0.64, worse than "
+		    "the best so far (3: 0.04) by more than the tolerance 0");
+	for (int i = 0; i < ARMSTG_COUNT(c); i++)
+		expect_stop(&c[i], NULL);
+	/* the choice rule is unchanged: tolerance 1.5 picks 2 (1.44 is
+	 * within 1.5 of 3's 0.04); 4 (0.64) is within it too, 5 (3.24) is
+	 * not but is the last: nothing to skip */
+	const stopcase_t t = { { "tune.stop=past_peak", "tune.tolerance=1.5" },
+			       "ooooo", 2 };
+	expect_stop(&t, NULL);
+}
+
+/* stop = require.  sq far of 1..5 is 148.84 125.44 104.04 84.64 67.24:
+ * "sq far > 100" fails from 4 on.  Without stop, 4 and 5 run and fail;
+ * with stop = require the search stops at 4 and skips 5, choosing 3 as the
+ * whole list does.  A candidate that fails in a stage (sim fails at 2)
+ * does not stop it; both rules together stop at the first that applies */
+static void test_stop_require(void **state)
+{
+	(void)state;
+	const stopcase_t c[] = {
+		{ { "tune.require=sq far > 100" }, "oooff", 3 },
+		{ { "tune.require=sq far > 100", "tune.stop=require" }, "ooofs",
+		  3 },
+		{ { "tune.require=sq far > 100", "tune.stop=require",
+		    "sim.fail_at=2" }, "ofofs", 3 },
+		{ { "tune.require=sq far > 100",
+		    "tune.stop=require, past_peak" }, "ooofs", 3 },
+		/* past_peak alone ignores require's failures: 4 fails
+		 * (no score to compare), 5 runs and fails too */
+		{ { "tune.require=sq far > 100", "tune.stop=past_peak" },
+		  "oooff", 3 },
+		/* sq far > 110: 3 fails, 4 and 5 skipped, best of 1, 2 */
+		{ { "tune.require=sq far > 110", "tune.stop=require past_peak" },
+		  "oofss", 2 },
+	};
+	for (int i = 0; i < ARMSTG_COUNT(c); i++)
+		expect_stop(&c[i], NULL);
+	expect_stop(&c[1], "stop = require: 4 failed it");
+	/* a condition that later values meet again is not monotone: the
+	 * whole list finds 4 and 5 ("sq far < 100"), the stopped search only
+	 * 1, which fails, and the run fails naming the skipped ones */
+	const char *nm[] = { "tune.require=sq far < 100", "tune.stop=require" };
+	trun_t r;
+	run_sets(&r, nm, 2);
+	assert_int_equal(r.rc, ARMSTG_ENUMERIC);
+	assert_string_equal(r.err, "[tune] every value of sim.offset failed: "
+			    "1: require sq far < 100 not met: 148.84; 2: "
+			    "skipped, stop = require: 1 failed it; 3: skipped, "
+			    "stop = require: 1 failed it; 4: skipped, stop = "
+			    "require: 1 failed it; 5: skipped, stop = require: "
+			    "1 failed it");
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 1);
+	ttab_t tt;
+	tune_tsv_named(r.out, "tune.failed.tsv", &tt);
+	assert_int_equal(tt.t->nrows, 5);
+	assert_string_equal(tt.status->str[0], "failed");
+	assert_string_equal(tt.status->str[4], "skipped");
+	ttab_free(&tt);
+	done(&r);
 }
 
 static void test_targets(void **state)
@@ -810,6 +950,39 @@ static void test_run_graph_after_tune(void **state)
 	assert_true(seen_offset);
 	assert_true(seen_param);
 	msg_unref(&t->base);
+	tu_cleanup(r.out);
+	tu_cleanup(r.cnt);
+	/* with stop = past_peak: 5 is listed as skipped, with the reason
+	 * (the report shows it like a failed one: no score) */
+	const char *sets[] = { "tune.stop=past_peak" };
+	new_dirs(&r);
+	g = graph_load(gp, sets, 1, r.err, sizeof r.err);
+	if (!g)
+		fail_msg("%s", r.err);
+	if (graph_run(g, &o, r.err, sizeof r.err))
+		fail_msg("%s", r.err);
+	graph_free(g);
+	snprintf(f, sizeof f, "%s/graph.tsv", r.out);
+	if (tab_read_file(f, &t, err, sizeof err))
+		fail_msg("%s", err);
+	ck = tab_col(t, "kind");
+	cy = tab_col(t, "key");
+	cv = tab_col(t, "value");
+	ncand = 0;
+	for (int64_t i = 0; i < t->nrows; i++) {
+		if (strcmp(ck->str[i], "candidate"))
+			continue;
+		ncand++;
+		if (!strcmp(cy->str[i], "5"))
+			assert_string_equal(cv->str[i], "skipped: stop = "
+					    "past_peak: 4 scored sq 0.64, worse "
+					    "than the best so far (3: 0.04) by "
+					    "more than the tolerance 0");
+		else
+			assert_null(strstr(cv->str[i], "skipped"));
+	}
+	assert_int_equal(ncand, 5);
+	msg_unref(&t->base);
 	unlink(gp);
 	tu_cleanup(r.out);
 	tu_cleanup(r.cnt);
@@ -872,6 +1045,8 @@ int main(void)
 		cmocka_unit_test(test_failed_candidates_are_skipped),
 		cmocka_unit_test(test_require),
 		cmocka_unit_test(test_require_other_table),
+		cmocka_unit_test(test_stop_past_peak),
+		cmocka_unit_test(test_stop_require),
 		cmocka_unit_test(test_all_candidates_fail),
 		cmocka_unit_test(test_shared_stage_failure_fails_the_run),
 		cmocka_unit_test(test_set_rules),

@@ -510,7 +510,9 @@ static void section_graph(FILE *f, const tab_t *g)
 				continue;
 			int ch = is(c.source, r, "chosen");
 			const char *v = cell(c.value, r);
-			int failed = !strncmp(v, "failed", 6);
+			/* "failed: why" or "skipped: why" ([tune] stop) */
+			int failed = !strncmp(v, "failed", 6) ||
+				     !strncmp(v, "skipped", 7);
 			fprintf(f, "<tr%s><td class=\"num\">", ch ? " "
 				"class=\"chosen\"" : "");
 			esc(f, cell(c.key, r));
