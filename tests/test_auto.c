@@ -19,7 +19,13 @@
  *     core: below direct demons (same settings, the TRUE tumour masked) and
  *     min det J > 0 in the brain;
  *   - a case with no FLAIR and no T2 fails before the growth, in the stage
- *     that selects the tumour, naming its missing input.
+ *     that selects the tumour, naming its missing input;
+ *   - push depth 0 (the shipped [tune]'s "no push" candidate) runs the whole
+ *     graph: every node's displacement exactly 0, the grown atlas T1 the
+ *     atlas T1 voxel for voxel and its labels the atlas's outside the
+ *     painted tumour (label 6), stage mass's growth field det J 1, shift 0
+ *     and intrusion 0 ml (what [tune] require reads), and a finite total
+ *     warp that does not fold (about 30 s more).
  *
  * Measured 2026-11-26 (2-core box, load 9-15): whole tumour Dice 0.966, core
  * 0.993, grown tumour 0.786, band error 1.075 mm against direct demons'
@@ -91,9 +97,10 @@ static const char direct_graph[] =
 
 static char dir[] = "/tmp/armstg-auto-XXXXXX";
 static char ph[1100], out_auto[1100], out_eval[1100], out_direct[1100],
-	out_fail[1100];
-static int ran_auto = -1, ran_eval = -1, ran_direct = -1, ran_fail = -1;
-static char run_err[4096], fail_err[4096];
+	out_fail[1100], out_zero[1100];
+static int ran_auto = -1, ran_eval = -1, ran_direct = -1, ran_fail = -1,
+	   ran_zero = -1;
+static char run_err[4096], fail_err[4096], zero_err[4096];
 
 static void set_plugin_path(void)
 {
@@ -153,6 +160,7 @@ static int setup(void **state)
 	snprintf(out_eval, sizeof out_eval, "%s/eval", dir);
 	snprintf(out_direct, sizeof out_direct, "%s/direct", dir);
 	snprintf(out_fail, sizeof out_fail, "%s/fail", dir);
+	snprintf(out_zero, sizeof out_zero, "%s/zero", dir);
 	char err[4096];
 	if (run_string(export_graph, ph, err, sizeof err)) {
 		fprintf(stderr, "phantom export failed: %s\n", err);
@@ -185,6 +193,9 @@ static int setup(void **state)
 	ran_direct = run_string(direct_graph, out_direct, err, sizeof err);
 	if (ran_direct)
 		fprintf(stderr, "direct demons failed: %s\n", err);
+	const char *zero[] = { "tune.values=0" };
+	ran_zero = run_file("graphs/armstg_auto.ini", zero, 1, out_zero,
+			    zero_err, sizeof zero_err);
 	/* no FLAIR, no T2: sts makes no tumour */
 	setenv("PATIENT_FLAIR", "none", 1);
 	ran_fail = run_file("graphs/armstg_auto.ini", sets, 1, out_fail,
@@ -200,10 +211,13 @@ static int teardown(void **state)
 	return 0;
 }
 
-static double metric(const char *d, const char *name, const char *structure)
+/* the value of row (name, structure) of table d/file (metric, structure,
+ * value columns: metrics.tsv, masseffect.tsv); NaN if absent */
+static double table_value(const char *d, const char *file, const char *name,
+			  const char *structure)
 {
 	char path[1200], line[512];
-	snprintf(path, sizeof path, "%s/metrics.tsv", d);
+	snprintf(path, sizeof path, "%s/%s", d, file);
 	FILE *f = fopen(path, "r");
 	if (!f)
 		return NAN;
@@ -219,6 +233,11 @@ static double metric(const char *d, const char *name, const char *structure)
 	}
 	fclose(f);
 	return v;
+}
+
+static double metric(const char *d, const char *name, const char *structure)
+{
+	return table_value(d, "metrics.tsv", name, structure);
 }
 
 static vol_t *read_vol(const char *d, const char *name)
@@ -318,6 +337,77 @@ static void test_no_tumour_modality(void **state)
 	assert_non_null(strstr(fail_err, "required input 'volume' is missing"));
 }
 
+/* push depth 0: no mass effect, and the rest of the graph as at any depth */
+static void test_no_push(void **state)
+{
+	(void)state;
+	if (ran_zero)
+		fail_msg("graphs/armstg_auto.ini at push_mm 0 failed: %s",
+			 zero_err);
+	char p[1200], err[512];
+	snprintf(p, sizeof p, "%s/nodes.h5", out_zero);
+	ps_t *ps = NULL;
+	if (ps_read_h5(p, &ps, err, sizeof err))
+		fail_msg("%s: %s", p, err);
+	assert_true(ps->n > 1000);
+	const ps_attr_t *u = NULL;
+	for (int a = 0; a < ps->nattr; a++)
+		if (!strcmp(ps->attr[a].name, "u"))
+			u = &ps->attr[a];
+	assert_non_null(u);
+	assert_int_equal(u->ncomp, 3);
+	int64_t nonzero = 0, nnodes = ps->n;
+	for (int64_t i = 0; i < 3 * ps->n; i++)
+		nonzero += !(u->data[i] == 0);
+	assert_int_equal(nonzero, 0);
+	msg_unref(&ps->base);
+	/* the growth field is zero: the grown atlas is the atlas */
+	vol_t *a = read_vol(ph, "atlas_t1.nii.gz");
+	vol_t *g = read_vol(out_zero, "grown_atlas_t1.nii.gz");
+	vol_t *al = read_vol(ph, "atlas_labels.nii.gz");
+	vol_t *gl = read_vol(out_zero, "grown_atlas_labels.nii.gz");
+	assert_int_equal(vol_nvox(a), vol_nvox(g));
+	assert_int_equal(vol_nvox(al), vol_nvox(gl));
+	int64_t dt1 = 0, dlab = 0, ntum = 0;
+	for (int64_t e = 0; e < vol_nvox(a); e++) {
+		dt1 += !(vol_get(a, e) == vol_get(g, e));
+		if (vol_get(gl, e) == 6)
+			ntum++;
+		else
+			dlab += vol_get(al, e) != vol_get(gl, e);
+	}
+	print_message("push 0: %lld nodes, u all 0; grown T1: %lld voxels "
+		      "differ, labels: %lld outside the %lld tumour voxels\n",
+		      (long long)nnodes, (long long)dt1, (long long)dlab,
+		      (long long)ntum);
+	assert_int_equal(dt1, 0);
+	assert_int_equal(dlab, 0);
+	assert_true(ntum > 100);
+	msg_unref(&a->base);
+	msg_unref(&g->base);
+	msg_unref(&al->base);
+	msg_unref(&gl->base);
+	/* stage mass: what [tune] require reads */
+	static const char me[] = "masseffect.tsv";
+	assert_float_equal(table_value(out_zero, me, "jac_min", "field"), 1, 0);
+	assert_float_equal(table_value(out_zero, me, "shift", "grown"), 0, 0);
+	assert_float_equal(table_value(out_zero, me, "intrusion", "ventricles"),
+			   0, 0);
+	/* the registration after it */
+	double jmin = metric(out_zero, "jac_min", "mask");
+	double ncc = metric(out_zero, "ncc", "band");
+	print_message("push 0: min det J %.3f, ncc band %.4f\n", jmin, ncc);
+	assert_true(jmin > 0);
+	assert_true(isfinite(ncc) && ncc > 0.5);
+	vol_t *w = read_vol(out_zero, "atlas_to_patient_warp.nii.gz");
+	assert_int_equal(w->nc, 3);
+	int64_t nbad = 0;
+	for (int64_t e = 0; e < vol_nvox(w) * w->nc; e++)
+		nbad += !isfinite(vol_get(w, e));
+	assert_int_equal(nbad, 0);
+	msg_unref(&w->base);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -325,6 +415,7 @@ int main(void)
 		cmocka_unit_test(test_registered_tumour),
 		cmocka_unit_test(test_accuracy),
 		cmocka_unit_test(test_no_tumour_modality),
+		cmocka_unit_test(test_no_push),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }

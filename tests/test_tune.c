@@ -15,6 +15,9 @@
  * may exist.  The *.count files (outside --out) get one line per run of
  * pre, ref and sim.
  *
+ * test_shipped_push_rule loads the shipped growth graphs with the real
+ * plugins and reads their parsed [tune] (graph_int.h).
+ *
  * The load errors of [tune] (one file per error, with its line) are in
  * tests/graphs/bad/tune_*.ini, checked by test_graph's test_bad_graphs;
  * the --set ones are here.
@@ -28,7 +31,7 @@
 #include <time.h>
 
 #include "testutil.h"
-#include "graph.h"
+#include "graph_int.h"
 
 static const char tune_graph[] =
 	"[graph]\nname = tune_test\n"
@@ -396,6 +399,51 @@ static void test_require_other_table(void **state)
 				      "'alt' (output 'table') has no row with "
 				      "metric 'nope'"));
 	done(&r);
+}
+
+/* The shape of the shipped push-depth rule (graphs/armstg.ini: values
+ * 0, 1.5, ..., require = jac_min mask > 0, mass.table: intrusion
+ * ventricles <= 0.1): a candidate 0 ("no push") and a condition on another
+ * stage's table after one on the score table.  alt's neg near is
+ * -(x - 4.2)^2: -17.64 -10.24 -4.84 -1.44 -0.04 -0.64 for 0..5, so "alt.table:
+ * neg near <= -11" leaves only 0, whose score (fit's sq near 10.24) is the
+ * worst: 0 is chosen and the final run uses it; every other candidate is
+ * listed as failed with alt's condition and its own score.  With "<= -10"
+ * 1 (score 4.84) also passes and wins. */
+static void test_require_keeps_zero(void **state)
+{
+	(void)state;
+	const char *a[] = { "tune.values=0, 1, 2, 3, 4, 5",
+			    "tune.require=sq far > 0, alt.table: neg near <= -11",
+			    "tune.tolerance=0.0003" };
+	trun_t r;
+	run_sets(&r, a, 3);
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 0.0, 0);
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 6);
+	assert_float_equal(tt.value->num[0], 0.0, 0);
+	assert_string_equal(tt.status->str[0], "ok");
+	assert_float_equal(tt.score->num[0], 10.24, 1e-9);
+	assert_float_equal(chosen_value(&tt), 0.0, 0);
+	static const char *const why[] = { NULL, "-10.24", "-4.84", "-1.44",
+					   "-0.04", "-0.64" };
+	for (int k = 1; k < 6; k++) {
+		char want[128];
+		snprintf(want, sizeof want, "require alt.table: neg near <= -11 "
+			 "not met: %s", why[k]);
+		assert_string_equal(tt.status->str[k], "failed");
+		assert_string_equal(tt.error->str[k], want);
+		assert_float_equal(tt.score->num[k],
+				   (k - 3.2) * (k - 3.2), 1e-9);
+	}
+	ttab_free(&tt);
+	done(&r);
+	const char *b[] = { "tune.values=0, 1, 2, 3, 4, 5",
+			    "tune.require=sq far > 0, alt.table: neg near <= -10" };
+	assert_float_equal(chosen_with(b, 2), 1.0, 0);
 }
 
 /* the value chosen with each set of --set options (at most 3) */
@@ -1034,6 +1082,55 @@ static void test_score_columns(void **state)
 	assert_string_equal(err, want);
 }
 
+/* The shipped growth graphs' push-depth rule as [tune] resolved it at load
+ * (the real plugins): 0 ("no push") the first of 7 depths, and two
+ * conditions: jac_min mask > 0 on the score table, then intrusion
+ * ventricles <= 0.1 (ml) on the table of stage 'mass' (masseffect), which
+ * depends on the growth (tune_check refuses one that does not) */
+static void test_shipped_push_rule(void **state)
+{
+	(void)state;
+	static const char *const graphs[] = { "graphs/armstg.ini",
+					      "graphs/armstg_auto.ini",
+					      "graphs/spherical.ini" };
+	static const char *const depths[] = { "0", "1.5", "3", "4.5", "6",
+					      "7.5", "9" };
+	char p[1024], err[8192];
+	snprintf(p, sizeof p, "%s/plugins", tu_build_dir());
+	setenv("ARMSTG_PLUGIN_PATH", p, 1);
+	unsetenv("PUSH_VALUES");
+	for (size_t k = 0; k < ARMSTG_COUNT(graphs); k++) {
+		graph_t *g = graph_load(graphs[k], NULL, 0, err, sizeof err);
+		if (!g)
+			fail_msg("%s: %s", graphs[k], err);
+		const g_tune_t *t = &g->tune;
+		assert_true(t->search);
+		assert_string_equal(g->stages[t->stage].name, "grow");
+		assert_string_equal(t->key, "push_mm");
+		assert_int_equal(t->nvalues, ARMSTG_COUNT(depths));
+		for (int v = 0; v < t->nvalues; v++)
+			assert_string_equal(t->values[v], depths[v]);
+		assert_int_equal(t->nreq, 2);
+		const g_req_t *f = &t->req[0], *q = &t->req[1];
+		assert_int_equal(f->stage, -1);
+		assert_string_equal(f->metric, "jac_min");
+		assert_string_equal(f->structure, "mask");
+		assert_string_equal(f->op, ">");
+		assert_float_equal(f->value, 0, 0);
+		assert_true(q->stage >= 0);
+		assert_string_equal(g->stages[q->stage].name, "mass");
+		assert_string_equal(g->stages[q->stage].plug.desc->name,
+				    "masseffect");
+		assert_string_equal(q->table, "mass.table");
+		assert_string_equal(q->metric, "intrusion");
+		assert_string_equal(q->structure, "ventricles");
+		assert_string_equal(q->op, "<=");
+		assert_float_equal(q->value, 0.1, 0);
+		graph_free(g);
+	}
+	setenv("ARMSTG_PLUGIN_PATH", plugdir, 1);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1047,6 +1144,8 @@ int main(void)
 		cmocka_unit_test(test_require_other_table),
 		cmocka_unit_test(test_stop_past_peak),
 		cmocka_unit_test(test_stop_require),
+		cmocka_unit_test(test_require_keeps_zero),
+		cmocka_unit_test(test_shipped_push_rule),
 		cmocka_unit_test(test_all_candidates_fail),
 		cmocka_unit_test(test_shared_stage_failure_fails_the_run),
 		cmocka_unit_test(test_set_rules),
