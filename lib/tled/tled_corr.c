@@ -270,7 +270,11 @@ typedef struct coarse {
 	int64_t *rptr;    /* nc + 1: R^T in CSR, coarse point c's entries */
 	int64_t *rent;    /*   rptr[c] .. rptr[c+1]-1, each 8 a + k (an index
 			   *   of cid / cw), in increasing node a */
-	double *A;        /* nc * nc: Cholesky factor (lower, column-major) */
+	double *A;        /* nc * nc: Cholesky factor L, lower, column-major
+			   * (A[c nc + r] = L_rc, r >= c), mirrored into the
+			   * upper part (A[r nc + c] = L_rc too): row r of L
+			   * and row r of L^T are both contiguous
+			   * (tled_chol_solve3) */
 	double *rc;       /* 3 * nc: coarse right-hand sides (column-major) */
 } coarse_t;
 
@@ -593,8 +597,25 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 				      (lapack_int)nc);
 	}
 	openblas_set_num_threads(blas_nt);
-	if (info)
+	if (info) {
 		coarse_free(C);
+		goto out;
+	}
+	/* the factor's rows for the forward solve: A[r nc + c] = L_rc, c < r
+	 * (the upper part, which dpotrf 'L' leaves alone) */
+	/* by 64 x 64 tiles: row by row, the strided reads missed the cache
+	 * on every element (0.2-0.4 s at nc = 2 665) */
+	int64_t nt64 = (nc + 63) / 64;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(m->nthreads)
+	for (int64_t tr = 0; tr < nt64; tr++)
+		for (int64_t tc = 0; tc <= tr; tc++) {
+			int64_t r1 = (tr + 1) * 64 < nc ? (tr + 1) * 64 : nc;
+			int64_t c1 = (tc + 1) * 64 < nc ? (tc + 1) * 64 : nc;
+			for (int64_t c = tc * 64; c < c1; c++)
+				for (int64_t r = tr * 64 > c + 1 ? tr * 64 : c + 1;
+				     r < r1; r++)
+					A[r * nc + c] = A[c * nc + r];
+		}
 	goto out;
 oom:
 	coarse_free(C);
@@ -608,6 +629,81 @@ out:
 	free(fill);
 	free(A0);
 	return rc;
+}
+
+/*
+ * C->rc = A_c^-1 C->rc for its 3 right-hand sides (column-major, nc each),
+ * in place: L y = b, then L^T x = y (A_c = L L^T, coarse_build), by blocks
+ * of CS_B rows.  Per block, each row's sum over the rows already solved
+ * runs in parallel (a row per thread), then the block's own triangle in
+ * order; a row's sum always runs over j in the same order, so x has the
+ * same bits on any thread count.  It replaces LAPACK's dpotrs, whose
+ * level-2 triangular solves OpenBLAS runs on one thread: 22 ms a solve at
+ * nc = 2 665 (a 3 mm pat0001 model, 35 672 nodes, on the 16-core H100
+ * host: 1.68 s of its 3.92 s build, 2026-11-26), memory-bound on the
+ * 57 MB factor, which every thread now streams a share of.
+ */
+#define CS_B 128
+void tled_chol_solve3(int64_t nc, const double *A, double *b, int nt)
+{
+	/* forward: y_i = (b_i - sum_{j<i} L_ij y_j) / L_ii, L_ij = A[i nc + j] */
+	for (int64_t k0 = 0; k0 < nc; k0 += CS_B) {
+		int64_t k1 = k0 + CS_B < nc ? k0 + CS_B : nc;
+		if (k0 > 0) {
+#pragma omp parallel for schedule(static) num_threads(nt)
+			for (int64_t i = k0; i < k1; i++) {
+				const double *row = A + i * nc;
+				double s0 = 0, s1 = 0, s2 = 0;
+				for (int64_t j = 0; j < k0; j++) {
+					s0 += row[j] * b[j];
+					s1 += row[j] * b[nc + j];
+					s2 += row[j] * b[2 * nc + j];
+				}
+				b[i] -= s0;
+				b[nc + i] -= s1;
+				b[2 * nc + i] -= s2;
+			}
+		}
+		for (int64_t i = k0; i < k1; i++) {
+			const double *row = A + i * nc;
+			for (int d = 0; d < 3; d++) {
+				double *bd = b + d * nc, s = bd[i];
+				for (int64_t j = k0; j < i; j++)
+					s -= row[j] * bd[j];
+				bd[i] = s / row[i];
+			}
+		}
+	}
+	/* backward: x_i = (y_i - sum_{j>i} L_ji x_j) / L_ii, L_ji = A[i nc + j],
+	 * the same blocks from the last */
+	int64_t nb = (nc + CS_B - 1) / CS_B;
+	for (int64_t kb = nb - 1; kb >= 0; kb--) {
+		int64_t k0 = kb * CS_B, k1 = k0 + CS_B < nc ? k0 + CS_B : nc;
+		if (k1 < nc) {
+#pragma omp parallel for schedule(static) num_threads(nt)
+			for (int64_t i = k0; i < k1; i++) {
+				const double *row = A + i * nc;
+				double s0 = 0, s1 = 0, s2 = 0;
+				for (int64_t j = k1; j < nc; j++) {
+					s0 += row[j] * b[j];
+					s1 += row[j] * b[nc + j];
+					s2 += row[j] * b[2 * nc + j];
+				}
+				b[i] -= s0;
+				b[nc + i] -= s1;
+				b[2 * nc + i] -= s2;
+			}
+		}
+		for (int64_t i = k1 - 1; i >= k0; i--) {
+			const double *row = A + i * nc;
+			for (int d = 0; d < 3; d++) {
+				double *bd = b + d * nc, s = bd[i];
+				for (int64_t j = i + 1; j < k1; j++)
+					s -= row[j] * bd[j];
+				bd[i] = s / row[i];
+			}
+		}
+	}
 }
 
 /* z = D^-1 r + R A_c^-1 R^T r (3 components); in the singular case the
@@ -633,8 +729,7 @@ static void precond(const corr_ctx_t *cx, const coarse_t *C, const double *dg,
 			for (int d = 0; d < 3; d++)
 				C->rc[d * nc + c] = s[d];
 		}
-		LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)nc, 3, C->A,
-			       (lapack_int)nc, C->rc, (lapack_int)nc);
+		tled_chol_solve3(nc, C->A, C->rc, m->nthreads);
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
 		for (int64_t a = 0; a < n; a++) {
 			double s[3] = { 0, 0, 0 };
@@ -757,12 +852,9 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 			  "correction");
 		goto out;
 	}
-	/* the coarse solves (dpotrs, 3 right-hand sides) on one BLAS thread:
-	 * OpenBLAS's own threads waiting beside the OpenMP team made them
-	 * 13 ms each at nc = 400 on 2 loaded cores (2.6 ms at nc = 1 042 on
-	 * one) */
-	int blas_nt = openblas_get_num_threads();
-	openblas_set_num_threads(1);
+	/* (the coarse solves are tled_chol_solve3's, on the OpenMP team: with
+	 * dpotrs, OpenBLAS's own threads waiting beside the team made them
+	 * 13 ms each at nc = 400 on 2 loaded cores) */
 	/* z = B r, rz = r . z per component */
 	double rz[3] = { 0, 0, 0 };
 	precond(&cx, &C, dg, singular, r, z, &m->t_csolve);
@@ -820,7 +912,6 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 			rz[c] = zn[c];
 		}
 	}
-	openblas_set_num_threads(blas_nt);
 	free(dg);
 	free(z);
 	coarse_free(&C);

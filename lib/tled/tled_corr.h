@@ -29,4 +29,12 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 			   const int64_t *ent_ip, const double *G, int coarse,
 			   char *err, size_t errsize);
 
+/*
+ * b = A^-1 b for 3 right-hand sides (b column-major, nc each), A = L L^T
+ * factored by LAPACK dpotrf 'L' column-major (A[c nc + r] = L_rc, r >= c)
+ * and mirrored (A[r nc + c] = L_rc for c < r too), on nt OpenMP threads:
+ * the same bits on any nt (tled_corr.c, the coarse level's solve).
+ */
+void tled_chol_solve3(int64_t nc, const double *A, double *b, int nt);
+
 #endif

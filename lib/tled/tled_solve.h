@@ -156,6 +156,28 @@ typedef struct tled_ops {
 	 * conditions of drive=collocated, which run on the host) */
 	int (*push)(void *ctx, tled_solver_t *s);
 	const char *(*strerror)(void *ctx);
+	/* optional (NULL: on the host, with forces): the Lanczos operator of
+	 * the time-step estimate (tled_solve_dt.c), y = M^-1/2 K M^-1/2 x by
+	 * central differences of the internal forces, where the state lives.
+	 * kbegin: the base state u (3n, m), the active points (NULL: all),
+	 * m->ipg, and im (n: 1/sqrt(m_a) on free nodes, 0 elsewhere);
+	 * kapply: y (3n) from x (3n) with the difference step eps (m),
+	 * y = im (f(u + eps im x) - f(u - eps im x)) / (2 eps).  A failure
+	 * returns -1 (message by strerror); the caller then falls back to
+	 * the host. */
+	int (*kbegin)(void *ctx, const tled_model_t *m, const uint8_t *ipact,
+		      const double *u, const double *im);
+	int (*kapply)(void *ctx, const double *x, double eps, double *y);
+	/* optional, with kbegin: the whole Lanczos recurrence where the state
+	 * lives, the vectors never crossing the bus (used when there are no
+	 * collocated conditions to project on the host).  kvstart: v1 = x
+	 * (3n), v0 = 0; kvstep: w = A v1 (kapply's operator, its eps from
+	 * h_mean as op_apply's), *a = w . v1, w -= a v1 + bk v0, *b = |w|;
+	 * kvnext: v0 = v1, v1 = w / b.  -1 on failure (the caller then runs
+	 * the estimate on the host). */
+	int (*kvstart)(void *ctx, const double *x);
+	int (*kvstep)(void *ctx, double bk, double *a, double *b);
+	int (*kvnext)(void *ctx, double b);
 } tled_ops_t;
 
 struct tled_solver_opts {

@@ -82,9 +82,10 @@ static double pdot(const tled_model_t *m, const double *a, const double *b,
 	return sum;
 }
 
-/* y = M^-1/2 K M^-1/2 x on free dofs (K by central differences of f) */
-static void op_apply(tled_solver_t *s, const tled_ops_t *ops, const double *x,
-		     double *y)
+/* y = M^-1/2 K M^-1/2 x on free dofs (K by central differences of f);
+ * dev: the backend's kapply (tled_ops_t) holds u and the model */
+static void op_apply(tled_solver_t *s, const tled_ops_t *ops, int dev,
+		     const double *x, double *y)
 {
 	tled_model_t *m = s->m;
 	int64_t n = m->n;
@@ -102,6 +103,13 @@ static void op_apply(tled_solver_t *s, const tled_ops_t *ops, const double *x,
 		return;
 	}
 	double eps = 1e-6 * m->h_mean / xmax;
+	/* on the device: x up, y down, the two force evaluations and the
+	 * difference there (the same arithmetic as below: 2 x 3n doubles
+	 * over the bus a Lanczos step instead of 4 x 3n + the growth
+	 * stretches, and no host passes over u; a 3 mm pat0001 model spent
+	 * 2.69 s of a 12.1 s growth in these estimates, 2026-11-26) */
+	if (dev && ops->kapply(ops->ctx, x, eps, y) == 0)
+		return;
 	for (int sgn = 0; sgn < 2; sgn++) {
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
 		for (int64_t a = 0; a < n; a++) {
@@ -178,19 +186,57 @@ int tled_solver_eigs(tled_solver_t *s, const tled_solver_opts_t *o,
 	}
 	for (int64_t i = 0; i < n3; i++)
 		v1[i] /= nrm;
+	/* the backend's operator when it has one (its state: u, the active
+	 * points, the growth stretches, M^-1/2 on free nodes), and its whole
+	 * recurrence when nothing is projected on the host (dev = 2): per
+	 * Lanczos step two force evaluations and two scalar copies instead of
+	 * 2 x 3n doubles over the bus and six passes over 3n on the host
+	 * (2.7 of a 3 mm growth's 12.1 s on the H100 host before,
+	 * 2026-11-26: bench/tled/results.md) */
+	int dev = 0;
+	if (ops->kbegin && ops->kapply) {
+		double *im = malloc((size_t)(m->n > 0 ? m->n : 1) * sizeof *im);
+		if (im) {
+			for (int64_t a = 0; a < m->n; a++)
+				im[a] = s->dkind[a] == TLED_FREE ? 1 / sqrt(m->mass[a])
+								 : 0;
+			dev = ops->kbegin(ops->ctx, m, s->ipact, s->u, im) == 0;
+			free(im);
+		}
+	}
+	if (dev && ops->kvstart && ops->kvstep && ops->kvnext &&
+	    !(m->ebc && s->nc > 0) && ops->kvstart(ops->ctx, v1) == 0)
+		dev = 2;
+	memcpy(v0, v1, (size_t)n3 * sizeof *v0); /* the start, for a retry */
 	double prev = 0, top = 0, bot = 0;
 	int k;
 	for (k = 0; k < kmax; k++) {
-		op_apply(s, ops, v1, w);
-		if (m->ebc && s->nc > 0)
-			tled_ebc_project_scaled(s, w);
-		double a = pdot(m, w, v1, n3);
-		al[k] = a;
-		double bk = be[k];
+		double a, b, bk = be[k];
+		if (dev == 2) {
+			if (ops->kvstep(ops->ctx, bk, &a, &b)) {
+				/* the device failed: again, on the host */
+				dev = 0;
+				memcpy(v1, v0, (size_t)n3 * sizeof *v1);
+				memset(v0, 0, (size_t)n3 * sizeof *v0);
+				memset(be, 0, (size_t)(kmax + 2) * sizeof *be);
+				prev = 0;
+				k = -1;
+				continue;
+			}
+			al[k] = a;
+		} else {
+			if (k == 0)
+				memset(v0, 0, (size_t)n3 * sizeof *v0);
+			op_apply(s, ops, dev, v1, w);
+			if (m->ebc && s->nc > 0)
+				tled_ebc_project_scaled(s, w);
+			a = pdot(m, w, v1, n3);
+			al[k] = a;
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
-		for (int64_t i = 0; i < n3; i++)
-			w[i] -= a * v1[i] + bk * v0[i];
-		double b = sqrt(pdot(m, w, w, n3));
+			for (int64_t i = 0; i < n3; i++)
+				w[i] -= a * v1[i] + bk * v0[i];
+			b = sqrt(pdot(m, w, w, n3));
+		}
 		top = tri_eig(al, be, k + 1, 1);
 		bot = tri_eig(al, be, k + 1, 0);
 		if (k >= 15 && fabs(top - prev) <= 1e-7 * fabs(top))
@@ -199,6 +245,17 @@ int tled_solver_eigs(tled_solver_t *s, const tled_solver_opts_t *o,
 		if (!(b > 1e-14 * fabs(top)))
 			break;
 		be[k + 1] = b;
+		if (dev == 2) {
+			if (ops->kvnext(ops->ctx, b) == 0)
+				continue;
+			dev = 0;
+			memcpy(v1, v0, (size_t)n3 * sizeof *v1);
+			memset(v0, 0, (size_t)n3 * sizeof *v0);
+			memset(be, 0, (size_t)(kmax + 2) * sizeof *be);
+			prev = 0;
+			k = -1;
+			continue;
+		}
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
 		for (int64_t i = 0; i < n3; i++) {
 			v0[i] = v1[i];

@@ -77,10 +77,15 @@ static int tled_cuda_process(armstg_stage_t *st)
 				      "of it", bw, 100 * cs.bytes_per_step /
 				      (cs.step_ms / cs.steps) / 1e6 / bw);
 	}
+	if (cs.kops > 0)
+		st->host->log(st, LOG_INFO, "device: %lld Lanczos steps "
+			      "(time-step estimates; two force evaluations "
+			      "each), %.2f s", cs.kops, cs.kops_ms / 1e3);
 	if (cs.hforces > 0)
 		st->host->log(st, LOG_INFO, "device: %lld host-array force "
-			      "evaluations (time-step estimates), %.2f s",
-			      cs.hforces, cs.hforces_ms / 1e3);
+			      "evaluations (growth energy%s), %.2f s",
+			      cs.hforces, cs.kops > 0 ? "" : ", time-step estimates",
+			      cs.hforces_ms / 1e3);
 	return rc;
 }
 

@@ -14,9 +14,11 @@
  * bus around each projection there.  The model is uploaded
  * once per build (tled_model_t.gen); per time step only these scalars come
  * back (one small copy per operation).  The Lanczos estimate of the
- * critical step (at the start of a growth step, at the end of its ramp and
- * every 1000 iterations) reads the state on the host and evaluates forces
- * on the device.
+ * critical step (at the start of a growth step, at the end of its ramp,
+ * every 1000 iterations and when the step watch asks) runs on the device
+ * too (tled_ops_t kbegin, kvstart, kvstep, kvnext: the Lanczos vectors stay
+ * there, two sums come back per step; with drive=collocated, whose
+ * projection runs on the host, only the operator does: kapply).
  *
  * Precision: double throughout, as tled_cpu.  The H100 runs FP64 at half
  * its FP32 rate and the step is bound by memory traffic, not arithmetic;
@@ -72,6 +74,9 @@ typedef struct tled_cuda_stats {
 	long long hforces;    /* host-array force calls (time-step estimates,
 	                         growth energy), with their copies */
 	double hforces_ms;
+	long long kops;       /* Lanczos steps on the device (kvstep or
+	                         kapply: two force evaluations each) */
+	double kops_ms;       /* their wall time with the copies, ms */
 	double bytes_per_step;
 	double upload_ms;     /* model upload, ms */
 } tled_cuda_stats_t;

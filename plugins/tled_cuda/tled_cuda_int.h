@@ -77,6 +77,24 @@ __global__ void k_grow(int nip, const double *g0, const double *g1, double rr,
 __global__ void k_contact(dmod m, const unsigned char *kind, const double *s0,
 			  double *u, double *v, double stick_dt, int *ctb,
 			  double *ctq, double *ctgap, double *ctd, red *part);
+/* the Lanczos operator's two states (tled_ops_t kapply): out = u +
+ * h im x, h = +-eps, im per node (3n entries) */
+__global__ void k_kpert(long long n3, const double *u, const double *im,
+			const double *x, double h, double *out);
+/* its difference: y = im (fp - fm) / (2 eps) */
+__global__ void k_kdiff(long long n3, const double *im, const double *fp,
+			const double *fm, double eps, double *y);
+/* the device Lanczos recurrence (kvstep): s0 = a . b over 3n entries;
+ * mx = max |x| im (im per node) */
+__global__ void k_kdot(long long n3, const double *a, const double *b,
+		       red *part);
+__global__ void k_kxmax(long long n3, const double *x, const double *im,
+			red *part);
+/* w -= a v1 + bk v0, a = ra->s0 */
+__global__ void k_kupd(long long n3, double *w, const double *v1,
+		       const double *v0, const red *ra, double bk);
+/* v = w / b */
+__global__ void k_kdiv(long long n3, const double *w, double b, double *v);
 /* max v^2 over the dynamic nodes */
 __global__ void k_vmax(dmod m, const unsigned char *dkind, const double *v,
 		       red *part);

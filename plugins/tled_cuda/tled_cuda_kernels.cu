@@ -428,3 +428,66 @@ __global__ void k_vmax(dmod m, const unsigned char *dkind, const double *v,
 		}
 	red_block(r, part);
 }
+
+/* the Lanczos operator (tled_solve_dt.c op_apply): the same expressions,
+ * in the same order, as the host's (no fused multiply-adds: plugin.mk) */
+__global__ void k_kpert(long long n3, const double *u, const double *im,
+			const double *x, double h, double *out)
+{
+	for (long long i = blockIdx.x * (long long)blockDim.x + threadIdx.x;
+	     i < n3; i += (long long)gridDim.x * blockDim.x)
+		out[i] = u[i] + h * im[i / 3] * x[i];
+}
+
+__global__ void k_kdiff(long long n3, const double *im, const double *fp,
+			const double *fm, double eps, double *y)
+{
+	for (long long i = blockIdx.x * (long long)blockDim.x + threadIdx.x;
+	     i < n3; i += (long long)gridDim.x * blockDim.x)
+		y[i] = im[i / 3] * (fp[i] - fm[i]) / (2 * eps);
+}
+
+/* the device Lanczos recurrence (tled_solve_dt.c, tled_ops_t kvstep): the
+ * host's expressions; the sums in this file's fixed order per launch
+ * geometry (the same bits run to run, not the host's bits) */
+__global__ void k_kdot(long long n3, const double *a, const double *b,
+		       red *part)
+{
+	red r;
+	red_init(r);
+	for (long long i = blockIdx.x * (long long)blockDim.x + threadIdx.x;
+	     i < n3; i += (long long)gridDim.x * blockDim.x)
+		r.s0 += a[i] * b[i];
+	red_block(r, part);
+}
+
+__global__ void k_kxmax(long long n3, const double *x, const double *im,
+			red *part)
+{
+	red r;
+	red_init(r);
+	r.mx = 0;
+	for (long long i = blockIdx.x * (long long)blockDim.x + threadIdx.x;
+	     i < n3; i += (long long)gridDim.x * blockDim.x) {
+		double v = fabs(x[i]) * im[i / 3];
+		if (v > r.mx)
+			r.mx = v;
+	}
+	red_block(r, part);
+}
+
+__global__ void k_kupd(long long n3, double *w, const double *v1,
+		       const double *v0, const red *ra, double bk)
+{
+	double a = ra->s0;
+	for (long long i = blockIdx.x * (long long)blockDim.x + threadIdx.x;
+	     i < n3; i += (long long)gridDim.x * blockDim.x)
+		w[i] -= a * v1[i] + bk * v0[i];
+}
+
+__global__ void k_kdiv(long long n3, const double *w, double b, double *v)
+{
+	for (long long i = blockIdx.x * (long long)blockDim.x + threadIdx.x;
+	     i < n3; i += (long long)gridDim.x * blockDim.x)
+		v[i] = w[i] / b;
+}

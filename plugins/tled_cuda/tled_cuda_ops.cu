@@ -35,6 +35,14 @@ struct tled_cuda {
 	/* state */
 	double *u, *v, *f, *fprev, *ustart, *target, *VP, *s0, *ipg, *ipg0,
 		*ipg1, *hu, *hf;
+	/* the Lanczos operator's (kbegin, kapply): base state, M^-1/2 on free
+	 * nodes, x, f at u - eps im x */
+	double *ku, *kim, *kx, *kfm;
+	double *kv0, *kv1, *kw; /* the device recurrence (kvstart ...) */
+	red *kres, *hkres;      /* its two sums (device, pinned host) */
+	double kh;              /* the model's mean spacing, m */
+	const unsigned char *kact; /* c->ipact or NULL */
+	const double *kipg;        /* c->ipg or NULL */
 	unsigned char *kind, *dkind, *ipact;
 	int *ctb;            /* contact cache (d_side) */
 	double *ctq, *ctgap, *ctd;
@@ -89,6 +97,8 @@ static void free_state(tled_cuda_t *c)
 {
 	void *bufs[] = { c->u, c->v, c->f, c->fprev, c->ustart, c->target,
 			 c->VP, c->s0, c->ipg, c->ipg0, c->ipg1, c->hu, c->hf,
+			 c->ku, c->kim, c->kx, c->kfm, c->kv0, c->kv1, c->kw,
+			 c->kres,
 			 c->kind, c->dkind, c->ipact, c->part, c->res, c->ctb,
 			 c->ctq, c->ctgap, c->ctd };
 	for (size_t i = 0; i < sizeof bufs / sizeof *bufs; i++)
@@ -96,6 +106,8 @@ static void free_state(tled_cuda_t *c)
 			cudaFree(bufs[i]);
 	c->u = c->v = c->f = c->fprev = c->ustart = c->target = c->VP = c->s0 =
 		c->ipg = c->ipg0 = c->ipg1 = c->hu = c->hf = NULL;
+	c->ku = c->kim = c->kx = c->kfm = c->kv0 = c->kv1 = c->kw = NULL;
+	c->kres = NULL;
 	c->kind = c->dkind = c->ipact = NULL;
 	c->part = c->res = NULL;
 	c->ctb = NULL;
@@ -234,13 +246,16 @@ static int ensure_model(tled_cuda_t *c, const tled_model_t *m)
 	size_t n3 = (size_t)(3 * m->n);
 	void **pp[] = { (void **)&c->u, (void **)&c->v, (void **)&c->f,
 			(void **)&c->fprev, (void **)&c->ustart,
-			(void **)&c->target, (void **)&c->hu, (void **)&c->hf };
+			(void **)&c->target, (void **)&c->hu, (void **)&c->hf,
+			(void **)&c->ku, (void **)&c->kx, (void **)&c->kfm,
+			(void **)&c->kv0, (void **)&c->kv1, (void **)&c->kw };
 	for (size_t i = 0; i < sizeof pp / sizeof *pp; i++)
 		if (dalloc(c, pp[i], n3 * sizeof(double), "state"))
 			return -1;
 	if (dalloc(c, (void **)&c->VP, (size_t)(9 * m->nip) * sizeof(double),
 		   "stresses") ||
 	    dalloc(c, (void **)&c->s0, (size_t)m->n * sizeof(double), "state") ||
+	    dalloc(c, (void **)&c->kim, (size_t)m->n * sizeof(double), "state") ||
 	    dalloc(c, (void **)&c->ipg, (size_t)m->nip * sizeof(double), "growth") ||
 	    dalloc(c, (void **)&c->ipg0, (size_t)m->nip * sizeof(double), "growth") ||
 	    dalloc(c, (void **)&c->ipg1, (size_t)m->nip * sizeof(double), "growth") ||
@@ -249,6 +264,7 @@ static int ensure_model(tled_cuda_t *c, const tled_model_t *m)
 	    dalloc(c, (void **)&c->ipact, (size_t)m->nip, "active points") ||
 	    dalloc(c, (void **)&c->part, MAXBLK * sizeof(red), "reductions") ||
 	    dalloc(c, (void **)&c->res, sizeof(red), "reductions") ||
+	    dalloc(c, (void **)&c->kres, 2 * sizeof(red), "reductions") ||
 	    dalloc(c, (void **)&c->ctb, (size_t)m->n * TLED_CT_K * sizeof(int), "contact") ||
 	    dalloc(c, (void **)&c->ctq, n3 * sizeof(double), "contact") ||
 	    dalloc(c, (void **)&c->ctgap, (size_t)m->n * sizeof(double), "contact") ||
@@ -298,9 +314,11 @@ static int dev_forces(tled_cuda_t *c, const double *u, double *f,
 	int ng = (int)((c->dm.n + TPB / 32 - 1) / (TPB / 32));
 	k_gather<<<ng > 0 ? ng : 1, TPB>>>(c->dm, ipact, c->VP, f);
 	CK(c, cudaGetLastError(), "force gather");
+	if (!fi)
+		return 0; /* nothing to read: no wait for the device */
 	if (fetch(c, nb, "stresses"))
 		return -1;
-	if (fi) {
+	{
 		const red &r = *c->hres;
 		fi->W = r.s0;
 		fi->Jmin = -r.mx;
@@ -351,6 +369,137 @@ static void cu_forces(void *ctx, const tled_model_t *m, const uint8_t *ipact,
 			info->ip_jmin = 0;
 		}
 	}
+}
+
+/* the Lanczos operator on the device (tled_ops_t kbegin, kapply): the base
+ * state and the scaling up once per estimate, then x up and y down per
+ * application */
+static int cu_kbegin(void *ctx, const tled_model_t *m, const uint8_t *ipact,
+		     const double *u, const double *im)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	size_t n3 = (size_t)(3 * m->n) * sizeof(double);
+	double t0 = now_ms();
+	if (ensure_model(c, m))
+		return -1;
+	CK(c, cudaMemcpy(c->ku, u, n3, cudaMemcpyHostToDevice), "time-step estimate");
+	CK(c, cudaMemcpy(c->kim, im, (size_t)m->n * sizeof(double),
+			 cudaMemcpyHostToDevice), "time-step estimate");
+	c->kact = NULL;
+	if (ipact) {
+		CK(c, cudaMemcpy(c->ipact, ipact, (size_t)m->nip,
+				 cudaMemcpyHostToDevice), "time-step estimate");
+		c->kact = c->ipact;
+	}
+	c->kh = m->h_mean;
+	c->kipg = NULL;
+	if (m->ipg) {
+		CK(c, cudaMemcpy(c->ipg, m->ipg, (size_t)m->nip * sizeof(double),
+				 cudaMemcpyHostToDevice), "time-step estimate");
+		c->kipg = c->ipg;
+	}
+	c->st.kops_ms += now_ms() - t0;
+	return 0;
+}
+
+static int cu_kapply(void *ctx, const double *x, double eps, double *y)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	long long n3 = 3LL * c->dm.n;
+	double t0 = now_ms();
+	int nb = nblk((int)((n3 + TPB - 1) / TPB));
+	CK(c, cudaMemcpy(c->kx, x, (size_t)n3 * sizeof(double),
+			 cudaMemcpyHostToDevice), "time-step estimate");
+	/* f(u + eps im x) into hf, f(u - eps im x) into kfm (the host's
+	 * order: + first) */
+	k_kpert<<<nb, TPB>>>(n3, c->ku, c->kim, c->kx, eps, c->hu);
+	CK(c, cudaGetLastError(), "time-step estimate");
+	if (dev_forces(c, c->hu, c->hf, c->kact, c->kipg, NULL))
+		return -1;
+	k_kpert<<<nb, TPB>>>(n3, c->ku, c->kim, c->kx, -eps, c->hu);
+	CK(c, cudaGetLastError(), "time-step estimate");
+	if (dev_forces(c, c->hu, c->kfm, c->kact, c->kipg, NULL))
+		return -1;
+	k_kdiff<<<nb, TPB>>>(n3, c->kim, c->hf, c->kfm, eps, c->kx);
+	CK(c, cudaGetLastError(), "time-step estimate");
+	CK(c, cudaMemcpy(y, c->kx, (size_t)n3 * sizeof(double),
+			 cudaMemcpyDeviceToHost), "time-step estimate");
+	c->st.kops++;
+	c->st.kops_ms += now_ms() - t0;
+	return 0;
+}
+
+/* the whole recurrence on the device (tled_ops_t kvstart, kvstep,
+ * kvnext): v0, v1, w stay there; per step two force evaluations, five
+ * small kernels and two copies of the sums */
+static int cu_kvstart(void *ctx, const double *x)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	size_t n3 = (size_t)(3 * c->dm.n) * sizeof(double);
+	double t0 = now_ms();
+	if (!c->hkres)
+		CK(c, cudaMallocHost((void **)&c->hkres, 2 * sizeof(red)),
+		   "time-step estimate");
+	CK(c, cudaMemcpy(c->kv1, x, n3, cudaMemcpyHostToDevice), "time-step estimate");
+	CK(c, cudaMemset(c->kv0, 0, n3), "time-step estimate");
+	c->st.kops_ms += now_ms() - t0;
+	return 0;
+}
+
+static int cu_kvstep(void *ctx, double bk, double *a, double *b)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	long long n3 = 3LL * c->dm.n;
+	double t0 = now_ms();
+	int nb = nblk((int)((n3 + TPB - 1) / TPB));
+	/* eps as op_apply: 1e-6 h_mean / max |x| / sqrt(m) over free nodes */
+	k_kxmax<<<nb, TPB>>>(n3, c->kv1, c->kim, c->part);
+	k_red_final<<<1, TPB>>>(c->part, nb, c->kres);
+	CK(c, cudaGetLastError(), "time-step estimate");
+	CK(c, cudaMemcpy(c->hkres, c->kres, sizeof(red), cudaMemcpyDeviceToHost),
+	   "time-step estimate");
+	double xmax = c->hkres[0].mx;
+	if (!(xmax > 0)) {
+		CK(c, cudaMemset(c->kw, 0, (size_t)n3 * sizeof(double)),
+		   "time-step estimate");
+	} else {
+		double eps = 1e-6 * c->kh / xmax;
+		k_kpert<<<nb, TPB>>>(n3, c->ku, c->kim, c->kv1, eps, c->hu);
+		CK(c, cudaGetLastError(), "time-step estimate");
+		if (dev_forces(c, c->hu, c->hf, c->kact, c->kipg, NULL))
+			return -1;
+		k_kpert<<<nb, TPB>>>(n3, c->ku, c->kim, c->kv1, -eps, c->hu);
+		CK(c, cudaGetLastError(), "time-step estimate");
+		if (dev_forces(c, c->hu, c->kfm, c->kact, c->kipg, NULL))
+			return -1;
+		k_kdiff<<<nb, TPB>>>(n3, c->kim, c->hf, c->kfm, eps, c->kw);
+	}
+	k_kdot<<<nb, TPB>>>(n3, c->kw, c->kv1, c->part);
+	k_red_final<<<1, TPB>>>(c->part, nb, c->kres);
+	k_kupd<<<nb, TPB>>>(n3, c->kw, c->kv1, c->kv0, c->kres, bk);
+	k_kdot<<<nb, TPB>>>(n3, c->kw, c->kw, c->part);
+	k_red_final<<<1, TPB>>>(c->part, nb, c->kres + 1);
+	CK(c, cudaGetLastError(), "time-step estimate");
+	CK(c, cudaMemcpy(c->hkres, c->kres, 2 * sizeof(red),
+			 cudaMemcpyDeviceToHost), "time-step estimate");
+	*a = c->hkres[0].s0;
+	*b = sqrt(c->hkres[1].s0);
+	c->st.kops++;
+	c->st.kops_ms += now_ms() - t0;
+	return 0;
+}
+
+static int cu_kvnext(void *ctx, double b)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	long long n3 = 3LL * c->dm.n;
+	int nb = nblk((int)((n3 + TPB - 1) / TPB));
+	double *t = c->kv0; /* v0 = v1, v1 = w / b */
+	c->kv0 = c->kv1;
+	c->kv1 = t;
+	k_kdiv<<<nb, TPB>>>(n3, c->kw, b, c->kv1);
+	CK(c, cudaGetLastError(), "time-step estimate");
+	return 0;
 }
 
 static void cu_cd_step(void *ctx, const tled_model_t *m, const uint8_t *kind,
@@ -584,6 +733,8 @@ void tled_cuda_close(tled_cuda_t **pc)
 	free_state(c);
 	if (c->hres)
 		cudaFreeHost(c->hres);
+	if (c->hkres)
+		cudaFreeHost(c->hkres);
 	free(c);
 	*pc = NULL;
 }
@@ -661,6 +812,11 @@ void tled_cuda_ops(tled_cuda_t *c, tled_ops_t *ops)
 	ops->end = cu_end;
 	ops->push = cu_push;
 	ops->strerror = cu_strerror;
+	ops->kbegin = cu_kbegin;
+	ops->kapply = cu_kapply;
+	ops->kvstart = cu_kvstart;
+	ops->kvstep = cu_kvstep;
+	ops->kvnext = cu_kvnext;
 }
 
 } /* extern "C" */

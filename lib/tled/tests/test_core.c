@@ -9,6 +9,9 @@
 #include <omp.h>
 
 #include "tled/tled_solve.h"
+#include "tled/tled_corr.h"
+#include <lapacke.h>
+#undef I /* complex.h's, from lapacke.h: a name in these tests */
 #include "tled_synth.h"
 
 static double g_L; /* cube edge, m */
@@ -385,6 +388,73 @@ static void test_corr_coarse(void **state)
 	synth_free(&c);
 }
 
+/* The coarse level's blocked Cholesky solve (tled_chol_solve3) against
+ * LAPACK's dpotrs on a random SPD matrix larger than several of its
+ * 128-row blocks: the same solution to round-off, and the same bits on
+ * 1, 2 and 3 threads. */
+static void test_chol_solve3(void **state)
+{
+	(void)state;
+	const int64_t nc = 389; /* 3 full blocks and a partial one */
+	double *B = malloc((size_t)(nc * nc) * sizeof *B);
+	double *A = malloc((size_t)(nc * nc) * sizeof *A);
+	double *b0 = malloc((size_t)(3 * nc) * sizeof *b0);
+	double *x = malloc((size_t)(3 * nc) * sizeof *x);
+	double *y = malloc((size_t)(3 * nc) * sizeof *y);
+	assert_non_null(B);
+	assert_non_null(A);
+	assert_non_null(b0);
+	assert_non_null(x);
+	assert_non_null(y);
+	uint64_t r = 88172645463325252ull;
+#define XS() (r ^= r << 13, r ^= r >> 7, r ^= r << 17, \
+	      (double)(r >> 11) / 9007199254740992.0 - 0.5)
+	for (int64_t i = 0; i < nc * nc; i++)
+		B[i] = XS();
+	for (int64_t i = 0; i < 3 * nc; i++)
+		b0[i] = XS();
+#undef XS
+	/* A = B B^T / nc + I: SPD, condition number about 5 */
+	for (int64_t i = 0; i < nc; i++)
+		for (int64_t j = 0; j < nc; j++) {
+			double t = 0;
+			for (int64_t k = 0; k < nc; k++)
+				t += B[i * nc + k] * B[j * nc + k];
+			A[i * nc + j] = t / nc + (i == j);
+		}
+	assert_int_equal(LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)nc,
+					A, (lapack_int)nc), 0);
+	memcpy(x, b0, (size_t)(3 * nc) * sizeof *x);
+	assert_int_equal(LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', (lapack_int)nc, 3,
+					A, (lapack_int)nc, x, (lapack_int)nc), 0);
+	for (int64_t rr = 1; rr < nc; rr++)
+		for (int64_t c = 0; c < rr; c++)
+			A[rr * nc + c] = A[c * nc + rr];
+	double *y1 = malloc((size_t)(3 * nc) * sizeof *y1);
+	assert_non_null(y1);
+	for (int nt = 1; nt <= 3; nt++) {
+		memcpy(y, b0, (size_t)(3 * nc) * sizeof *y);
+		tled_chol_solve3(nc, A, y, nt);
+		double dmax = 0, xmax = 0;
+		for (int64_t i = 0; i < 3 * nc; i++) {
+			dmax = fmax(dmax, fabs(y[i] - x[i]));
+			xmax = fmax(xmax, fabs(x[i]));
+		}
+		assert_true(xmax > 0.1);
+		assert_true(dmax < 1e-12 * xmax);
+		if (nt == 1)
+			memcpy(y1, y, (size_t)(3 * nc) * sizeof *y1);
+		else
+			assert_memory_equal(y, y1, (size_t)(3 * nc) * sizeof *y);
+	}
+	free(y1);
+	free(B);
+	free(A);
+	free(b0);
+	free(x);
+	free(y);
+}
+
 /* small model: faces fixed, a random initial displacement inside */
 static void small_model(tled_model_t *m, tled_solver_t *s, double nu)
 {
@@ -435,6 +505,25 @@ static void test_dt_critical(void **state)
 		double crit = s.dt_eigen;
 		print_message("nu %.3f: dt critical (eigen) %.4g s, wave-speed "
 			      "h_min/c %.4g s\n", nu, crit, m.dt_wave);
+		if (so.ops && so.ops->kapply) {
+			/* a backend's own Lanczos (kbegin, kapply, and the
+			 * recurrence kvstep) against the host's, with the
+			 * backend's forces: the same arithmetic but its sums
+			 * in another order, so the same extreme eigenvalues to
+			 * the recurrence's stopping test (1e-7 relative) */
+			tled_ops_t host = *so.ops;
+			host.kbegin = NULL;
+			host.kapply = NULL;
+			tled_solver_opts_t sh = so;
+			sh.ops = &host;
+			double lmx0 = s.lmax, lmn0 = s.lmin, lmx, lmn;
+			assert_int_equal(tled_solver_eigs(&s, &sh, &lmx, &lmn), 0);
+			print_message("nu %.3f: omega_max^2 %.10g (device operator) "
+				      "%.10g (host), omega_min^2 %.6g %.6g\n", nu,
+				      lmx0, lmx, lmn0, lmn);
+			assert_true(fabs(lmx - lmx0) <= 1e-6 * lmx);
+			assert_true(fabs(lmn - lmn0) <= 1e-4 * lmx);
+		}
 		assert_true(crit > 0 && isfinite(crit));
 		so.dt_policy = TLED_DT_FORCE;
 		so.damping = 0;
@@ -533,6 +622,7 @@ int main(void)
 		cmocka_unit_test(test_patch),
 		cmocka_unit_test(test_iter_log_thin),
 		cmocka_unit_test(test_corr_coarse),
+		cmocka_unit_test(test_chol_solve3),
 		cmocka_unit_test(test_dt_critical),
 		cmocka_unit_test(test_coincident),
 	};
