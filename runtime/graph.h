@@ -15,6 +15,8 @@
  *                       stop = require, past_peak (optional: skip the
  *                       values after the first failing require / the
  *                       first below the best so far by more than T),
+ *                       reuse = true (optional: the final run takes the
+ *                       chosen candidate's stages from the search),
  *                       metric_column = C, structure_column = C,
  *                       value_column = C (optional: the score table's
  *                       columns; default metric, structure, value)

@@ -113,6 +113,10 @@ typedef struct g_tune {
 	 * that of the whole list when require fails from some value on and
 	 * the score rises to one peak and falls after it (tune.c). */
 	int stop_require, stop_peak;
+	/* reuse = true: the final run takes the chosen candidate's outputs
+	 * (and pending files) instead of running the stages that depend on
+	 * the tuned one again, when the search kept them (tune.c) */
+	int reuse;
 	int search;                /* 1: try the candidates when running */
 	int one_value;             /* no search: the single value is used */
 	char why[512];             /* when present but no search: why */
@@ -262,6 +266,10 @@ typedef struct g_run {
 	r_stage_t *rs;              /* [g->nstages] */
 	tune_row_t *rows;           /* [tune] candidates tried */
 	int nrows, best;
+	int reused;                 /* stages the final run took from the
+				       chosen candidate ([tune] reuse) */
+	const char *staging;        /* the output folder's staging folder
+				       (outdir.h), for stages made anew */
 } g_run_t;
 
 /* run.c: a run's stages, each a fresh instance with the graph's
@@ -269,6 +277,10 @@ typedef struct g_run {
 g_run_t *run_new(const graph_t *g, const run_opts_t *o, char *err,
 		 size_t errsize);
 void run_free(g_run_t *r);
+/* A fresh instance of stage i with the graph's parameters (and [tune]'s
+ * single value); NULL with err */
+rt_stage_t *run_stage_new(const graph_t *g, int i, char *err,
+			  size_t errsize);
 
 /* ---- sched.c ---- */
 /* mark stage v and what it reads as needed */

@@ -43,31 +43,39 @@ g_run_t *run_new(const graph_t *g, const run_opts_t *o, char *err,
 	if (r->o.jobs < 1)
 		r->o.jobs = 1;
 	r->best = -1;
-	const g_tune_t *t = &g->tune;
 	for (int i = 0; i < g->nstages; i++) {
-		const g_stage_t *s = &g->stages[i];
-		char e[1024];
-		rt_stage_t *st = stage_new(s->plug.desc, s->name);
-		r->rs[i].st = st;
-		int bad = !st;
-		/* the values graph_load checked */
-		for (int k = 0; !bad && k < s->nkv; k++)
-			if (g_is_param(s, s->kv[k].key))
-				bad = stage_set_param(st, s->kv[k].key,
-						      s->kv[k].val, e, sizeof e);
-		if (!bad && t->one_value && t->stage == i)
-			bad = stage_set_param(st, t->key, t->values[0], e,
-					      sizeof e);
-		if (!bad)
-			bad = stage_finish_params(st, e, sizeof e);
-		if (bad) {
-			snprintf(err, errsize, "stage '%s': %s", s->name,
-				 st ? e : "out of memory");
+		if (!(r->rs[i].st = run_stage_new(g, i, err, errsize))) {
 			run_free(r);
 			return NULL;
 		}
 	}
 	return r;
+}
+
+rt_stage_t *run_stage_new(const graph_t *g, int i, char *err,
+			  size_t errsize)
+{
+	const g_tune_t *t = &g->tune;
+	const g_stage_t *s = &g->stages[i];
+	char e[1024];
+	rt_stage_t *st = stage_new(s->plug.desc, s->name);
+	int bad = !st;
+	/* the values graph_load checked */
+	for (int k = 0; !bad && k < s->nkv; k++)
+		if (g_is_param(s, s->kv[k].key))
+			bad = stage_set_param(st, s->kv[k].key, s->kv[k].val, e,
+					      sizeof e);
+	if (!bad && t->one_value && t->stage == i)
+		bad = stage_set_param(st, t->key, t->values[0], e, sizeof e);
+	if (!bad)
+		bad = stage_finish_params(st, e, sizeof e);
+	if (bad) {
+		snprintf(err, errsize, "stage '%s': %s", s->name,
+			 st ? e : "out of memory");
+		stage_free(st);
+		return NULL;
+	}
+	return st;
 }
 
 void run_free(g_run_t *r)
@@ -329,6 +337,7 @@ int graph_run_ex(const graph_t *g, const run_opts_t *o, int *refused,
 	if (rc)
 		goto out;
 	*refused = 0;
+	r->staging = outdir_staging(od);
 	for (int i = 0; i < g->nstages; i++) {
 		stage_set_outdir(r->rs[i].st, r->o.outdir);
 		stage_set_staging(r->rs[i].st, outdir_staging(od));

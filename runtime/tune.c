@@ -30,8 +30,9 @@
  * the candidates after the first that fails require, or after the first
  * that scores worse than the best so far by more than T (tune_stop: the
  * same choice when require fails from some value on and the score has one
- * peak).  tune.tsv lists the candidates (tune_table_write), the skipped
- * ones too.
+ * peak).  reuse = true: the final run takes the chosen candidate's
+ * stages instead of running them again (tune_keep_t).  tune.tsv lists the
+ * candidates (tune_table_write), the skipped ones too.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -51,7 +52,7 @@ static const char *const tune_keys[] = { "param", "values", "score", "metric",
 					 "structure", "goal", "require",
 					 "tolerance", "metric_column",
 					 "structure_column", "value_column",
-					 "stop" };
+					 "stop", "reuse" };
 
 /* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
  * with an error reported when the list is empty or has an empty item. */
@@ -308,7 +309,7 @@ void tune_check(graph_t *g)
 			     "[tune] (known: param, values, score, metric, "
 			     "structure, goal, require, tolerance, "
 			     "metric_column, structure_column, value_column, "
-			     "stop)");
+			     "stop, reuse)");
 		else if (!kv->val[0] && strcmp(kv->key, "values"))
 			g_err(g, kv->line, NULL, kv->key, "empty value");
 	}
@@ -425,6 +426,12 @@ void tune_check(graph_t *g)
 	t->stop_require = t->stop_peak = 0;
 	if (sk2 && sk2->val[0])
 		tune_stop_parse(g, sk2);
+	const g_kv_t *uk = g_kv_find(t->kv, t->nkv, "reuse");
+	t->reuse = uk && !strcmp(uk->val, "true");
+	if (uk && uk->val[0] && strcmp(uk->val, "true") &&
+	    strcmp(uk->val, "false"))
+		g_err(g, uk->line, NULL, "reuse", "[tune] reuse must be true "
+		      "or false, got '%s'", uk->val);
 	/* a requirement on a table that does not depend on the tuned stage
 	 * is met alike by every value: a mistake (only on an otherwise
 	 * sound graph, as for the score) */
@@ -636,6 +643,71 @@ static int tune_stop(g_run_t *r, int k, int best, const char *sel)
 }
 
 /*
+ * [tune] reuse: the search keeps the outputs of the candidate that would be
+ * chosen if the search ended now (the earliest within the tolerance of the
+ * best so far) in kept[], the instances of the stages that depend on the
+ * tuned one and that the final run needs; the next candidates run on fresh
+ * instances.  If that candidate is the one chosen at the end, the final
+ * run takes them (ST_DONE: not run again, their pending files committed);
+ * else they are freed and the final run computes the choice as without
+ * reuse.
+ */
+typedef struct tune_keep {
+	rt_stage_t **st;            /* [nstages], NULL: nothing kept */
+	r_stage_t *meta;            /* the stage's row (times) */
+	int k;                      /* the candidate kept, -1: none */
+} tune_keep_t;
+
+static void keep_drop(const g_run_t *r, tune_keep_t *kp)
+{
+	for (int i = 0; kp->st && i < r->g->nstages; i++) {
+		stage_free(kp->st[i]); /* its outputs and pending files too */
+		kp->st[i] = NULL;
+	}
+	kp->k = -1;
+}
+
+/* candidate k just ran: hold its instances (sel: the final run needs the
+ * stage and it depends on the tuned one), fresh ones in their place.
+ * 0, or a negative code with err. */
+static int keep_take(g_run_t *r, tune_keep_t *kp, int k, const char *sel,
+		     char *err, size_t errsize)
+{
+	keep_drop(r, kp);
+	for (int i = 0; i < r->g->nstages; i++) {
+		r_stage_t *x = &r->rs[i];
+		if (!sel[i] || x->state != ST_DONE)
+			continue;
+		rt_stage_t *fresh = run_stage_new(r->g, i, err, errsize);
+		if (!fresh)
+			return ARMSTG_ENOMEM;
+		stage_set_outdir(fresh, r->o.outdir);
+		if (r->staging)
+			stage_set_staging(fresh, r->staging);
+		kp->st[i] = x->st;
+		kp->meta[i] = *x;
+		x->st = fresh;
+	}
+	kp->k = k;
+	return 0;
+}
+
+/* the earliest candidate within the tolerance of the best so far (the
+ * choice if the search ended after the rows run so far) */
+static int tune_choice(const g_run_t *r, int best)
+{
+	const g_tune_t *t = &r->g->tune;
+	for (int k = 0; best >= 0 && t->tol > 0 && k < best; k++) {
+		const tune_row_t *row = &r->rows[k];
+		double bs = r->rows[best].score;
+		if (row->ok && (t->goal_max ? row->score >= bs - t->tol
+					    : row->score <= bs + t->tol))
+			return k;
+	}
+	return best;
+}
+
+/*
  * The [tune] search, before the final run.  Stages the score needs that do
  * not depend on the tuned stage run once (pass 0) and keep their outputs
  * (keep = 1: release_inputs leaves them) for every candidate and for the
@@ -650,17 +722,21 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	const graph_t *g = r->g;
 	const g_tune_t *t = &g->tune;
 	const g_stage_t *ts = &g->stages[t->stage];
-	rt_stage_t *tst = r->rs[t->stage].st;
 	size_t n = (size_t)g->nstages;
 	signed char *memo = malloc(n);
 	char *down = calloc(n, 1), *fin = calloc(n, 1), *cand = calloc(n, 1);
+	char *ksel = calloc(n, 1);
 	int rc = 0, any = 0, nshared = 0, nper = 0, nok = 0, best = -1;
 	int nskip = 0;
+	tune_keep_t kp = { .st = calloc(n, sizeof *kp.st),
+			   .meta = calloc(n, sizeof *kp.meta), .k = -1 };
 	free(r->rows);
 	r->rows = calloc((size_t)t->nvalues, sizeof *r->rows);
 	r->nrows = 0;
 	r->best = -1;
-	if (!memo || !down || !fin || !cand || !r->rows) {
+	r->reused = 0;
+	if (!memo || !down || !fin || !cand || !ksel || !kp.st || !kp.meta ||
+	    !r->rows) {
 		snprintf(err, errsize, "[tune] out of memory");
 		rc = ARMSTG_ENOMEM;
 		goto out;
@@ -684,7 +760,10 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	for (int i = 0; i < g->nstages; i++) {
 		r_stage_t *x = &r->rs[i];
 		cand[i] = (char)x->needed;
-		x->needed = x->keep = cand[i] && !down[i];
+		x->needed = cand[i] && !down[i];
+		/* reuse: a candidate's outputs stay until the next one */
+		x->keep = cand[i] && (!down[i] || t->reuse);
+		ksel[i] = (char)(t->reuse && cand[i] && down[i] && fin[i]);
 		nshared += x->needed;
 		nper += cand[i] && down[i];
 	}
@@ -703,8 +782,8 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	for (int k = 0; k < t->nvalues && !rt_interrupted; k++) {
 		tune_row_t *row = &r->rows[k];
 		tune_reset(r, down);
-		rc = stage_set_param(tst, t->key, t->values[k], row->err,
-				     sizeof row->err);
+		rc = stage_set_param(r->rs[t->stage].st, t->key, t->values[k],
+				     row->err, sizeof row->err);
 		if (rc) { /* checked at load: cannot happen */
 			snprintf(err, errsize, "[tune] %s", row->err);
 			goto out;
@@ -754,6 +833,12 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 			if (!b || (t->goal_max ? row->score > b->score
 					       : row->score < b->score))
 				best = k;
+			/* the choice if the search ended now: keep it */
+			if (t->reuse && tune_choice(r, best) == k) {
+				rc = keep_take(r, &kp, k, ksel, err, errsize);
+				if (rc)
+					goto out;
+			}
 		} else {
 			rt_log(NULL, LOG_WARN, "tune %s.%s = %s: failed "
 			       "(%.1f s): %s", ts->name, t->key, t->values[k],
@@ -797,7 +882,26 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 		rc = r->rows[0].rc ? r->rows[0].rc : ARMSTG_EINVAL;
 		goto out;
 	}
-	rc = stage_set_param(tst, t->key, t->values[best], err, errsize);
+	if (kp.k >= 0 && kp.k == best) {
+		/* the final run takes the chosen candidate's stages */
+		for (int i = 0; i < g->nstages; i++) {
+			if (!kp.st[i])
+				continue;
+			stage_free(r->rs[i].st);
+			r->rs[i] = kp.meta[i];
+			r->rs[i].st = kp.st[i];
+			r->rs[i].state = ST_DONE;
+			kp.st[i] = NULL;
+			r->reused++;
+		}
+		rt_log(NULL, LOG_INFO, "tune %s.%s = %s: the final run reuses "
+		       "its %d stage%s that depend on %s", ts->name, t->key,
+		       t->values[best], r->reused, r->reused == 1 ? "" : "s",
+		       ts->name);
+	}
+	keep_drop(r, &kp);
+	rc = stage_set_param(r->rs[t->stage].st, t->key, t->values[best], err,
+			     errsize);
 	if (rc)
 		goto out;
 	r->best = best;
@@ -812,6 +916,11 @@ out:
 		r->rs[i].needed = fin[i];
 		r->rs[i].keep = 0;
 	}
+	if (kp.st)
+		keep_drop(r, &kp);
+	free(kp.st);
+	free(kp.meta);
+	free(ksel);
 	free(memo);
 	free(down);
 	free(fin);

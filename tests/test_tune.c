@@ -628,7 +628,9 @@ static void test_set_rules(void **state)
 		{ "tune.steps=3", "key 'steps': unknown key in [tune] (known: "
 		  "param, values, score, metric, structure, goal, require, "
 		  "tolerance, metric_column, structure_column, value_column, "
-		  "stop)" },
+		  "stop, reuse)" },
+		{ "tune.reuse=yes", "key 'reuse': [tune] reuse must be true "
+		  "or false, got 'yes'" },
 		{ "tune.stop=early", "key 'stop': [tune] stop: unknown rule "
 		  "'early' (require: skip the values after the first that "
 		  "fails require; past_peak: after the first that scores "
@@ -810,6 +812,92 @@ static void test_stop_require(void **state)
 	assert_string_equal(tt.status->str[0], "failed");
 	assert_string_equal(tt.status->str[4], "skipped");
 	ttab_free(&tt);
+	done(&r);
+}
+
+/* reuse = true: the final run takes the chosen candidate's stages instead
+ * of running them again.  sim runs once per candidate and not after (its
+ * count 5, was 6); the files and the value are those of the run without
+ * reuse: chosen.txt (save, run only in the final run, reading the kept
+ * sim) and fit-3.txt (written while the candidate ran, committed), nothing
+ * else; run.tsv lists sim and fit as ok */
+static void test_reuse(void **state)
+{
+	(void)state;
+	trun_t r;
+	const char *a[] = { "tune.reuse=true" };
+	run_sets(&r, a, 1);
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 3.0, 0);
+	assert_float_equal(tu_read_num(in(r.out, "fit-3.txt")), 3.0, 0);
+	assert_int_equal(tu_count_entries(r.out), 7);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 5);
+	assert_int_equal(count_lines(in(r.cnt, "pre.count")), 1);
+	char *rt = slurp(in(r.out, "run.tsv"));
+	assert_non_null(strstr(rt, "\nsim\ttp_score\tok\t"));
+	assert_non_null(strstr(rt, "\nfit\ttp_score\tok\t"));
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_float_equal(chosen_value(&tt), 3.0, 0);
+	ttab_free(&tt);
+	done(&r);
+	/* the choice the earliest within the tolerance (2: 1.44 within 1.5
+	 * of 3's 0.04): kept when it ran, reused */
+	const char *b[] = { "tune.reuse=true", "tune.tolerance=1.5" };
+	run_sets(&r, b, 2);
+	assert_int_equal(r.rc, 0);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 2.0, 0);
+	assert_float_equal(tu_read_num(in(r.out, "fit-2.txt")), 2.0, 0);
+	assert_int_equal(tu_count_entries(r.out), 7);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 5);
+	done(&r);
+	/* a choice that was not the choice when it ran: target 3, values
+	 * 2, 2.3, 3 score 1, 0.49, 0; tolerance 0.6: after 2.3 the choice is
+	 * still 2 (kept), after 3 it is 2.3, which was not kept: the final
+	 * run computes it again (sim 3 + 1), the same files as without reuse */
+	const char *c[] = { "tune.reuse=true", "fit.target=3",
+			    "tune.values=2, 2.3, 3", "tune.tolerance=0.6" };
+	run_sets(&r, c, 4);
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 2.3, 0);
+	assert_float_equal(tu_read_num(in(r.out, "fit-2.3.txt")), 2.3, 0);
+	assert_int_equal(tu_count_entries(r.out), 7);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 4);
+	done(&r);
+	/* with stop = require (4 fails, 5 skipped): 4 candidates, no rerun */
+	const char *d[] = { "tune.reuse=true", "tune.stop=require",
+			    "tune.require=sq far > 100" };
+	run_sets(&r, d, 3);
+	assert_int_equal(r.rc, 0);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 3.0, 0);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 4);
+	assert_int_equal(tu_count_entries(r.out), 7);
+	done(&r);
+	/* targets: save needs sim, not fit: sim reused, fit's file not
+	 * committed, fit not in run.tsv */
+	const char *save[] = { "save" };
+	run_with(&r, a, 1, 1, save, 1);
+	assert_int_equal(r.rc, 0);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 3.0, 0);
+	assert_false(tu_exists(in(r.out, "fit-3.txt")));
+	assert_int_equal(tu_count_entries(r.out), 4);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 5);
+	assert_null(strstr(slurp(in(r.out, "run.tsv")), "\nfit\t"));
+	done(&r);
+	/* every candidate fails: nothing kept is left behind */
+	const char *e[] = { "tune.reuse=true", "tune.require=neg > 0" };
+	run_sets(&r, e, 2);
+	assert_int_not_equal(r.rc, 0);
+	assert_int_equal(tu_count_entries(r.out), 2);
+	done(&r);
+	/* two jobs: the same */
+	run_with(&r, a, 1, 2, NULL, 0);
+	assert_int_equal(r.rc, 0);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 3.0, 0);
+	assert_int_equal(tu_count_entries(r.out), 7);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 5);
 	done(&r);
 }
 
@@ -1146,6 +1234,7 @@ int main(void)
 		cmocka_unit_test(test_stop_require),
 		cmocka_unit_test(test_require_keeps_zero),
 		cmocka_unit_test(test_shipped_push_rule),
+		cmocka_unit_test(test_reuse),
 		cmocka_unit_test(test_all_candidates_fail),
 		cmocka_unit_test(test_shared_stage_failure_fails_the_run),
 		cmocka_unit_test(test_set_rules),
