@@ -21,9 +21,9 @@ FOLD = ("metrics", "jac_min", "mask", ">", 0)
 INTR = ("mass", "intrusion", "ventricles", "<=", 0.1)
 # name: (values in order, score table, metric, structure, goal, tolerance, require)
 RULES = {
-    "main (1.5-9, fold)": ((1.5, 3, 4.5, 6, 7.5, 9),) + ps.NCC + ([FOLD],),
+    "1.5-9, fold (graphs until 26f6c10)": ((1.5, 3, 4.5, 6, 7.5, 9),) + ps.NCC + ([FOLD],),
     "0-9, fold": ((0, 1.5, 3, 4.5, 6, 7.5, 9),) + ps.NCC + ([FOLD],),
-    "0-9, fold + intrusion <= 0.1": ((0, 1.5, 3, 4.5, 6, 7.5, 9),) + ps.NCC + ([FOLD, INTR],),
+    "0-9, fold + intrusion <= 0.1 (since 26f6c10)": ((0, 1.5, 3, 4.5, 6, 7.5, 9),) + ps.NCC + ([FOLD, INTR],),
 }
 
 
