@@ -117,6 +117,10 @@ typedef struct g_tune {
 	 * (and pending files) instead of running the stages that depend on
 	 * the tuned one again, when the search kept them (tune.c) */
 	int reuse;
+	/* require_early = true: a condition read from a table that does not
+	 * depend on the score's stage is checked as soon as that table is
+	 * made, and a candidate failing it runs no further (tune.c) */
+	int require_early;
 	int search;                /* 1: try the candidates when running */
 	int one_value;             /* no search: the single value is used */
 	char why[512];             /* when present but no search: why */

@@ -31,8 +31,13 @@
  * that scores worse than the best so far by more than T (tune_stop: the
  * same choice when require fails from some value on and the score has one
  * peak).  reuse = true: the final run takes the chosen candidate's
- * stages instead of running them again (tune_keep_t).  tune.tsv lists the
- * candidates (tune_table_write), the skipped ones too.
+ * stages instead of running them again (tune_keep_t).  require_early =
+ * true: the conditions read from tables that do not depend on the score's
+ * stage (e.g. the growth's own measures) are checked first, after only the
+ * stages they need, and a candidate that fails one is not run further (the
+ * registration of a push that already failed is not computed; the choice
+ * is the same).  tune.tsv lists the candidates (tune_table_write), the
+ * skipped ones too.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -52,7 +57,7 @@ static const char *const tune_keys[] = { "param", "values", "score", "metric",
 					 "structure", "goal", "require",
 					 "tolerance", "metric_column",
 					 "structure_column", "value_column",
-					 "stop", "reuse" };
+					 "stop", "reuse", "require_early" };
 
 /* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
  * with an error reported when the list is empty or has an empty item. */
@@ -309,7 +314,7 @@ void tune_check(graph_t *g)
 			     "[tune] (known: param, values, score, metric, "
 			     "structure, goal, require, tolerance, "
 			     "metric_column, structure_column, value_column, "
-			     "stop, reuse)");
+			     "stop, reuse, require_early)");
 		else if (!kv->val[0] && strcmp(kv->key, "values"))
 			g_err(g, kv->line, NULL, kv->key, "empty value");
 	}
@@ -432,6 +437,12 @@ void tune_check(graph_t *g)
 	    strcmp(uk->val, "false"))
 		g_err(g, uk->line, NULL, "reuse", "[tune] reuse must be true "
 		      "or false, got '%s'", uk->val);
+	const g_kv_t *ek = g_kv_find(t->kv, t->nkv, "require_early");
+	t->require_early = ek && !strcmp(ek->val, "true");
+	if (ek && ek->val[0] && strcmp(ek->val, "true") &&
+	    strcmp(ek->val, "false"))
+		g_err(g, ek->line, NULL, "require_early", "[tune] require_early "
+		      "must be true or false, got '%s'", ek->val);
 	/* a requirement on a table that does not depend on the tuned stage
 	 * is met alike by every value: a mistake (only on an otherwise
 	 * sound graph, as for the score) */
@@ -559,14 +570,17 @@ static int tune_score(const g_run_t *r, double *score, char *err,
 }
 
 /* 1 when the candidate just run meets every condition of [tune] require
- * (or there is none), 0 with the first one it fails in why; < 0: a table
- * or row is missing (a graph error). */
-static int tune_require(const g_run_t *r, char *why, size_t whysize,
-			char *err, size_t errsize)
+ * (or there is none; only: the conditions k with only[k] set, NULL all),
+ * 0 with the first one it fails in why; < 0: a table or row is missing (a
+ * graph error). */
+static int tune_require(const g_run_t *r, const char *only, char *why,
+			size_t whysize, char *err, size_t errsize)
 {
 	const g_tune_t *t = &r->g->tune;
 	for (int k = 0; k < t->nreq; k++) {
 		const g_req_t *q = &t->req[k];
+		if (only && !only[k])
+			continue;
 		double v;
 		int rc = tune_lookup(r, "require",
 				     q->stage >= 0 ? q->stage : t->score,
@@ -726,6 +740,7 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	signed char *memo = malloc(n);
 	char *down = calloc(n, 1), *fin = calloc(n, 1), *cand = calloc(n, 1);
 	char *ksel = calloc(n, 1);
+	char *early = NULL, *ereq = NULL; /* require_early */
 	int rc = 0, any = 0, nshared = 0, nper = 0, nok = 0, best = -1;
 	int nskip = 0;
 	tune_keep_t kp = { .st = calloc(n, sizeof *kp.st),
@@ -767,6 +782,42 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 		nshared += x->needed;
 		nper += cand[i] && down[i];
 	}
+	/* require_early: the conditions whose table does not depend on the
+	 * score's stage, and the candidate's stages they need (early[]) */
+	int nearly = 0;
+	if (t->require_early && t->nreq > 0) {
+		early = calloc(n, 1);
+		ereq = calloc((size_t)t->nreq, 1);
+		if (!early || !ereq) {
+			snprintf(err, errsize, "[tune] out of memory");
+			rc = ARMSTG_ENOMEM;
+			goto out;
+		}
+		for (int k = 0; k < t->nreq; k++) {
+			int qs = t->req[k].stage;
+			if (qs < 0 || qs == t->score)
+				continue;
+			memset(memo, -1, n);
+			if (g_depends_on(g, qs, t->score, memo))
+				continue;
+			ereq[k] = 1;
+			nearly++;
+		}
+		if (nearly) {
+			for (int i = 0; i < g->nstages; i++)
+				r->rs[i].needed = 0;
+			for (int k = 0; k < t->nreq; k++)
+				if (ereq[k])
+					sched_mark_needed(r, t->req[k].stage);
+			for (int i = 0; i < g->nstages; i++) {
+				early[i] = (char)(r->rs[i].needed && cand[i]);
+				r->rs[i].needed = cand[i] && !down[i];
+				/* phase two reads what phase one made */
+				if (cand[i])
+					r->rs[i].keep = 1;
+			}
+		}
+	}
 	char sel[256];
 	snprintf(sel, sizeof sel, "%s%s%s", t->metric,
 		 t->structure ? " " : "", t->structure ? t->structure : "");
@@ -788,21 +839,47 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 			snprintf(err, errsize, "[tune] %s", row->err);
 			goto out;
 		}
-		for (int i = 0; i < g->nstages; i++)
-			r->rs[i].needed = cand[i];
 		double t0 = sched_now();
-		row->rc = sched_pass(r, row->err, sizeof row->err);
+		int efail = 0;
+		row->rc = 0;
+		if (nearly) {
+			/* phase one: the early conditions' stages, then them */
+			for (int i = 0; i < g->nstages; i++)
+				r->rs[i].needed = early[i];
+			row->rc = sched_pass(r, row->err, sizeof row->err);
+			if (!row->rc && !rt_interrupted) {
+				int req = tune_require(r, ereq, row->err,
+						       sizeof row->err, err,
+						       errsize);
+				if (req < 0) {
+					rc = req;
+					goto out;
+				}
+				efail = !req;
+			}
+		}
+		if (!row->rc && !efail && !rt_interrupted) {
+			for (int i = 0; i < g->nstages; i++)
+				r->rs[i].needed = cand[i];
+			row->rc = sched_pass(r, row->err, sizeof row->err);
+		}
 		row->wall_s = sched_now() - t0;
 		row->score = NAN;
 		if (rt_interrupted)
 			break;
 		r->nrows = k + 1;
-		if (!row->rc) {
+		if (efail) {
+			row->rc = ARMSTG_ENUMERIC;
+			row->req_failed = 1;
+			size_t l = strlen(row->err);
+			snprintf(row->err + l, sizeof row->err - l, " (require_early: "
+				 "the score was not computed)");
+		} else if (!row->rc) {
 			rc = tune_score(r, &row->score, err, errsize);
 			if (rc)
 				goto out;
 			int req = isfinite(row->score)
-					  ? tune_require(r, row->err,
+					  ? tune_require(r, NULL, row->err,
 							 sizeof row->err, err,
 							 errsize)
 					  : 1;
@@ -921,6 +998,8 @@ out:
 	free(kp.st);
 	free(kp.meta);
 	free(ksel);
+	free(early);
+	free(ereq);
 	free(memo);
 	free(down);
 	free(fin);

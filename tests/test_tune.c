@@ -628,7 +628,7 @@ static void test_set_rules(void **state)
 		{ "tune.steps=3", "key 'steps': unknown key in [tune] (known: "
 		  "param, values, score, metric, structure, goal, require, "
 		  "tolerance, metric_column, structure_column, value_column, "
-		  "stop, reuse)" },
+		  "stop, reuse, require_early)" },
 		{ "tune.reuse=yes", "key 'reuse': [tune] reuse must be true "
 		  "or false, got 'yes'" },
 		{ "tune.stop=early", "key 'stop': [tune] stop: unknown rule "
@@ -813,6 +813,68 @@ static void test_stop_require(void **state)
 	assert_string_equal(tt.status->str[4], "skipped");
 	ttab_free(&tt);
 	done(&r);
+}
+
+/* require_early = true: "alt.table: sq near < 1" reads alt, which does not
+ * depend on the score's stage fit, so it is checked after sim and alt only;
+ * 1, 2, 3 fail it and fit does not run for them (fit's count 2 + 1 in the
+ * final run, against 5 + 1 without the key), the same choice (4) and the
+ * same rows but for their missing scores and the note in the error; a
+ * condition on the score table stays checked after the score (sq far);
+ * with stop = require the search ends after 1; an unknown value is refused
+ * at load */
+static void test_require_early(void **state)
+{
+	(void)state;
+	trun_t r;
+	const char *a[] = { "tune.require=sq far <= 150, alt.table: sq near < 1",
+			    "tune.require_early=true",
+			    "fit.count_file=${TT_COUNT}/fit.count" };
+	for (int early = 0; early < 2; early++) {
+		/* without the key first (fit counted too), then with it */
+		const char *b[] = { a[0], a[2] };
+		if (early)
+			run_sets(&r, a, 3);
+		else
+			run_sets(&r, b, 2);
+		if (r.rc)
+			fail_msg("rc %d: %s", r.rc, r.err);
+		assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 4.0, 0);
+		assert_int_equal(count_lines(in(r.cnt, "fit.count")),
+				 early ? 3 : 6);
+		assert_int_equal(count_lines(in(r.cnt, "alt.count")), 6);
+		assert_int_equal(count_lines(in(r.cnt, "sim.count")), 6);
+		ttab_t tt;
+		tune_tsv(r.out, &tt);
+		assert_int_equal(tt.t->nrows, 5);
+		for (int k = 0; k < 3; k++) {
+			assert_string_equal(tt.status->str[k], "failed");
+			assert_true(early ? isnan(tt.score->num[k])
+					  : isfinite(tt.score->num[k]));
+		}
+		assert_string_equal(tt.error->str[2],
+				    early ? "require alt.table: sq near < 1 not "
+					    "met: 1.44 (require_early: the score "
+					    "was not computed)"
+					  : "require alt.table: sq near < 1 not "
+					    "met: 1.44");
+		assert_string_equal(tt.status->str[3], "ok");
+		assert_float_equal(chosen_value(&tt), 4.0, 0);
+		ttab_free(&tt);
+		done(&r);
+	}
+	const char *c[] = { a[0], a[1], a[2], "tune.stop=require" };
+	run_sets(&r, c, 4);
+	assert_int_equal(r.rc, ARMSTG_ENUMERIC);
+	assert_int_equal(count_lines(in(r.cnt, "fit.count")), 0);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 1);
+	done(&r);
+	const char *d[] = { "tune.require_early=yes" };
+	char err[4096];
+	graph_t *g = graph_load(graph_path, d, 1, err, sizeof err);
+	assert_null(g);
+	assert_non_null(strstr(err, "[tune] require_early must be true or "
+				    "false, got 'yes'"));
 }
 
 /* reuse = true: the final run takes the chosen candidate's stages instead
@@ -1235,6 +1297,7 @@ int main(void)
 		cmocka_unit_test(test_require_keeps_zero),
 		cmocka_unit_test(test_shipped_push_rule),
 		cmocka_unit_test(test_reuse),
+		cmocka_unit_test(test_require_early),
 		cmocka_unit_test(test_all_candidates_fail),
 		cmocka_unit_test(test_shared_stage_failure_fails_the_run),
 		cmocka_unit_test(test_set_rules),
