@@ -213,16 +213,8 @@ int tled_solver_eigs(tled_solver_t *s, const tled_solver_opts_t *o,
 	for (k = 0; k < kmax; k++) {
 		double a, b, bk = be[k];
 		if (dev == 2) {
-			if (ops->kvstep(ops->ctx, bk, &a, &b)) {
-				/* the device failed: again, on the host */
-				dev = 0;
-				memcpy(v1, v0, (size_t)n3 * sizeof *v1);
-				memset(v0, 0, (size_t)n3 * sizeof *v0);
-				memset(be, 0, (size_t)(kmax + 2) * sizeof *be);
-				prev = 0;
-				k = -1;
-				continue;
-			}
+			if (ops->kvstep(ops->ctx, bk, &a, &b))
+				goto restart;
 			al[k] = a;
 		} else {
 			if (k == 0)
@@ -248,19 +240,22 @@ int tled_solver_eigs(tled_solver_t *s, const tled_solver_opts_t *o,
 		if (dev == 2) {
 			if (ops->kvnext(ops->ctx, b) == 0)
 				continue;
-			dev = 0;
-			memcpy(v1, v0, (size_t)n3 * sizeof *v1);
-			memset(v0, 0, (size_t)n3 * sizeof *v0);
-			memset(be, 0, (size_t)(kmax + 2) * sizeof *be);
-			prev = 0;
-			k = -1;
-			continue;
+			goto restart;
 		}
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
 		for (int64_t i = 0; i < n3; i++) {
 			v0[i] = v1[i];
 			v1[i] = w[i] / b;
 		}
+		continue;
+	restart:
+		/* the device failed: again from the start (v0 holds it), on
+		 * the host (k = 0 clears v0 there) */
+		dev = 0;
+		memcpy(v1, v0, (size_t)n3 * sizeof *v1);
+		memset(be, 0, (size_t)(kmax + 2) * sizeof *be);
+		prev = 0;
+		k = -1;
 	}
 	free(al);
 	free(be);
