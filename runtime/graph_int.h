@@ -252,6 +252,8 @@ typedef struct r_stage {
 				       consumers) */
 	double wall_s;
 	double rss_mb, out_mb;
+	int threads_start, threads_min; /* its OpenMP threads when it started,
+					   and the fewest while it ran (sched.c) */
 } r_stage_t;
 
 /* One candidate of a [tune] search, as tune.tsv reports it. */

@@ -1,8 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * The scheduler: runs the stages a run needs, each once its producers are
- * done, o.jobs at a time (threads), each with its share of the machine's
- * OpenMP threads.  A stage's outputs are dropped once every consumer has
+ * done, o.jobs at a time (threads), the running ones sharing the
+ * machine's OpenMP threads (resplit).  A stage's outputs are dropped once every consumer has
  * run (unless a tuning run keeps them for the next candidate).  The first
  * failure stops the pass (running stages finish); so does rt_interrupted.
  * Stages with a node (or, in a batch, stages a worker can run) run through
@@ -27,6 +27,7 @@ typedef struct runner {
 	pthread_mutex_t mu;
 	pthread_cond_t cv;
 	int running, remaining, failed;
+	int threads_total; /* the OpenMP threads the stages share */
 	char err[2048];
 } runner_t;
 
@@ -96,7 +97,8 @@ static void run_one(g_run_t *r, int v)
 	if (r->o.jobs <= 1)
 		reset_peak_rss();
 	double t0 = sched_now();
-	rt_log(s->name, LOG_DEBUG, "start (plugin %s)", d->name);
+	rt_log(s->name, LOG_DEBUG, "start (plugin %s, %d threads)", d->name,
+	       stage_threads(x->st));
 	/* on a node, or in a batch on the case's worker (remote.h) */
 	remote_ctx_t *rx = r->o.remote;
 	const remote_node_t *rn = NULL;
@@ -148,6 +150,56 @@ static void release_inputs(g_run_t *r, int v)
 	}
 }
 
+/*
+ * The OpenMP threads of the running stages (rn->mu held), set again each
+ * time a stage starts or ends: a stage's own `threads` key, else an equal
+ * part of the threads the keyed stages leave (at least 1; the remainder to
+ * the earliest in the graph).  A stage that runs alone has every thread.
+ * The plugins read their share (host->threads) when they start, and the
+ * long ones again as they go (demons: each iteration), so a registration
+ * that started beside a few short stages gets the cores they free: a fixed
+ * share of OMP_NUM_THREADS / --jobs left half of a 2-core machine idle
+ * under --jobs 2 while the growth and the registration ran one after the
+ * other (pat0001, one push depth: 71.5 s, against 51.2 s under --jobs 1;
+ * bench/pipeline/results.md).  Results do not depend on the thread count
+ * (the plugins' sums are in row order).
+ */
+static void resplit(runner_t *rn)
+{
+	g_run_t *r = rn->r;
+	const graph_t *g = r->g;
+	int avail = rn->threads_total, ndyn = 0;
+	for (int i = 0; i < g->nstages; i++)
+		if (r->rs[i].state == ST_RUNNING) {
+			if (g->stages[i].threads > 0)
+				avail -= g->stages[i].threads;
+			else
+				ndyn++;
+		}
+	if (!ndyn)
+		return;
+	const int each = avail / ndyn;
+	int extra = avail > 0 ? avail % ndyn : 0;
+	for (int i = 0; i < g->nstages; i++) {
+		r_stage_t *x = &r->rs[i];
+		if (x->state != ST_RUNNING)
+			continue;
+		int n = g->stages[i].threads;
+		if (n <= 0) {
+			n = each + (extra > 0);
+			if (extra > 0)
+				extra--;
+			if (n < 1)
+				n = 1;
+		}
+		stage_set_threads(x->st, n);
+		if (x->threads_start == 0)
+			x->threads_start = n;
+		if (x->threads_min == 0 || n < x->threads_min)
+			x->threads_min = n;
+	}
+}
+
 static void *worker(void *arg)
 {
 	runner_t *rn = arg;
@@ -171,6 +223,8 @@ static void *worker(void *arg)
 		}
 		r_stage_t *x = &r->rs[pick];
 		x->state = ST_RUNNING;
+		x->threads_start = x->threads_min = 0;
+		resplit(rn);
 		rn->running++;
 		pthread_mutex_unlock(&rn->mu);
 		run_one(r, pick);
@@ -190,6 +244,7 @@ static void *worker(void *arg)
 			x->state = ST_DONE;
 			release_inputs(r, pick);
 		}
+		resplit(rn);
 		pthread_cond_broadcast(&rn->cv);
 	}
 	pthread_cond_broadcast(&rn->cv);
@@ -213,6 +268,7 @@ int sched_pass(g_run_t *r, char *err, size_t errsize)
 #endif
 	int jobs = r->o.jobs > 0 ? r->o.jobs : 1;
 	int per = nthreads_total / jobs;
+	rn.threads_total = nthreads_total;
 	/* what made the run, for the stages that report it
 	 * (host->run_graph); after a [tune] search, with its candidates */
 	tab_t *gt = run_graph_table(r);

@@ -315,7 +315,8 @@ static int h_tab_write(armstg_stage_t *st, const char *path, const tab_t *t)
 
 static int h_threads(armstg_stage_t *st)
 {
-	return of(st)->threads > 0 ? of(st)->threads : 1;
+	const int n = stage_threads(of(st));
+	return n > 0 ? n : 1;
 }
 
 static const tab_t *h_run_graph(armstg_stage_t *st)
@@ -417,14 +418,16 @@ void stage_set_staging(rt_stage_t *s, const char *dir)
 	snprintf(s->staging, sizeof s->staging, "%s", dir ? dir : "");
 }
 
+/* set by the scheduler while the stage runs, read by its plugin's threads
+ * (sched.c, resplit): atomic */
 void stage_set_threads(rt_stage_t *s, int n)
 {
-	s->threads = n > 0 ? n : 1;
+	__atomic_store_n(&s->threads, n > 0 ? n : 1, __ATOMIC_RELAXED);
 }
 
 int stage_threads(const rt_stage_t *s)
 {
-	return s->threads;
+	return __atomic_load_n(&s->threads, __ATOMIC_RELAXED);
 }
 
 static int find_param(const armstg_plugin_t *d, const char *key)
@@ -774,7 +777,7 @@ int stage_process(rt_stage_t *s, const msg_t *const *inputs)
 	 * what it runs (a parallel region without num_threads, the host's
 	 * conversions): no stage of a --jobs run takes every core */
 	const int nt_prev = omp_get_max_threads();
-	omp_set_num_threads(s->threads > 0 ? s->threads : 1);
+	omp_set_num_threads(stage_threads(s) > 0 ? stage_threads(s) : 1);
 #endif
 	int rc = d->process(&s->pub);
 #ifdef _OPENMP

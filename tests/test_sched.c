@@ -123,9 +123,10 @@ static void test_jobs(void **state)
 	graph_free(g);
 }
 
-/* a stage's `threads` key gives it that many OpenMP threads; the others
- * get the run's share (OMP_NUM_THREADS / --jobs); a bad value is an error
- * naming the file, line, stage and key */
+/* a stage's `threads` key gives it that many OpenMP threads; the running
+ * stages without one share the rest (OMP_NUM_THREADS), split again as
+ * stages start and end; a bad value is an error naming the file, line,
+ * stage and key */
 static void test_stage_threads(void **state)
 {
 	(void)state;
@@ -141,7 +142,44 @@ static void test_stage_threads(void **state)
 	sched_mark_needed(r, idx(g, "a"));
 	assert_int_equal(sched_pass(r, err, sizeof err), 0);
 	assert_int_equal(stage_threads(r->rs[idx(g, "a")].st), 3);
-	assert_int_equal(stage_threads(r->rs[idx(g, "gen")].st), 2);
+	/* gen runs alone: every thread (a fixed OMP_NUM_THREADS / --jobs
+	 * share left 2 of the 4 idle) */
+	assert_int_equal(r->rs[idx(g, "gen")].threads_start, 4);
+	run_free(r);
+	graph_free(g);
+	/* two stages ready together: the first starts with all 4 and gives 2
+	 * to the second while both run; the one after them, alone, has all 4
+	 * again */
+	g = load("[stage gen]\nplugin = tp_gen\n"
+		 "[stage a]\nplugin = tp_add\na = gen.volume\nsleep_ms = 300\n"
+		 "[stage b]\nplugin = tp_add\na = gen.volume\nsleep_ms = 300\n"
+		 "[stage c]\nplugin = tp_add\na = a.sum\nb = b.sum\n");
+	r = run_new(g, &o, err, sizeof err);
+	assert_non_null(r);
+	sched_mark_needed(r, idx(g, "c"));
+	assert_int_equal(sched_pass(r, err, sizeof err), 0);
+	const r_stage_t *ra = &r->rs[idx(g, "a")], *rb = &r->rs[idx(g, "b")];
+	assert_int_equal(r->rs[idx(g, "gen")].threads_start, 4);
+	assert_int_equal(ra->threads_start, 4);
+	assert_int_equal(ra->threads_min, 2);
+	assert_int_equal(rb->threads_start, 2);
+	assert_int_equal(r->rs[idx(g, "c")].threads_start, 4);
+	assert_int_equal(r->rs[idx(g, "c")].threads_min, 4);
+	run_free(r);
+	graph_free(g);
+	/* a stage with its own key keeps it and the other shares the rest */
+	g = load("[stage gen]\nplugin = tp_gen\n"
+		 "[stage a]\nplugin = tp_add\na = gen.volume\nsleep_ms = 300\n"
+		 "threads = 3\n"
+		 "[stage b]\nplugin = tp_add\na = gen.volume\nsleep_ms = 300\n");
+	r = run_new(g, &o, err, sizeof err);
+	assert_non_null(r);
+	sched_mark_needed(r, idx(g, "a"));
+	sched_mark_needed(r, idx(g, "b"));
+	assert_int_equal(sched_pass(r, err, sizeof err), 0);
+	assert_int_equal(r->rs[idx(g, "a")].threads_start, 3);
+	assert_int_equal(r->rs[idx(g, "a")].threads_min, 3);
+	assert_int_equal(r->rs[idx(g, "b")].threads_start, 1);
 	run_free(r);
 	graph_free(g);
 	const char *bad[] = { "0", "-2", "two", "3x", "5000" };

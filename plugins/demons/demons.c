@@ -1274,6 +1274,13 @@ static int demons_process(armstg_stage_t *st)
 					  l + 1, it + 1);
 				goto out;
 			}
+			/* the share of the machine's threads may have grown
+			 * since the start (a stage that ran beside this one
+			 * ended): read it again; the results do not depend on
+			 * it */
+			nt = h->threads ? h->threads(st) : 1;
+			if (nt < 1)
+				nt = 1;
 			fimg_resample_block(&L.M, &S, FIELD_LINEAR, NAN, &L.W,
 					    L.wlo, L.whi, nt);
 			if (L.WM.d)
