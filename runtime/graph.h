@@ -17,6 +17,10 @@
  *                       first below the best so far by more than T),
  *                       reuse = true (optional: the final run takes the
  *                       chosen candidate's stages from the search),
+ *                       require_early = true (optional),
+ *                       search_set = STAGE.KEY=VALUE; ... (optional:
+ *                       overrides the candidates run with, not the
+ *                       final run),
  *                       metric_column = C, structure_column = C,
  *                       value_column = C (optional: the score table's
  *                       columns; default metric, structure, value)

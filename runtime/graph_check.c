@@ -535,6 +535,9 @@ void graph_free(graph_t *g)
 	for (int k = 0; k < g->tune.nvalues; k++)
 		free(g->tune.values[k]);
 	free(g->tune.values);
+	for (int k = 0; k < g->tune.nset; k++)
+		free(g->tune.set[k].val);
+	free(g->tune.set);
 	free(g->stages);
 	free(g->nodes);
 	g_vars_free(g);

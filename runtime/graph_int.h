@@ -79,6 +79,14 @@ typedef struct g_req {
 	double value;
 } g_req_t;
 
+/* One override of [tune] search_set, STAGE.KEY=VALUE: a parameter value
+ * the candidates run with during the search only (tune.c). */
+typedef struct g_tset {
+	int stage;                 /* index */
+	char key[G_NAME];          /* its parameter */
+	char *val;
+} g_tset_t;
+
 /* [tune]: one stage parameter chosen per run by a score (see graph.h),
  * as checked by tune_check. */
 typedef struct g_tune {
@@ -121,6 +129,11 @@ typedef struct g_tune {
 	 * depend on the score's stage is checked as soon as that table is
 	 * made, and a candidate failing it runs no further (tune.c) */
 	int require_early;
+	/* search_set = STAGE.KEY=VALUE; ...: the candidates run with these
+	 * values; the final run with the graph's, the overridden stages and
+	 * those that read them run again (tune.c) */
+	g_tset_t *set;
+	int nset;
 	int search;                /* 1: try the candidates when running */
 	int one_value;             /* no search: the single value is used */
 	char why[512];             /* when present but no search: why */

@@ -36,8 +36,13 @@
  * stage (e.g. the growth's own measures) are checked first, after only the
  * stages they need, and a candidate that fails one is not run further (the
  * registration of a push that already failed is not computed; the choice
- * is the same).  tune.tsv lists the candidates (tune_table_write), the
- * skipped ones too.
+ * is the same).  search_set = STAGE.KEY=VALUE; ...: the candidates run
+ * with these parameter values (e.g. a registration without its finest
+ * level), the final run with the graph's: the overridden stages and every
+ * stage that reads them are computed again (tune_set_restore), reuse
+ * keeps only the others (the growth).  tune.tsv lists the candidates
+ * (tune_table_write), the skipped ones too, and the overrides in a column
+ * search_set when there are some.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -57,7 +62,8 @@ static const char *const tune_keys[] = { "param", "values", "score", "metric",
 					 "structure", "goal", "require",
 					 "tolerance", "metric_column",
 					 "structure_column", "value_column",
-					 "stop", "reuse", "require_early" };
+					 "stop", "reuse", "require_early",
+					 "search_set" };
 
 /* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
  * with an error reported when the list is empty or has an empty item. */
@@ -288,6 +294,154 @@ static void tune_stop_parse(graph_t *g, const g_kv_t *sk)
 		      "a require key (the conditions a value must meet)");
 }
 
+static const char set_syntax[] =
+	"[tune] search_set must read STAGE.KEY=VALUE, overrides separated by "
+	"';' (e.g. 'register.iterations=40,30,0; register.tol=0.01')";
+
+/* One override of search_set (text a..b, trimmed): the stage, a parameter
+ * of its plugin but not an output path nor the tuned parameter, its value
+ * checked by the stage's own parser, once.  Appended to t->set; -1 with
+ * an error reported (nothing when the stage's plugin failed to load: its
+ * own error was). */
+static int tune_set_parse(graph_t *g, int line, const char *a, const char *b)
+{
+	g_tune_t *t = &g->tune;
+	char ov[G_MAX_LINE], sn[G_NAME], pn[G_NAME], e[1024];
+	snprintf(ov, sizeof ov, "%.*s", (int)(b - a), a);
+	char *eq = strchr(ov, '=');
+	if (!eq) {
+		g_err(g, line, NULL, "search_set", "%s, got '%s'", set_syntax,
+		      ov);
+		return -1;
+	}
+	const char *val = eq + 1;
+	char *ke = eq;
+	while (ke > ov && (ke[-1] == ' ' || ke[-1] == '\t'))
+		ke--;
+	*ke = 0;
+	val += strspn(val, " \t");
+	if (!*val || g_parse_conn(ov, sn, pn)) {
+		g_err(g, line, NULL, "search_set", "%s, got '%.*s'", set_syntax,
+		      (int)(b - a), a);
+		return -1;
+	}
+	int si = g_stage_index(g, sn);
+	if (si < 0) {
+		g_err(g, line, NULL, "search_set", "[tune] search_set: '%s.%s="
+		      "%s': unknown stage '%s'", sn, pn, val, sn);
+		return -1;
+	}
+	const g_stage_t *ss = &g->stages[si];
+	if (!ss->loaded)
+		return -1;
+	const armstg_plugin_t *d = ss->plug.desc;
+	if (!g_is_param(ss, pn)) {
+		g_err(g, line, NULL, "search_set", "[tune] search_set: '%s.%s="
+		      "%s': '%s' is not a parameter of plugin '%s' (see "
+		      "'armstg describe %s')", sn, pn, val, pn, d->name,
+		      d->name);
+		return -1;
+	}
+	for (int k = 0; k < d->n_params; k++)
+		if (!strcmp(d->params[k].name, pn) &&
+		    (d->params[k].flags & (PARAM_OUT_FILE | PARAM_OUT_DIR))) {
+			g_err(g, line, NULL, "search_set", "[tune] search_set: "
+			      "'%s.%s=%s': '%s' is an output path (what the "
+			      "search writes is discarded)", sn, pn, val, pn);
+			return -1;
+		}
+	if (si == t->stage && !strcmp(pn, t->key)) {
+		g_err(g, line, NULL, "search_set", "[tune] search_set: '%s.%s="
+		      "%s' sets the tuned parameter (param = %s.%s)", sn, pn,
+		      val, sn, pn);
+		return -1;
+	}
+	for (int k = 0; k < t->nset; k++)
+		if (t->set[k].stage == si && !strcmp(t->set[k].key, pn)) {
+			g_err(g, line, NULL, "search_set", "[tune] search_set: "
+			      "%s.%s is set twice", sn, pn);
+			return -1;
+		}
+	/* a scratch stage: the real ones keep the graph's value */
+	rt_stage_t *scr = stage_new(d, ss->name);
+	int rc = scr ? stage_set_param(scr, pn, val, e, sizeof e) : -1;
+	stage_free(scr);
+	if (rc) {
+		g_err(g, line, NULL, "search_set", "[tune] search_set: '%s.%s="
+		      "%s': %s", sn, pn, val, scr ? e : "out of memory");
+		return -1;
+	}
+	g_tset_t *ns = realloc(t->set, (size_t)(t->nset + 1) * sizeof *ns);
+	char *v = strdup(val);
+	if (!ns || !v) {
+		free(v);
+		if (ns)
+			t->set = ns;
+		g_err(g, line, NULL, "search_set", "out of memory");
+		return -1;
+	}
+	t->set = ns;
+	ns[t->nset].stage = si;
+	snprintf(ns[t->nset].key, sizeof ns[t->nset].key, "%s", pn);
+	ns[t->nset++].val = v;
+	return 0;
+}
+
+/* search_set: overrides separated by ';' (blanks around each trimmed),
+ * each parsed (tune_set_parse); an empty one is an error. */
+static void tune_set_split(graph_t *g, const g_kv_t *k)
+{
+	for (const char *p = k->val;;) {
+		const char *end = strchr(p, ';');
+		if (!end)
+			end = p + strlen(p);
+		const char *a = p, *b = end;
+		while (a < b && (*a == ' ' || *a == '\t'))
+			a++;
+		while (b > a && (b[-1] == ' ' || b[-1] == '\t'))
+			b--;
+		if (a == b) {
+			g_err(g, k->line, NULL, "search_set", "[tune] "
+			      "search_set: empty override in '%s' (overrides "
+			      "are separated by ';')", k->val);
+			return;
+		}
+		if (tune_set_parse(g, k->line, a, b))
+			return;
+		if (!*end)
+			return;
+		p = end + 1;
+	}
+}
+
+/* an override of a stage that neither the score nor a table of require
+ * reads changes nothing in the search: a mistake (only on an otherwise
+ * sound graph, as for the score) */
+static void tune_set_check_used(graph_t *g, const g_kv_t *k)
+{
+	g_tune_t *t = &g->tune;
+	signed char *memo = malloc((size_t)g->nstages);
+	for (int j = 0; memo && j < t->nset; j++) {
+		int si = t->set[j].stage, used;
+		memset(memo, -1, (size_t)g->nstages);
+		used = g_depends_on(g, t->score, si, memo);
+		for (int q = 0; !used && q < t->nreq; q++) {
+			if (t->req[q].stage < 0)
+				continue;
+			memset(memo, -1, (size_t)g->nstages);
+			used = g_depends_on(g, t->req[q].stage, si, memo);
+		}
+		if (!used)
+			g_err(g, k->line, NULL, "search_set", "[tune] "
+			      "search_set: '%s.%s=%s': neither the score (%s) "
+			      "nor a table of require reads stage '%s', so the "
+			      "override would change nothing in the search",
+			      g->stages[si].name, t->set[j].key, t->set[j].val,
+			      g->stages[t->score].name, g->stages[si].name);
+	}
+	free(memo);
+}
+
 /* [tune]: resolve the tuned parameter and the score table, check every
  * candidate with the stage's own parameter parser, and decide whether the
  * run searches (2+ values and no explicit --set of the parameter). */
@@ -314,7 +468,7 @@ void tune_check(graph_t *g)
 			     "[tune] (known: param, values, score, metric, "
 			     "structure, goal, require, tolerance, "
 			     "metric_column, structure_column, value_column, "
-			     "stop, reuse, require_early)");
+			     "stop, reuse, require_early, search_set)");
 		else if (!kv->val[0] && strcmp(kv->key, "values"))
 			g_err(g, kv->line, NULL, kv->key, "empty value");
 	}
@@ -462,6 +616,13 @@ void tune_check(graph_t *g)
 			      q->structure, q->structure[0] ? " " : "", q->op,
 			      q->value);
 		free(memo);
+	}
+	/* after param (the tuned parameter) and require (the tables read) */
+	const g_kv_t *xk = g_kv_find(t->kv, t->nkv, "search_set");
+	if (xk && xk->val[0]) {
+		tune_set_split(g, xk);
+		if (g->nerr == 0 && t->score >= 0)
+			tune_set_check_used(g, xk);
 	}
 	if (g->nerr != nerr0 || !ts || t->score < 0)
 		return;
@@ -721,6 +882,66 @@ static int tune_choice(const g_run_t *r, int best)
 	return best;
 }
 
+/* search_set: the overrides on the run's instances of their stages
+ * (before the search; those instances stay through it: keep_take never
+ * takes an overridden stage).  0, or a negative code with err. */
+static int tune_set_apply(g_run_t *r, char *err, size_t errsize)
+{
+	const g_tune_t *t = &r->g->tune;
+	char e[1024];
+	for (int j = 0; j < t->nset; j++) {
+		const g_tset_t *o = &t->set[j];
+		int rc = stage_set_param(r->rs[o->stage].st, o->key, o->val, e,
+					 sizeof e);
+		if (rc) { /* checked at load: cannot happen */
+			snprintf(err, errsize, "[tune] search_set: stage '%s': "
+				 "%s", r->g->stages[o->stage].name, e);
+			return rc;
+		}
+	}
+	return 0;
+}
+
+/* search_set, after the search: the stages that read an overridden one
+ * (aff) and that the final run needs, or that depend on the tuned stage,
+ * back to "not run"; the overridden ones on fresh instances with the
+ * graph's values.  The count of stages the final run computes again; a
+ * negative code with err. */
+static int tune_set_restore(g_run_t *r, const char *aff, const char *down,
+			    const char *fin, char *err, size_t errsize)
+{
+	const graph_t *g = r->g;
+	const g_tune_t *t = &g->tune;
+	char *redo = calloc((size_t)g->nstages, 1);
+	int n = 0;
+	if (!redo) {
+		snprintf(err, errsize, "[tune] out of memory");
+		return ARMSTG_ENOMEM;
+	}
+	for (int i = 0; i < g->nstages; i++) {
+		redo[i] = (char)(aff[i] && (down[i] || fin[i]));
+		n += redo[i] && fin[i];
+	}
+	tune_reset(r, redo);
+	for (int j = 0; j < t->nset; j++) {
+		int i = t->set[j].stage;
+		if (!redo[i] || r->rs[i].st == NULL)
+			continue;
+		rt_stage_t *fresh = run_stage_new(g, i, err, errsize);
+		if (!fresh) {
+			free(redo);
+			return ARMSTG_ENOMEM;
+		}
+		stage_set_outdir(fresh, r->o.outdir);
+		if (r->staging)
+			stage_set_staging(fresh, r->staging);
+		stage_free(r->rs[i].st);
+		r->rs[i].st = fresh;
+	}
+	free(redo);
+	return n;
+}
+
 /*
  * The [tune] search, before the final run.  Stages the score needs that do
  * not depend on the tuned stage run once (pass 0) and keep their outputs
@@ -740,6 +961,7 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	signed char *memo = malloc(n);
 	char *down = calloc(n, 1), *fin = calloc(n, 1), *cand = calloc(n, 1);
 	char *ksel = calloc(n, 1);
+	char *aff = calloc(n, 1); /* search_set: the overridden and readers */
 	char *early = NULL, *ereq = NULL; /* require_early */
 	int rc = 0, any = 0, nshared = 0, nper = 0, nok = 0, best = -1;
 	int nskip = 0;
@@ -750,8 +972,8 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	r->nrows = 0;
 	r->best = -1;
 	r->reused = 0;
-	if (!memo || !down || !fin || !cand || !ksel || !kp.st || !kp.meta ||
-	    !r->rows) {
+	if (!memo || !down || !fin || !cand || !ksel || !aff || !kp.st ||
+	    !kp.meta || !r->rows) {
 		snprintf(err, errsize, "[tune] out of memory");
 		rc = ARMSTG_ENOMEM;
 		goto out;
@@ -768,6 +990,12 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 		       "'%s': no search", ts->name);
 		goto out;
 	}
+	for (int j = 0; j < t->nset; j++) {
+		memset(memo, -1, n);
+		for (int i = 0; i < g->nstages; i++)
+			aff[i] |= (char)g_depends_on(g, i, t->set[j].stage,
+						     memo);
+	}
 	sched_mark_needed(r, t->score);
 	for (int k = 0; k < t->nreq; k++)
 		if (t->req[k].stage >= 0)
@@ -778,7 +1006,9 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 		x->needed = cand[i] && !down[i];
 		/* reuse: a candidate's outputs stay until the next one */
 		x->keep = cand[i] && (!down[i] || t->reuse);
-		ksel[i] = (char)(t->reuse && cand[i] && down[i] && fin[i]);
+		/* search_set: what an override reached runs again */
+		ksel[i] = (char)(t->reuse && cand[i] && down[i] && fin[i] &&
+				 !aff[i]);
 		nshared += x->needed;
 		nper += cand[i] && down[i];
 	}
@@ -827,6 +1057,19 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	       g->stages[t->score].name,
 	       g->stages[t->score].plug.desc->outputs[t->score_port].name,
 	       nshared, nper);
+	if (t->nset) {
+		const g_kv_t *xk = g_kv_find(t->kv, t->nkv, "search_set");
+		int naff = 0;
+		for (int i = 0; i < g->nstages; i++)
+			naff += aff[i] && fin[i];
+		rt_log(NULL, LOG_INFO, "tune: the candidates run with "
+		       "search_set = %s; the final run computes the %d "
+		       "stage%s that it reaches with the graph's values",
+		       xk ? xk->val : "", naff, naff == 1 ? "" : "s");
+		rc = tune_set_apply(r, err, errsize);
+		if (rc)
+			goto out;
+	}
 	rc = sched_pass(r, err, errsize);
 	if (rc)
 		goto out;
@@ -977,6 +1220,14 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 		       ts->name);
 	}
 	keep_drop(r, &kp);
+	if (t->nset) {
+		rc = tune_set_restore(r, aff, down, fin, err, errsize);
+		if (rc < 0)
+			goto out;
+		rt_log(NULL, LOG_INFO, "tune: the final run computes %d "
+		       "stage%s again without search_set", rc,
+		       rc == 1 ? "" : "s");
+	}
 	rc = stage_set_param(r->rs[t->stage].st, t->key, t->values[best], err,
 			     errsize);
 	if (rc)
@@ -998,6 +1249,7 @@ out:
 	free(kp.st);
 	free(kp.meta);
 	free(ksel);
+	free(aff);
 	free(early);
 	free(ereq);
 	free(memo);
@@ -1013,13 +1265,23 @@ int tune_table_write(const g_run_t *run, const char *path)
 {
 	const g_tune_t *t = &run->g->tune;
 	char e[1024];
+	/* search_set: the overrides every candidate ran with, in each row
+	 * (STAGE.KEY=VALUE; ...) */
+	char set[G_MAX_LINE] = "";
+	size_t so = 0;
+	for (int j = 0; j < t->nset && so < sizeof set; j++)
+		so += (size_t)snprintf(set + so, sizeof set - so, "%s%s.%s=%s",
+				       j ? "; " : "",
+				       run->g->stages[t->set[j].stage].name,
+				       t->set[j].key, t->set[j].val);
 	tab_t *tab = tab_new();
 	int bad = !tab || !tab_add_col(tab, "value", TAB_STR) ||
 		  !tab_add_col(tab, "score", TAB_NUM) ||
 		  !tab_add_col(tab, "wall_s", TAB_NUM) ||
 		  !tab_add_col(tab, "status", TAB_STR) ||
 		  !tab_add_col(tab, "chosen", TAB_NUM) ||
-		  !tab_add_col(tab, "error", TAB_STR);
+		  !tab_add_col(tab, "error", TAB_STR) ||
+		  (t->nset && !tab_add_col(tab, "search_set", TAB_STR));
 	for (int k = 0; !bad && k < run->nrows; k++) {
 		const tune_row_t *r = &run->rows[k];
 		int64_t row = tab_add_row(tab);
@@ -1030,7 +1292,8 @@ int tune_table_write(const g_run_t *run, const char *path)
 				  r->ok ? "ok"
 				  : r->skipped ? "skipped" : "failed") ||
 		      tab_set_num(tab, row, "chosen", k == run->best) ||
-		      (!r->ok && tab_set_str(tab, row, "error", r->err));
+		      (!r->ok && tab_set_str(tab, row, "error", r->err)) ||
+		      (t->nset && tab_set_str(tab, row, "search_set", set));
 	}
 	if (!bad && tab_write_file(path, tab, e, sizeof e)) {
 		rt_log(NULL, LOG_WARN, "cannot write %s: %s", path, e);

@@ -628,7 +628,7 @@ static void test_set_rules(void **state)
 		{ "tune.steps=3", "key 'steps': unknown key in [tune] (known: "
 		  "param, values, score, metric, structure, goal, require, "
 		  "tolerance, metric_column, structure_column, value_column, "
-		  "stop, reuse, require_early)" },
+		  "stop, reuse, require_early, search_set)" },
 		{ "tune.reuse=yes", "key 'reuse': [tune] reuse must be true "
 		  "or false, got 'yes'" },
 		{ "tune.stop=early", "key 'stop': [tune] stop: unknown rule "
@@ -961,6 +961,180 @@ static void test_reuse(void **state)
 	assert_int_equal(tu_count_entries(r.out), 7);
 	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 5);
 	done(&r);
+}
+
+/* search_set: overrides the candidates run with, and only they.  With
+ * fit.offset = 1 fit scores x + 1, (x + 1 - 3.2)^2, so the search picks 2
+ * (scores 1.44, 0.04, 0.64, 3.24, 7.84: the override reached every
+ * candidate; without it 3); the final run's fit has the graph's offset 0,
+ * so its file is fit-2.txt (fit-3.txt if the override reached it).  With
+ * reuse, fit (overridden) runs again in the final run (5 + 1) and sim
+ * (upstream of it) is reused (5); pre.offset = 1 (a stage run once,
+ * upstream of sim) makes pre run again and sim with it; the table says
+ * which overrides scored the candidates (STAGE.KEY=VALUE; ...); without
+ * the key tune.tsv has no such column */
+typedef struct setcase {
+	const char *sets[4];
+	int jobs;
+	double chosen;          /* the value chosen = chosen.txt = fit-N.txt */
+	int pre, sim, fit, ref; /* process calls */
+	const char *column;     /* tune.tsv search_set (NULL: no column) */
+	const double *scores;
+} setcase_t;
+
+static void expect_set(const setcase_t *c)
+{
+	trun_t r;
+	int ns = 0;
+	while (ns < 4 && c->sets[ns])
+		ns++;
+	run_with(&r, c->sets, ns, c->jobs, NULL, 0);
+	if (r.rc)
+		fail_msg("%s: rc %d: %s", c->sets[0], r.rc, r.err);
+	char fit[64];
+	snprintf(fit, sizeof fit, "fit-%g.txt", c->chosen);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), c->chosen, 0);
+	assert_float_equal(tu_read_num(in(r.out, fit)), c->chosen, 0);
+	assert_float_equal(tu_read_num(in(r.out, "pre-0.txt")), 0, 0);
+	/* chosen, fit-N, pre-0, ref-0, side, run.tsv, tune.tsv: nothing
+	 * written with an override (fit-3.txt, pre-1.txt) */
+	assert_int_equal(tu_count_entries(r.out), 7);
+	assert_int_equal(count_lines(in(r.cnt, "pre.count")), c->pre);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), c->sim);
+	assert_int_equal(count_lines(in(r.cnt, "fit.count")), c->fit);
+	assert_int_equal(count_lines(in(r.cnt, "ref.count")), c->ref);
+	char *rt = slurp(in(r.out, "run.tsv"));
+	assert_non_null(strstr(rt, "\nsim\ttp_score\tok\t"));
+	assert_non_null(strstr(rt, "\nfit\ttp_score\tok\t"));
+	assert_non_null(strstr(rt, "\npre\ttp_score\tok\t"));
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 5);
+	const tab_col_t *col = tab_col(tt.t, "search_set");
+	if (!c->column) {
+		assert_null(col);
+		assert_int_equal(tt.t->ncols, 6);
+	} else {
+		assert_non_null(col);
+		assert_int_equal(col->type, TAB_STR);
+		for (int k = 0; k < 5; k++)
+			assert_string_equal(col->str[k], c->column);
+	}
+	for (int k = 0; k < 5; k++) {
+		assert_float_equal(tt.score->num[k], c->scores[k], 1e-9);
+		assert_string_equal(tt.status->str[k], "ok");
+	}
+	assert_float_equal(chosen_value(&tt), c->chosen, 0);
+	ttab_free(&tt);
+	done(&r);
+}
+
+static void test_search_set(void **state)
+{
+	(void)state;
+	static const double plain[] = { 4.84, 1.44, 0.04, 0.64, 3.24 };
+	static const double plus1[] = { 1.44, 0.04, 0.64, 3.24, 7.84 };
+	/* (x + 1 - 5.2)^2 */
+	static const double t52[] = { 10.24, 4.84, 1.44, 0.04, 0.64 };
+	const char *fc = "fit.count_file=${TT_COUNT}/fit.count";
+	const setcase_t cases[] = {
+		/* without the key: as before, no column */
+		{ { fc }, 1, 3, 1, 6, 6, 1, NULL, plain },
+		{ { fc, "tune.reuse=true" }, 1, 3, 1, 5, 5, 1, NULL, plain },
+		/* the override scores the candidates, the final run has
+		 * the graph's value */
+		{ { fc, "tune.search_set=fit.offset=1" }, 1, 2, 1, 6, 6, 1,
+		  "fit.offset=1", plus1 },
+		/* reuse: sim taken from the search, fit run again */
+		{ { fc, "tune.search_set=fit.offset=1", "tune.reuse=true" }, 1,
+		  2, 1, 5, 6, 1, "fit.offset=1", plus1 },
+		{ { fc, "tune.search_set=fit.offset=1", "tune.reuse=true" }, 2,
+		  2, 1, 5, 6, 1, "fit.offset=1", plus1 },
+		/* a stage run once (pre): it and what reads it (sim, fit) run
+		 * again, ref (beside it) does not */
+		{ { fc, "tune.search_set=pre.offset=1", "tune.reuse=true" }, 1,
+		  2, 2, 6, 6, 1, "pre.offset=1", plus1 },
+		/* two overrides, ';' between them, blanks trimmed */
+		{ { fc, "tune.search_set= fit.offset = 1 ;fit.target=5.2 ",
+		    "tune.reuse=true" }, 1, 4, 1, 5, 6, 1,
+		  "fit.offset=1; fit.target=5.2", t52 },
+	};
+	for (int i = 0; i < ARMSTG_COUNT(cases); i++)
+		expect_set(&cases[i]);
+	/* one value: no search, the graph's values */
+	trun_t r;
+	const char *one[] = { "tune.values=4", "tune.search_set=fit.offset=1" };
+	run_sets(&r, one, 2);
+	assert_int_equal(r.rc, 0);
+	assert_float_equal(tu_read_num(in(r.out, "fit-4.txt")), 4.0, 0);
+	assert_false(tu_exists(in(r.out, "tune.tsv")));
+	done(&r);
+	/* refused at load, naming the key and the override */
+	struct { const char *set, *err; } bad[] = {
+		{ "tune.search_set=nope.offset=1", "key 'search_set': [tune] "
+		  "search_set: 'nope.offset=1': unknown stage 'nope'" },
+		{ "tune.search_set=fit.size=1", "key 'search_set': [tune] "
+		  "search_set: 'fit.size=1': 'size' is not a parameter of "
+		  "plugin 'tp_score' (see 'armstg describe tp_score')" },
+		{ "tune.search_set=fit.volume=base.volume", "key 'search_set': "
+		  "[tune] search_set: 'fit.volume=base.volume': 'volume' is not "
+		  "a parameter of plugin 'tp_score' (see 'armstg describe "
+		  "tp_score')" },
+		{ "tune.search_set=fit.offset=500", "key 'search_set': [tune] "
+		  "search_set: 'fit.offset=500': parameter 'offset': 500 is out "
+		  "of range [-100, 100]" },
+		{ "tune.search_set=fit.offset=1; fit.target=x", "key "
+		  "'search_set': [tune] search_set: 'fit.target=x': parameter "
+		  "'target': 'x' is not a number" },
+		{ "tune.search_set=sim.offset=2", "key 'search_set': [tune] "
+		  "search_set: 'sim.offset=2' sets the tuned parameter (param = "
+		  "sim.offset)" },
+		{ "tune.search_set=save.path=x.txt", "key 'search_set': [tune] "
+		  "search_set: 'save.path=x.txt': 'path' is an output path "
+		  "(what the search writes is discarded)" },
+		{ "tune.search_set=fit.offset", "key 'search_set': [tune] "
+		  "search_set must read STAGE.KEY=VALUE, overrides separated by "
+		  "';' (e.g. 'register.iterations=40,30,0; register.tol=0.01'), "
+		  "got 'fit.offset'" },
+		{ "tune.search_set=fit.offset=", "key 'search_set': [tune] "
+		  "search_set must read STAGE.KEY=VALUE, overrides separated by "
+		  "';' (e.g. 'register.iterations=40,30,0; register.tol=0.01'), "
+		  "got 'fit.offset='" },
+		{ "tune.search_set=fit.offset=1;;fit.target=2", "key "
+		  "'search_set': [tune] search_set: empty override in "
+		  "'fit.offset=1;;fit.target=2' (overrides are separated by "
+		  "';')" },
+		{ "tune.search_set=fit.offset=1; fit.offset=2", "key "
+		  "'search_set': [tune] search_set: fit.offset is set twice" },
+		{ "tune.search_set=alt.target=1", "key 'search_set': [tune] "
+		  "search_set: 'alt.target=1': neither the score (fit) nor a "
+		  "table of require reads stage 'alt', so the override would "
+		  "change nothing in the search" },
+	};
+	setenv("TT_COUNT", "/tmp", 1);
+	for (int i = 0; i < ARMSTG_COUNT(bad); i++) {
+		char err[4096], want[1024];
+		const char *s[] = { bad[i].set };
+		graph_t *g = graph_load(graph_path, s, 1, err, sizeof err);
+		if (g) {
+			graph_free(g);
+			fail_msg("--set %s was accepted", bad[i].set);
+		}
+		snprintf(want, sizeof want, "%s: --set: %s", graph_path,
+			 bad[i].err);
+		assert_string_equal(err, want);
+	}
+	/* a table of require that reads the stage: accepted */
+	const char *req[] = { "tune.search_set=alt.target=1",
+			      "tune.require=alt.table: sq near < 100" };
+	char err[4096];
+	graph_t *g = graph_load(graph_path, req, 2, err, sizeof err);
+	if (!g)
+		fail_msg("%s", err);
+	assert_int_equal(g->tune.nset, 1);
+	assert_string_equal(g->tune.set[0].key, "target");
+	assert_string_equal(g->tune.set[0].val, "1");
+	graph_free(g);
 }
 
 static void test_targets(void **state)
@@ -1301,6 +1475,7 @@ int main(void)
 		cmocka_unit_test(test_all_candidates_fail),
 		cmocka_unit_test(test_shared_stage_failure_fails_the_run),
 		cmocka_unit_test(test_set_rules),
+		cmocka_unit_test(test_search_set),
 		cmocka_unit_test(test_targets),
 		cmocka_unit_test(test_interrupt),
 		cmocka_unit_test(test_run_graph_after_tune),
