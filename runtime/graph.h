@@ -27,9 +27,9 @@
  *
  * Values may use ${VAR} and ${VAR:-default} (environment variables; the
  * default is expanded too, so they nest; "$$" is a literal '$').  The
- * code: graph_parse.c (the file), graph_check.c (graph_load), tune.c,
- * sched.c, runtab.c, run.c (graph_run); graph_int.h says which does
- * what.  `--set stage.key=value` overrides or adds any key.  Loading
+ * code: graph_parse.c (the file), graph_check.c (graph_load),
+ * tune_check.c, tune.c, sched.c, runtab.c, run.c (graph_run); graph_int.h
+ * says which does what.  `--set stage.key=value` overrides or adds any key.  Loading
  * validates everything before any stage runs; each error reads
  *     FILE:LINE: stage 'S': key 'K': what is wrong
  *

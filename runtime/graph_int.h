@@ -7,7 +7,8 @@
  *   graph_vars.c    ${VAR} expansion, [vars]
  *   graph_check.c   plugins, parameters, ports, connections, cycles,
  *                   targets, declared outputs; graph_load   -> graph_t
- *   tune.c          [tune]: its keys checked; the search during a run
+ *   tune_check.c    [tune]: its keys checked              -> g_tune_t
+ *   tune.c          [tune]: the search during a run, tune.tsv
  *   sched.c         the scheduler: which stages, in what order, threads
  *   runtab.c        the run table (run.tsv)
  *   run_graph.c     the run's graph as a table for plugins (run_graph)
@@ -323,9 +324,11 @@ int runtab_write(const g_run_t *r, double total, const char *path);
  * NULL when out of memory */
 tab_t *run_graph_table(const g_run_t *r);
 
-/* ---- tune.c ---- */
+/* ---- tune_check.c ---- */
 /* check the [tune] section (after the stages are checked) */
 void tune_check(graph_t *g);
+
+/* ---- tune.c ---- */
 /* The search before the final run (see tune.c); 0 or a negative code. */
 int tune_search(g_run_t *r, char *err, size_t errsize);
 /* tune.tsv of r to path; 0 or -1 */
