@@ -218,7 +218,8 @@ def method_T(args, c, d, m, x):
     (growth methods: with the grown tumour) or None"""
     fixed = c["t1c"]
     moving = c["atlas_t1"]
-    o = os.path.join(d, m)
+    # --keep: one run folder per tag (METHOD+TAG), so variants can be compared
+    o = os.path.join(d, m + (args.tag if args.keep else ""))
     if m in GRAPH:
         env = case_env(c)
         env["PATIENT_IMAGE"] = fixed
@@ -345,6 +346,9 @@ def main():
     ap.add_argument("--set", action="append", default=[],
                     help="STAGE.KEY=V for the growth graphs")
     ap.add_argument("--tag", default="", help="suffix of the method names")
+    ap.add_argument("--keep", action="store_true",
+                    help="keep each tag's run folder (OUT/CASE/METHOD+TAG; default: "
+                    "OUT/CASE/METHOD, the last tag's)")
     ap.add_argument("--log", action="store_true",
                     help="run the graphs with -v and keep their log (OUT/CASE/METHOD/armstg.log: "
                     "stage times, every iteration's metric)")
@@ -430,10 +434,11 @@ def main():
                 f.write("\t".join(row) + "\n")
             log("\t".join(row))
             for junk in ("coord0.nii.gz", "coord1.nii.gz", "coord2.nii.gz"):
-                p = os.path.join(d, m, junk)
+                p = os.path.join(d, m + (args.tag if args.keep else ""), junk)
                 if os.path.exists(p):
                     os.remove(p)
-            shutil.rmtree(os.path.join(d, m, "report"), ignore_errors=True)
+            shutil.rmtree(os.path.join(d, m + (args.tag if args.keep else ""), "report"),
+                          ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -89,6 +89,9 @@
  * fixed one (the patient's tumour) where the masks leave the images out.
  * Its cost (the mean distance between the two boundaries, mm) enters the
  * convergence test: a level stops only when neither cost still improves.
+ * label_where = after takes it out of the levels: once the registration is
+ * done, it corrects the field only where the fixed mask leaves the images
+ * out, blended to zero towards the imaged voxels (dlabel_correct).
  *
  * Threads: every result (the field, the warped image, each figure of the
  * table but its seconds) is the same bits on any thread count: sums over
@@ -120,6 +123,7 @@ enum { UPD_DIFFEO, UPD_ADDITIVE };
 enum { NORM_HIST, NORM_MINMAX, NORM_NONE, NORM_LOCAL };
 enum { SIGMA_MM, SIGMA_VOXEL, SIGMA_IMAGE_VOXEL };
 enum { IN_FIXED, IN_MOVING, IN_FMASK, IN_MMASK, IN_INIT, IN_FLABEL, IN_MLABEL };
+enum { WHERE_ALL, WHERE_UNMASKED, WHERE_AFTER };
 enum { OUT_FIELD, OUT_WARPED, OUT_TABLE };
 
 typedef struct demons_priv {
@@ -143,7 +147,9 @@ typedef struct demons_priv {
 	double label_weight;
 	double label_reach;  /* mm */
 	int label_levels;
-	int label_where;
+	int label_where;     /* WHERE_* */
+	double label_blend;  /* mm */
+	int label_iterations;
 	/* parsed in init */
 	int niter[MAX_LEVELS];
 	int nlist;
@@ -262,7 +268,20 @@ static const armstg_param_t demons_params[] = {
 	{ "label_where", PT_ENUM, "all", 0, 0, "",
 	  "where the label term pushes: all (within label_reach of either "
 	  "boundary) or unmasked (there, and only where a mask leaves the "
-	  "images out: no image force)", "all|unmasked", OFF(label_where), 0 },
+	  "images out: no image force), at every iteration; after: once the "
+	  "registration is done, as a correction confined to where the fixed "
+	  "mask leaves the images out (without one: the fixed region), "
+	  "blended to zero over label_blend towards the imaged voxels, whose "
+	  "field it leaves as it is (label_levels does not apply)",
+	  "all|unmasked|after", OFF(label_where), 0 },
+	{ "label_blend", PT_DOUBLE, "2", 0, 50, "mm",
+	  "label_where=after: the correction's weight rises from 0 to 1 over "
+	  "this distance from the imaged voxels (0: 1 everywhere it acts)",
+	  NULL, OFF(label_blend), 0 },
+	{ "label_iterations", PT_INT, "30", 1, 1000, "iterations",
+	  "label_where=after: the correction's steps at most (it stops "
+	  "earlier when its cost gains less than tol over tol_window steps)",
+	  NULL, OFF(label_iterations), 0 },
 };
 
 #define FAIL(code, ...) st->host->fail(st, code, __VA_ARGS__)
@@ -1242,8 +1261,9 @@ static int demons_process(armstg_stage_t *st)
 		if (rc || (rc = fimg_alloc(&A, &g, 3)) ||
 		    (rc = fimg_alloc(&B, &g, 3)) ||
 		    (use_label && (rc = dlabel_level(&DL, &g, sig_f, sig_m, &S,
-						     p->label_levels &&
-						     l < nlev - p->label_levels,
+						     p->label_where == WHERE_AFTER ||
+						     (p->label_levels &&
+						      l < nlev - p->label_levels),
 						     sg_fluid, nt)))) {
 			rc = FAIL(ARMSTG_ENOMEM, "out of memory (fields, level %d)",
 				  l);
@@ -1412,6 +1432,39 @@ static int demons_process(armstg_stage_t *st)
 			fimg_free(&S);
 			S = Sfull;
 			Sfull = (fimg_t){ 0 };
+		}
+	}
+
+	/* label_where = after: the label term as a correction of the finished
+	 * field, only where the fixed mask leaves the images out
+	 * (demons_label.c), with the finest level's update smoothing and
+	 * demons bound */
+	if (use_label && p->label_where == WHERE_AFTER) {
+		const double *sp = F0.g.sp;
+		const double vs = p->sigma_unit == SIGMA_MM ? 1
+				  : (sp[0] + sp[1] + sp[2]) / 3;
+		const double ms2 = (sp[0] * sp[0] + sp[1] * sp[1] + sp[2] * sp[2]) / 3;
+		double d0, d1, c1;
+		int nsteps, folds;
+		rc = dlabel_correct(&DL, &S, FM0.d ? &FM0 : NULL, p->label_blend,
+				    p->sigma_fluid * vs, p->sigma_field * vs,
+				    4 * p->max_step * p->max_step * ms2,
+				    p->label_iterations, p->tol, p->tol_window,
+				    &d0, &d1, &c1, &nsteps, &folds, nt);
+		if (rc) {
+			rc = FAIL(rc, "out of memory (label correction)");
+			goto out;
+		}
+		h->log(st, LOG_INFO, "label correction: %d steps%s, label Dice "
+		       "%.4f -> %.4f, label cost %.4f mm", nsteps,
+		       folds ? " (stopped: the next would fold)" : "", d0, d1, c1);
+		const int64_t r = tab->nrows - 1;
+		if (r >= 0) {
+			h->tab_set_num(tab, r, "label_dice_before", d0);
+			h->tab_set_num(tab, r, "label_dice", d1);
+			h->tab_set_num(tab, r, "label_mm", c1);
+			h->tab_set_num(tab, r, "label_steps", nsteps);
+			h->tab_set_num(tab, r, "label_fold_stop", folds);
 		}
 	}
 

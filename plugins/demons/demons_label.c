@@ -45,6 +45,10 @@
 #include "demons_label.h"
 #include "img/edt.h"
 
+/* the fold guard of the correction (label_where = after): the smallest
+ * Jacobian determinant it may leave where it acts */
+#define DLABEL_JMIN 0.2
+
 /* the region of v (> 0) on grid g (nearest voxel when g differs, NULL: v's
  * own), as 0/1 bytes; *n the voxels set.  0, or a negative code. */
 static int region(const vol_t *v, const char *what, const fgrid_t *g,
@@ -238,15 +242,16 @@ out:
 	return rc;
 }
 
-int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
-		     const fimg_t *WM, fimg_t *A, double w, double sg_fluid,
-		     double sx2, double *dice, double *cost, int nt)
+/*
+ * The term's demons step on the block (d->U, not smoothed) for the field on
+ * the block d->S, with its Dice and cost.  It pushes where the masks FM, WM
+ * (the level grid, A's: GX x GY) leave the images out (both NULL:
+ * everywhere) and, with the weight wt (on the block), only where wt > 0.
+ */
+static int label_step(dlabel_t *d, const fimg_t *FM, const fimg_t *WM,
+		      int GX, int GY, const float *wt, double sx2, double *dice,
+		      double *cost, int nt)
 {
-	*dice = NAN;
-	*cost = NAN;
-	if (!d->U.d)
-		return 0; /* no term at this level */
-	copy_block(d, S);
 	int rc = fimg_resample(&d->MD, &d->S, FIELD_LINEAR, (float)d->reach,
 			       &d->WD, nt);
 	if (rc)
@@ -263,7 +268,6 @@ int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
 	const float *F = d->FD.d, *W = d->WD.d;
 	/* the masks on the level grid (A's): the image term's voxels */
 	const float *fm = FM && FM->d ? FM->d : NULL, *wm = WM && WM->d ? WM->d : NULL;
-	const int GX = A->g.nx, GY = A->g.ny;
 	float *U = d->U.d;
 	const float lim = 0.999f * (float)d->reach;
 	int64_t nf = 0, nw = 0, nb = 0, na = 0;
@@ -288,7 +292,7 @@ int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
 				na++;
 				sd += fabs(diff);
 			}
-			if (fabs(diff) < 1e-4)
+			if (fabs(diff) < 1e-4 || (wt && !(wt[e] > 0)))
 				continue;
 			if (fm || wm) {
 				const int64_t E = ((int64_t)(k + d->lo[2]) * GY +
@@ -326,9 +330,29 @@ int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
 	free(rsum);
 	*dice = nf + nw ? 2.0 * (double)nb / (double)(nf + nw) : NAN;
 	*cost = na ? sd / (double)na : 0;
+	return 0;
+}
+
+int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
+		     const fimg_t *WM, fimg_t *A, double w, double sg_fluid,
+		     double sx2, double *dice, double *cost, int nt)
+{
+	*dice = NAN;
+	*cost = NAN;
+	if (!d->U.d)
+		return 0; /* no term at this level */
+	copy_block(d, S);
+	int rc = label_step(d, FM, WM, A->g.nx, A->g.ny, NULL, sx2, dice, cost,
+			    nt);
+	if (rc)
+		return rc;
 	if (sg_fluid > 0 && (rc = fimg_smooth(&d->U, sg_fluid, nt)))
 		return rc;
 	/* A += w U on the block */
+	const fgrid_t *g = &d->bg;
+	const int nx = g->nx, ny = g->ny, nz = g->nz;
+	const int64_t nv = fgrid_nvox(g);
+	const float *U = d->U.d;
 	const fgrid_t *G = &A->g;
 	const int64_t NV = fgrid_nvox(G);
 	const float wf = (float)w;
@@ -344,6 +368,178 @@ int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
 					a[i] += wf * u[i];
 			}
 	return 0;
+}
+
+/* the squarings of exp(u) for its largest vector mvox (voxels): scaled to at
+ * most half a voxel (as demons.c's) */
+static int squarings(double mvox)
+{
+	int n = 0;
+	while (mvox / ldexp(1.0, n) > 0.5 * (1 + 1e-4) && n < 30)
+		n++;
+	return n;
+}
+
+/* the correction's weight on the block: w = min(1, d(x, outside R) / blend)
+ * in R (FM <= 0, or the fixed region without FM), 0 elsewhere; the
+ * distance on the whole fixed grid (exact, not cut by the block) */
+static int correction_weight(const dlabel_t *d, const fgrid_t *G,
+			     const fimg_t *FM, double blend, fimg_t *wt, int nt)
+{
+	const int64_t NV = fgrid_nvox(G);
+	const int n[3] = { G->nx, G->ny, G->nz };
+	uint8_t *site = malloc((size_t)NV);
+	float *d2 = malloc(sizeof(float) * (size_t)NV);
+	int rc = ARMSTG_ENOMEM;
+	if (!site || !d2)
+		goto done;
+	for (int64_t e = 0; e < NV; e++)
+		site[e] = FM && FM->d ? FM->d[e] > 0 : !(d->FD0.d[e] < 0);
+	if ((rc = img_edt_sq(site, n, G->sp, nt, d2)))
+		goto done;
+	const fgrid_t *g = &d->bg;
+	for (int k = 0; k < g->nz; k++)
+		for (int j = 0; j < g->ny; j++)
+			for (int i = 0; i < g->nx; i++) {
+				const int64_t E = ((int64_t)(k + d->lo[2]) * G->ny + j +
+						   d->lo[1]) * G->nx + i + d->lo[0];
+				const int64_t e = ((int64_t)k * g->ny + j) * g->nx + i;
+				wt->d[e] = site[E] ? 0.0f
+					   : blend > 0 ? (float)fmin(1.0, sqrt(d2[E]) / blend)
+						       : 1.0f;
+			}
+	rc = 0;
+done:
+	free(site);
+	free(d2);
+	return rc;
+}
+
+/* the smallest Jacobian determinant of the block's field u where the
+ * correction acts (wt > 0) */
+static double jac_min_where(const fimg_t *u, const float *wt, int nt)
+{
+	const fgrid_t *g = &u->g;
+	const int n[3] = { g->nx, g->ny, g->nz };
+	double m = INFINITY;
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(min : m)
+	for (int k = 0; k < n[2]; k++)
+		for (int j = 0; j < n[1]; j++)
+			for (int i = 0; i < n[0]; i++) {
+				const int64_t e = ((int64_t)k * n[1] + j) * n[0] + i;
+				if (!(wt[e] > 0))
+					continue;
+				const double v = field_jac_det_at(u->d, n, g->w2v, i, j, k);
+				if (v < m)
+					m = v;
+			}
+	return m;
+}
+
+int dlabel_correct(dlabel_t *d, fimg_t *S, const fimg_t *FM, double blend_mm,
+		   double sg_fluid, double sg_field, double sx2, int max_iter,
+		   double tol, int window, double *dice0, double *dice,
+		   double *cost, int *steps, int *folds, int nt)
+{
+	*dice0 = *dice = *cost = NAN;
+	*steps = 0;
+	*folds = 0;
+	const fgrid_t *G = &S->g;
+	int rc = dlabel_level(d, G, 0, 0, S, 0, sg_fluid, nt);
+	if (rc || !d->U.d)
+		return rc; /* or neither region reaches the grid */
+	fimg_t wt = { 0 }, B = { 0 }, P = { 0 };
+	double *hist = malloc(sizeof(double) * (size_t)(max_iter + 1));
+	if (!hist || (rc = fimg_alloc(&wt, &d->bg, 1)) ||
+	    (rc = fimg_alloc(&B, &d->bg, 3)) || (rc = fimg_alloc(&P, &d->bg, 3)) ||
+	    (rc = correction_weight(d, G, FM, blend_mm, &wt, nt))) {
+		rc = ARMSTG_ENOMEM;
+		goto out;
+	}
+	const fgrid_t *g = &d->bg;
+	const int64_t nv = fgrid_nvox(g), NV = fgrid_nvox(G);
+	copy_block(d, S);
+	/* the fold guard: a step that takes the smallest Jacobian determinant
+	 * where the correction acts below DLABEL_JMIN (or below the field's
+	 * own, when that is lower already) is undone and the correction ends:
+	 * where the region to be moved meets imaged tissue that the
+	 * correction must not move (a moving region that overlaps it), the
+	 * pull would fold the field in the blend */
+	const double jlim = fmin(DLABEL_JMIN, jac_min_where(&d->S, wt.d, nt));
+	for (int it = 0;; it++) {
+		double dc, cs;
+		if ((rc = label_step(d, NULL, NULL, 0, 0, wt.d, sx2, &dc, &cs, nt)))
+			goto out;
+		if (it == 0)
+			*dice0 = dc;
+		*dice = dc;
+		*cost = cs;
+		hist[it] = cs;
+		/* stop: the step budget spent, or the cost's relative gain
+		 * over the last `window` steps below tol */
+		if (it == max_iter ||
+		    (it >= window && !(hist[it - window] - cs >= tol * hist[it - window])))
+			break;
+		if (sg_fluid > 0 && (rc = fimg_smooth(&d->U, sg_fluid, nt)))
+			goto out;
+		for (int c = 0; c < 3; c++)
+			for (int64_t e = 0; e < nv; e++)
+				d->U.d[e + c * nv] *= wt.d[e];
+		double mmm, mvox;
+		fimg_field_maxnorm(&d->U, &mmm, &mvox);
+		if (!(mvox > 0))
+			break;
+		/* s <- s o exp(w u) on the block (lib/field) */
+		memcpy(P.d, d->S.d, sizeof(float) * 3 * (size_t)nv);
+		fimg_t *res;
+		if ((rc = fimg_compose_exp(&d->S, &d->U, &B, squarings(mvox), &res,
+					   nt)))
+			goto out;
+		fimg_t t = d->S;
+		d->S = *res;
+		*res = t;
+		/* the field's smoothing (sg_field mm), blended in by w: the
+		 * field in R is regularised as the registration's is, the
+		 * imaged voxels keep theirs */
+		if (sg_field > 0) {
+			fimg_t *sm = res; /* the old field: scratch now */
+			memcpy(sm->d, d->S.d, sizeof(float) * 3 * (size_t)nv);
+			if ((rc = fimg_smooth(sm, sg_field, nt)))
+				goto out;
+			for (int c = 0; c < 3; c++)
+				for (int64_t e = 0; e < nv; e++)
+					d->S.d[e + c * nv] += wt.d[e] *
+						(sm->d[e + c * nv] - d->S.d[e + c * nv]);
+		}
+		if (jac_min_where(&d->S, wt.d, nt) < jlim) {
+			memcpy(d->S.d, P.d, sizeof(float) * 3 * (size_t)nv);
+			*folds = 1;
+			/* the figures of the field kept */
+			if ((rc = label_step(d, NULL, NULL, 0, 0, wt.d, sx2, dice,
+					     cost, nt)))
+				goto out;
+			break;
+		}
+		(*steps)++;
+	}
+	/* back into S, only in R: outside it S is as given, bit for bit */
+	for (int c = 0; c < 3; c++)
+		for (int k = 0; k < g->nz; k++)
+			for (int j = 0; j < g->ny; j++)
+				for (int i = 0; i < g->nx; i++) {
+					const int64_t e = ((int64_t)k * g->ny + j) * g->nx + i;
+					if (!(wt.d[e] > 0))
+						continue;
+					S->d[c * NV + ((int64_t)(k + d->lo[2]) * G->ny +
+						       j + d->lo[1]) * G->nx + i + d->lo[0]] =
+						d->S.d[c * nv + e];
+				}
+out:
+	free(hist);
+	fimg_free(&wt);
+	fimg_free(&B);
+	fimg_free(&P);
+	return rc;
 }
 
 void dlabel_free(dlabel_t *d)

@@ -59,6 +59,29 @@ int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
 		     const fimg_t *WM, fimg_t *A, double w, double sg_fluid,
 		     double sx2, double *dice, double *cost, int nt);
 
+/*
+ * label_where = after: the term as a correction of the finished field S
+ * (on the fixed grid, nc 3), confined to the region R the fixed mask FM
+ * leaves out of the images (FM <= 0; FM NULL: the fixed region itself) and
+ * blended to zero towards the imaged voxels: each step's update (the term's
+ * demons step where R holds, smoothed by sg_fluid mm) is multiplied by
+ * w(x) = min(1, d(x, outside R) / blend_mm) (d: exact Euclidean distance,
+ * mm; blend_mm 0: w = 1 in R) and composed, s <- s o exp(w u), then the
+ * field is smoothed by sg_field mm with the same weight,
+ * s <- s + w (G * s - s); the field is written back only in R, so outside R it is the field given, bit for bit.
+ * At most max_iter steps; it stops when the term's cost improved by less
+ * than the fraction tol over the last window steps, or (*folds = 1) at the
+ * step that would take the smallest Jacobian determinant in R below 0.2
+ * (or below the given field's there, if lower), which is not taken.  *dice0, *dice: the
+ * regions' overlap before and after, *cost: the cost after (mm), *steps:
+ * the steps taken (NaN, 0 when neither region reaches the grid).
+ * Returns 0 or ARMSTG_ENOMEM.
+ */
+int dlabel_correct(dlabel_t *d, fimg_t *S, const fimg_t *FM, double blend_mm,
+		   double sg_fluid, double sg_field, double sx2, int max_iter,
+		   double tol, int window, double *dice0, double *dice,
+		   double *cost, int *steps, int *folds, int nt);
+
 void dlabel_free(dlabel_t *d);
 
 #endif

@@ -6,35 +6,10 @@
  * true field (ITK convention) is exactly u, with no interpolation error.
  * Fixed and moving are on different grids (LAS vs LPS, other sizes).
  */
-#include <math.h>
+#include "synth_head.h"
 
-#include "testutil.h"
-#include "field/field.h"
-
-enum { IN_FIXED, IN_MOVING, IN_FMASK, IN_MMASK, IN_INIT };
-enum { OUT_FIELD, OUT_WARPED, OUT_TABLE };
-
-#define SP 1.5 /* mm */
-
-static double sigm(double d)
-{
-	return 1.0 / (1.0 + exp(-d));
-}
-
-/* ellipsoid indicator, smooth edge of about w mm */
-static double ell(const double y[3], const double c[3], const double a[3],
-		  double w)
-{
-	double e = 0;
-	for (int q = 0; q < 3; q++)
-		e += (y[q] - c[q]) * (y[q] - c[q]) / (a[q] * a[q]);
-	e = sqrt(e);
-	double r = (a[0] + a[1] + a[2]) / 3;
-	return sigm((1 - e) * r / w);
-}
-
-static const double C0[3] = { 0, 0, 0 };
 static const double ABRAIN[3] = { 27, 31, 23 };
+static const double AWHITE[3] = { 18, 21, 14 };
 
 static double brain(const double y[3])
 {
@@ -43,16 +18,7 @@ static double brain(const double y[3])
 
 static double phantom(const double y[3])
 {
-	static const double cw[3] = { 0, 2, 3 }, aw[3] = { 18, 21, 14 };
-	static const double cv1[3] = { 6, 3, 4 }, cv2[3] = { -6, 3, 4 },
-			    av[3] = { 3.5, 10, 5 };
-	static const double cb[3] = { 12, -15, -8 }, ab[3] = { 5, 4, 6 };
-	double b = brain(y);
-	double v = 0.45 * b + 0.35 * ell(y, cw, aw, 1.0) -
-		   0.5 * ell(y, cv1, av, 0.8) - 0.5 * ell(y, cv2, av, 0.8) +
-		   0.25 * ell(y, cb, ab, 1.0);
-	v += 0.12 * b * sin(y[0] / 3.1) * sin(y[1] / 3.7 + 1) * cos(y[2] / 2.9);
-	return v;
+	return synth_head(y, ABRAIN, AWHITE, 1);
 }
 
 static void true_u(const double x[3], double u[3])
@@ -160,15 +126,6 @@ static void field_error(const vol_t *fld, const vol_t *fmask, double *err,
 	}
 	*err = s / (double)n;
 	*base = b / (double)n;
-}
-
-static double jac_min(const vol_t *fld)
-{
-	vol_t *j = vol_new(fld->nx, fld->ny, fld->nz, 1, DT_F32, fld->affine);
-	field_jac_stats_t s;
-	assert_int_equal(field_jacobian_vol(fld, j, &s, 2), 0);
-	msg_unref(&j->base);
-	return s.min;
 }
 
 static double tab_last(const tab_t *t, const char *col)
@@ -814,14 +771,6 @@ static void test_convergence(void **state)
  * over slices), so the costs the convergence test compares are the same
  * bits on any thread count.
  */
-static int same_bits(const vol_t *a, const vol_t *b)
-{
-	return a->nx == b->nx && a->ny == b->ny && a->nz == b->nz &&
-	       a->nc == b->nc && a->dtype == b->dtype &&
-	       !memcmp(a->data, b->data,
-		       (size_t)vol_nvox(a) * a->nc * vol_dtype_size(a->dtype));
-}
-
 static void test_threads(void **state)
 {
 	fixture_t *fx = *state;
