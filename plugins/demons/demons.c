@@ -149,6 +149,7 @@ typedef struct demons_priv {
 	int label_levels;
 	int label_where;     /* WHERE_* */
 	double label_blend;  /* mm */
+	double label_jmin;
 	int label_iterations;
 	/* parsed in init */
 	int niter[MAX_LEVELS];
@@ -278,6 +279,11 @@ static const armstg_param_t demons_params[] = {
 	  "label_where=after: the correction's weight rises from 0 to 1 over "
 	  "this distance from the imaged voxels (0: 1 everywhere it acts)",
 	  NULL, OFF(label_blend), 0 },
+	{ "label_jmin", PT_DOUBLE, "0.2", -1, 1, "",
+	  "label_where=after: the correction stops before a step that would "
+	  "take the smallest Jacobian determinant where it acts below this "
+	  "(or below the registration's own there, if lower)", NULL,
+	  OFF(label_jmin), 0 },
 	{ "label_iterations", PT_INT, "30", 1, 1000, "iterations",
 	  "label_where=after: the correction's steps at most (it stops "
 	  "earlier when its cost gains less than tol over tol_window steps)",
@@ -1450,7 +1456,7 @@ static int demons_process(armstg_stage_t *st)
 				    p->sigma_fluid * vs, p->sigma_field * vs,
 				    4 * p->max_step * p->max_step * ms2,
 				    p->label_iterations, p->tol, p->tol_window,
-				    &d0, &d1, &c1, &nsteps, &folds, nt);
+				    p->label_jmin, &d0, &d1, &c1, &nsteps, &folds, nt);
 		if (rc) {
 			rc = FAIL(rc, "out of memory (label correction)");
 			goto out;

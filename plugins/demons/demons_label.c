@@ -45,9 +45,6 @@
 #include "demons_label.h"
 #include "img/edt.h"
 
-/* the fold guard of the correction (label_where = after): the smallest
- * Jacobian determinant it may leave where it acts */
-#define DLABEL_JMIN 0.2
 
 /* the region of v (> 0) on grid g (nearest voxel when g differs, NULL: v's
  * own), as 0/1 bytes; *n the voxels set.  0, or a negative code. */
@@ -438,8 +435,8 @@ static double jac_min_where(const fimg_t *u, const float *wt, int nt)
 
 int dlabel_correct(dlabel_t *d, fimg_t *S, const fimg_t *FM, double blend_mm,
 		   double sg_fluid, double sg_field, double sx2, int max_iter,
-		   double tol, int window, double *dice0, double *dice,
-		   double *cost, int *steps, int *folds, int nt)
+		   double tol, int window, double jmin, double *dice0,
+		   double *dice, double *cost, int *steps, int *folds, int nt)
 {
 	*dice0 = *dice = *cost = NAN;
 	*steps = 0;
@@ -460,12 +457,12 @@ int dlabel_correct(dlabel_t *d, fimg_t *S, const fimg_t *FM, double blend_mm,
 	const int64_t nv = fgrid_nvox(g), NV = fgrid_nvox(G);
 	copy_block(d, S);
 	/* the fold guard: a step that takes the smallest Jacobian determinant
-	 * where the correction acts below DLABEL_JMIN (or below the field's
+	 * where the correction acts below jmin (or below the field's
 	 * own, when that is lower already) is undone and the correction ends:
 	 * where the region to be moved meets imaged tissue that the
 	 * correction must not move (a moving region that overlaps it), the
 	 * pull would fold the field in the blend */
-	const double jlim = fmin(DLABEL_JMIN, jac_min_where(&d->S, wt.d, nt));
+	const double jlim = fmin(jmin, jac_min_where(&d->S, wt.d, nt));
 	for (int it = 0;; it++) {
 		double dc, cs;
 		if ((rc = label_step(d, NULL, NULL, 0, 0, wt.d, sx2, &dc, &cs, nt)))

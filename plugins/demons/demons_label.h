@@ -71,7 +71,7 @@ int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
  * s <- s + w (G * s - s); the field is written back only in R, so outside R it is the field given, bit for bit.
  * At most max_iter steps; it stops when the term's cost improved by less
  * than the fraction tol over the last window steps, or (*folds = 1) at the
- * step that would take the smallest Jacobian determinant in R below 0.2
+ * step that would take the smallest Jacobian determinant in R below jmin
  * (or below the given field's there, if lower), which is not taken.  *dice0, *dice: the
  * regions' overlap before and after, *cost: the cost after (mm), *steps:
  * the steps taken (NaN, 0 when neither region reaches the grid).
@@ -79,8 +79,8 @@ int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
  */
 int dlabel_correct(dlabel_t *d, fimg_t *S, const fimg_t *FM, double blend_mm,
 		   double sg_fluid, double sg_field, double sx2, int max_iter,
-		   double tol, int window, double *dice0, double *dice,
-		   double *cost, int *steps, int *folds, int nt);
+		   double tol, int window, double jmin, double *dice0,
+		   double *dice, double *cost, int *steps, int *folds, int nt);
 
 void dlabel_free(dlabel_t *d);
 
