@@ -130,6 +130,10 @@ typedef struct g_tune {
 	 * depend on the score's stage is checked as soon as that table is
 	 * made, and a candidate failing it runs no further (tune.c) */
 	int require_early;
+	/* same_skip = true: a candidate whose tuned stage gives the volumes
+	 * and point sets (a hash of them) of an earlier scored one is not run
+	 * further: it takes that candidate's score and status (tune.c) */
+	int same_skip;
 	/* search_set = STAGE.KEY=VALUE; ...: the candidates run with these
 	 * values; the final run with the graph's, the overridden stages and
 	 * those that read them run again (tune.c) */
@@ -277,6 +281,11 @@ typedef struct tune_row {
 	int ok, rc;
 	int req_failed;             /* dropped by a condition of require */
 	int skipped;                /* not run: [tune] stop (err says why) */
+	int scored;                 /* the score stage ran (score read) */
+	int same_as;                /* same_skip: 1 + the earlier candidate
+				       whose outputs these are, 0: none */
+	uint64_t hash;              /* same_skip: of the tuned stage's
+				       volumes and point sets */
 	char err[2048];
 } tune_row_t;
 

@@ -37,7 +37,15 @@
  * with these parameter values (e.g. a registration without its finest
  * level), the final run with the graph's: the overridden stages and every
  * stage that reads them are computed again (tune_set_restore), reuse
- * keeps only the others (the growth).  tune.tsv lists the candidates
+ * keeps only the others (the growth).  same_skip = true: once a
+ * candidate's tuned stage has run (with the stages of require_early, when
+ * there are some, and after those conditions), a 64-bit FNV-1a hash of its
+ * volumes and point sets (msg_hash: grid, affine, data; points, labels,
+ * attributes; not its tables, which may hold times) is compared with those
+ * of the earlier candidates that were scored: when one matches, the
+ * candidate runs no further and takes that candidate's score and status
+ * (tune.tsv's error column: "same grow outputs as 6"); it is never chosen
+ * over it (tune_same).  tune.tsv lists the candidates
  * (tune_table_write), the skipped ones too, and the overrides in a column
  * search_set when there are some.
  */
@@ -287,6 +295,37 @@ static int tune_choice(const g_run_t *r, int best)
 	return best;
 }
 
+/* same_skip: the hash of the tuned stage's volumes and point sets (the
+ * candidate's; an absent optional output hashes as 0).  Tables are left
+ * out: the growth's hold wall-clock times. */
+static uint64_t tune_out_hash(const g_run_t *r)
+{
+	const g_tune_t *t = &r->g->tune;
+	const armstg_plugin_t *d = r->g->stages[t->stage].plug.desc;
+	uint64_t h = UINT64_C(14695981039346656037); /* FNV-1a 64 */
+	for (int o = 0; o < d->n_outputs; o++) {
+		if (d->outputs[o].type == MSG_TABLE)
+			continue;
+		uint64_t x = msg_hash(stage_output(r->rs[t->stage].st, o));
+		for (int b = 0; b < 8; b++) {
+			h ^= (x >> (8 * b)) & 0xffu;
+			h *= UINT64_C(1099511628211);
+		}
+	}
+	return h;
+}
+
+/* same_skip: the earliest candidate before k that was scored and whose
+ * tuned stage gave the outputs of k's (rows[k].hash); -1: none */
+static int tune_same(const g_run_t *r, int k)
+{
+	for (int j = 0; j < k; j++)
+		if (r->rows[j].scored && !r->rows[j].same_as &&
+		    r->rows[j].hash == r->rows[k].hash)
+			return j;
+	return -1;
+}
+
 /* search_set: the overrides on the run's instances of their stages
  * (before the search; those instances stay through it: keep_take never
  * takes an overridden stage).  0, or a negative code with err. */
@@ -368,6 +407,7 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	char *ksel = calloc(n, 1);
 	char *aff = calloc(n, 1); /* search_set: the overridden and readers */
 	char *early = NULL, *ereq = NULL; /* require_early */
+	char *pre = NULL; /* same_skip: the stages run before comparing */
 	int rc = 0, any = 0, nshared = 0, nper = 0, nok = 0, best = -1;
 	int nskip = 0;
 	tune_keep_t kp = { .st = calloc(n, sizeof *kp.st),
@@ -453,6 +493,23 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 			}
 		}
 	}
+	/* same_skip: compared after the early stages, else after the tuned
+	 * stage alone (its outputs stay: nothing reads them in that pass) */
+	if (t->same_skip && !nearly) {
+		pre = calloc(n, 1);
+		if (!pre) {
+			snprintf(err, errsize, "[tune] out of memory");
+			rc = ARMSTG_ENOMEM;
+			goto out;
+		}
+		for (int i = 0; i < g->nstages; i++)
+			r->rs[i].needed = 0;
+		sched_mark_needed(r, t->stage);
+		for (int i = 0; i < g->nstages; i++) {
+			pre[i] = (char)(r->rs[i].needed && cand[i]);
+			r->rs[i].needed = cand[i] && !down[i];
+		}
+	}
 	char sel[256];
 	snprintf(sel, sizeof sel, "%s%s%s", t->metric,
 		 t->structure ? " " : "", t->structure ? t->structure : "");
@@ -488,13 +545,16 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 			goto out;
 		}
 		double t0 = sched_now();
-		int efail = 0;
+		int efail = 0, same = -1;
 		row->rc = 0;
-		if (nearly) {
-			/* phase one: the early conditions' stages, then them */
+		if (nearly || pre) {
+			/* phase one: the early conditions' stages (or the
+			 * tuned stage alone, for same_skip), then them */
 			for (int i = 0; i < g->nstages; i++)
-				r->rs[i].needed = early[i];
+				r->rs[i].needed = nearly ? early[i] : pre[i];
 			row->rc = sched_pass(r, row->err, sizeof row->err);
+		}
+		if (nearly) {
 			if (!row->rc && !rt_interrupted) {
 				int req = tune_require(r, ereq, row->err,
 						       sizeof row->err, err,
@@ -506,7 +566,11 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 				efail = !req;
 			}
 		}
-		if (!row->rc && !efail && !rt_interrupted) {
+		if (t->same_skip && !row->rc && !efail && !rt_interrupted) {
+			row->hash = tune_out_hash(r);
+			same = tune_same(r, k);
+		}
+		if (!row->rc && !efail && same < 0 && !rt_interrupted) {
 			for (int i = 0; i < g->nstages; i++)
 				r->rs[i].needed = cand[i];
 			row->rc = sched_pass(r, row->err, sizeof row->err);
@@ -522,10 +586,29 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 			size_t l = strlen(row->err);
 			snprintf(row->err + l, sizeof row->err - l, " (require_early: "
 				 "the score was not computed)");
+		} else if (same >= 0) {
+			/* the earlier candidate's score and status, not
+			 * computed again */
+			const tune_row_t *e = &r->rows[same];
+			row->same_as = same + 1;
+			row->score = e->score;
+			row->ok = e->ok;
+			row->rc = e->rc;
+			row->req_failed = e->req_failed;
+			char why[sizeof row->err];
+			snprintf(why, sizeof why, "%s", e->err);
+			snprintf(row->err, sizeof row->err, "same %s outputs as "
+				 "%s%s%s", ts->name, t->values[same],
+				 e->ok ? "" : ": ", e->ok ? "" : why);
+			rt_log(NULL, LOG_INFO, "tune %s.%s = %s: stage '%s' gave "
+			       "the volumes and point sets of %s: not run "
+			       "further, its score taken", ts->name, t->key,
+			       t->values[k], ts->name, t->values[same]);
 		} else if (!row->rc) {
 			rc = tune_score(r, &row->score, err, errsize);
 			if (rc)
 				goto out;
+			row->scored = 1;
 			int req = isfinite(row->score)
 					  ? tune_require(r, NULL, row->err,
 							 sizeof row->err, err,
@@ -554,12 +637,15 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 			       "(%.1f s)", ts->name, t->key, t->values[k], sel,
 			       row->score, row->wall_s);
 			const tune_row_t *b = best >= 0 ? &r->rows[best] : NULL;
-			/* ties: the earlier value stays */
-			if (!b || (t->goal_max ? row->score > b->score
-					       : row->score < b->score))
+			/* ties: the earlier value stays (same_skip: a copy
+			 * ties with its earlier candidate, never chosen) */
+			if (!row->same_as &&
+			    (!b || (t->goal_max ? row->score > b->score
+						: row->score < b->score)))
 				best = k;
 			/* the choice if the search ended now: keep it */
-			if (t->reuse && tune_choice(r, best) == k) {
+			if (t->reuse && !row->same_as &&
+			    tune_choice(r, best) == k) {
 				rc = keep_take(r, &kp, k, ksel, err, errsize);
 				if (rc)
 					goto out;
@@ -657,6 +743,7 @@ out:
 	free(aff);
 	free(early);
 	free(ereq);
+	free(pre);
 	free(memo);
 	free(down);
 	free(fin);
@@ -697,7 +784,8 @@ int tune_table_write(const g_run_t *run, const char *path)
 				  r->ok ? "ok"
 				  : r->skipped ? "skipped" : "failed") ||
 		      tab_set_num(tab, row, "chosen", k == run->best) ||
-		      (!r->ok && tab_set_str(tab, row, "error", r->err)) ||
+		      ((!r->ok || r->same_as) &&
+		       tab_set_str(tab, row, "error", r->err)) ||
 		      (t->nset && tab_set_str(tab, row, "search_set", set));
 	}
 	if (!bad && tab_write_file(path, tab, e, sizeof e)) {

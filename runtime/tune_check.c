@@ -31,7 +31,7 @@ static const char *const tune_keys[] = { "param", "values", "score", "metric",
 					 "tolerance", "metric_column",
 					 "structure_column", "value_column",
 					 "stop", "reuse", "require_early",
-					 "search_set" };
+					 "search_set", "same_skip" };
 
 /* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
  * with an error reported when the list is empty or has an empty item. */
@@ -436,7 +436,8 @@ void tune_check(graph_t *g)
 			     "[tune] (known: param, values, score, metric, "
 			     "structure, goal, require, tolerance, "
 			     "metric_column, structure_column, value_column, "
-			     "stop, reuse, require_early, search_set)");
+			     "stop, reuse, require_early, search_set, "
+			     "same_skip)");
 		else if (!kv->val[0] && strcmp(kv->key, "values"))
 			g_err(g, kv->line, NULL, kv->key, "empty value");
 	}
@@ -565,6 +566,24 @@ void tune_check(graph_t *g)
 	    strcmp(ek->val, "false"))
 		g_err(g, ek->line, NULL, "require_early", "[tune] require_early "
 		      "must be true or false, got '%s'", ek->val);
+	const g_kv_t *dk = g_kv_find(t->kv, t->nkv, "same_skip");
+	t->same_skip = dk && !strcmp(dk->val, "true");
+	if (dk && dk->val[0] && strcmp(dk->val, "true") &&
+	    strcmp(dk->val, "false"))
+		g_err(g, dk->line, NULL, "same_skip", "[tune] same_skip must be "
+		      "true or false, got '%s'", dk->val);
+	/* same_skip compares the tuned stage's volumes and point sets (its
+	 * tables may hold times): a stage with none has nothing to compare */
+	if (t->same_skip && ts && ts->plug.desc) {
+		const armstg_plugin_t *d = ts->plug.desc;
+		int nvp = 0;
+		for (int o = 0; o < d->n_outputs; o++)
+			nvp += d->outputs[o].type != MSG_TABLE;
+		if (!nvp)
+			g_err(g, dk->line, NULL, "same_skip", "[tune] same_skip: "
+			      "stage '%s' (plugin '%s') has no volume or point "
+			      "set output to compare", ts->name, d->name);
+	}
 	/* a requirement on a table that does not depend on the tuned stage
 	 * is met alike by every value: a mistake (only on an otherwise
 	 * sound graph, as for the score) */

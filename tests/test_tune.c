@@ -628,7 +628,9 @@ static void test_set_rules(void **state)
 		{ "tune.steps=3", "key 'steps': unknown key in [tune] (known: "
 		  "param, values, score, metric, structure, goal, require, "
 		  "tolerance, metric_column, structure_column, value_column, "
-		  "stop, reuse, require_early, search_set)" },
+		  "stop, reuse, require_early, search_set, same_skip)" },
+		{ "tune.same_skip=yes", "key 'same_skip': [tune] same_skip "
+		  "must be true or false, got 'yes'" },
 		{ "tune.reuse=yes", "key 'reuse': [tune] reuse must be true "
 		  "or false, got 'yes'" },
 		{ "tune.stop=early", "key 'stop': [tune] stop: unknown rule "
@@ -875,6 +877,122 @@ static void test_require_early(void **state)
 	assert_null(g);
 	assert_non_null(strstr(err, "[tune] require_early must be true or "
 				    "false, got 'yes'"));
+}
+
+/* same_skip = true: sim.cap = 3 makes sim's volume the same for the
+ * offsets 3, 4 and 5 (x = 3; its table still differs: the offset row).
+ * The candidates 4 and 5 then do not run fit (fit.count: one line per
+ * call), take 3's score and status, say so in tune.tsv's error column, and
+ * 3 is chosen; the key off (absent or false), or outputs that differ (no
+ * cap), run every candidate as before. */
+typedef struct samecase {
+	const char *sets[7];
+	double chosen;
+	int sim, fit;            /* process calls */
+	const char *status;      /* per candidate: o ok, f failed */
+	int same[5];             /* 1 + the candidate whose score is taken */
+} samecase_t;
+
+static void expect_same(const samecase_t *c)
+{
+	trun_t r;
+	int ns = 0;
+	while (ns < 7 && c->sets[ns])
+		ns++;
+	run_sets(&r, c->sets, ns);
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), c->chosen, 0);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), c->sim);
+	assert_int_equal(count_lines(in(r.cnt, "fit.count")), c->fit);
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 5);
+	assert_float_equal(chosen_value(&tt), c->chosen, 0);
+	for (int k = 0; k < 5; k++) {
+		const char *st = tt.status->str[k], *e = tt.error->str[k];
+		assert_string_equal(st, c->status[k] == 'o' ? "ok" : "failed");
+		if (!c->same[k]) {
+			if (c->status[k] == 'o')
+				assert_true(!e || !e[0]);
+			continue;
+		}
+		/* the earlier candidate's score, bit for bit, and its error */
+		int j = c->same[k] - 1;
+		char want[1024];
+		const char *ej = tt.error->str[j];
+		snprintf(want, sizeof want, "same sim outputs as %g%s%s",
+			 tt.value->num[j], c->status[k] == 'o' ? "" : ": ",
+			 c->status[k] == 'o' ? "" : ej);
+		assert_non_null(e);
+		assert_string_equal(e, want);
+		assert_string_equal(st, tt.status->str[j]);
+		assert_memory_equal(&tt.score->num[k], &tt.score->num[j],
+				    sizeof(double));
+	}
+	ttab_free(&tt);
+	done(&r);
+}
+
+static void test_same_skip(void **state)
+{
+	(void)state;
+	static const samecase_t cases[] = {
+		/* key off: 4 and 5 scored (0.04 as 3), 3 chosen by the tie */
+		{ { "sim.cap=3", "fit.count_file=${TT_COUNT}/fit.count" },
+		  3, 6, 6, "ooooo", { 0 } },
+		{ { "sim.cap=3", "fit.count_file=${TT_COUNT}/fit.count",
+		    "tune.same_skip=false" },
+		  3, 6, 6, "ooooo", { 0 } },
+		/* on: fit runs for 1, 2, 3 and the final run */
+		{ { "sim.cap=3", "fit.count_file=${TT_COUNT}/fit.count",
+		    "tune.same_skip=true" },
+		  3, 6, 4, "ooooo", { 0, 0, 0, 3, 3 } },
+		/* on, outputs that differ: as without the key */
+		{ { "fit.count_file=${TT_COUNT}/fit.count",
+		    "tune.same_skip=true" },
+		  3, 6, 6, "ooooo", { 0 } },
+		/* a failed status is taken too: cap 2, 2 fails require
+		 * (sq far 125.44), 3-5 the same as 2; 1 chosen */
+		{ { "sim.cap=2", "fit.count_file=${TT_COUNT}/fit.count",
+		    "tune.same_skip=true", "tune.require=sq far > 130" },
+		  1, 6, 3, "offff", { 0, 0, 2, 2, 2 } },
+		/* require_early (alt: (x - 4.2)^2 < 5; 1 fails it, fit not
+		 * run) and reuse (no final run of sim and fit): compared
+		 * after alt; fit runs for 2 and 3 only */
+		{ { "sim.cap=3", "fit.count_file=${TT_COUNT}/fit.count",
+		    "tune.same_skip=true", "tune.reuse=true",
+		    "tune.require=alt.table: sq near < 5",
+		    "tune.require_early=true" },
+		  3, 5, 2, "foooo", { 0, 0, 0, 3, 3 } },
+	};
+	for (int i = 0; i < ARMSTG_COUNT(cases); i++)
+		expect_same(&cases[i]);
+	/* a later candidate whose table (not compared) would score better:
+	 * score = sim's own table, the offset row, goal max.  Without the
+	 * key 5 wins (score 5); with it 4 and 5 take 3's score (3) and 3
+	 * is chosen */
+	for (int on = 0; on < 2; on++) {
+		const char *s[] = { "sim.cap=3", "tune.score=sim.table",
+				    "tune.metric=offset", "tune.goal=max",
+				    on ? "tune.same_skip=true"
+				       : "tune.same_skip=false" };
+		trun_t r;
+		run_sets(&r, s, 5);
+		if (r.rc)
+			fail_msg("rc %d: %s", r.rc, r.err);
+		ttab_t tt;
+		tune_tsv(r.out, &tt);
+		assert_int_equal(tt.t->nrows, 5);
+		for (int k = 0; k < 5; k++)
+			assert_float_equal(tt.score->num[k],
+					   on && k > 2 ? 3 : k + 1, 0);
+		assert_float_equal(chosen_value(&tt), on ? 3 : 5, 0);
+		/* x = min(offset, cap) either way */
+		assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 3, 0);
+		ttab_free(&tt);
+		done(&r);
+	}
 }
 
 /* reuse = true: the final run takes the chosen candidate's stages instead
@@ -1472,6 +1590,7 @@ int main(void)
 		cmocka_unit_test(test_shipped_push_rule),
 		cmocka_unit_test(test_reuse),
 		cmocka_unit_test(test_require_early),
+		cmocka_unit_test(test_same_skip),
 		cmocka_unit_test(test_all_candidates_fail),
 		cmocka_unit_test(test_shared_stage_failure_fails_the_run),
 		cmocka_unit_test(test_set_rules),

@@ -1,10 +1,13 @@
 /* Test-only plugin for the [tune] tests: volume out = volume in + offset
- * (+ the first voxel of the optional f32 input ref), and a table laid out
+ * (+ the first voxel of the optional f32 input ref; offset capped at cap:
+ * an output that stops changing past a parameter value), and a table laid out
  * like the metrics plugin's (metric | structure | value | unit) that scores
  * x, the first voxel of the output:
  *     sq   near  (x - target)^2
  *     sq   far   (x - target - 10)^2
  *     neg  near  -(x - target)^2
+ *     offset param  the offset parameter (not capped: a table that differs
+ *                   where the volume does not)
  * fail_at / nan_at: fail, or score NaN, when x equals them; path: write x to
  * this file ("{}" in it becomes x) through out_path; count_file: append one
  * line per process call, directly (the tests count runs); sleep_ms. */
@@ -16,7 +19,7 @@
 #include "armstg/plugin.h"
 
 typedef struct {
-	double offset, target, fail_at, nan_at;
+	double offset, cap, target, fail_at, nan_at;
 	const char *path, *count_file;
 	int sleep_ms;
 } priv_t;
@@ -32,6 +35,9 @@ static const armstg_port_t outs[] = {
 static const armstg_param_t params[] = {
 	{ "offset", PT_DOUBLE, "0", -100, 100, "", "added to the volume", NULL,
 	  offsetof(priv_t, offset), 0 },
+	{ "cap", PT_DOUBLE, "100", -100, 100, "",
+	  "the offset added is at most this", NULL, offsetof(priv_t, cap),
+	  0 },
 	{ "target", PT_DOUBLE, "3.2", -100, 100, "", "best x", NULL,
 	  offsetof(priv_t, target), 0 },
 	{ "fail_at", PT_DOUBLE, "-1000", -1000, 1000, "",
@@ -76,7 +82,7 @@ static int process(armstg_stage_t *st)
 	const vol_t *ref = (const vol_t *)st->in[1];
 	if (ref && ref->dtype != DT_F32)
 		return h->fail(st, ARMSTG_EINVAL, "ref must be f32");
-	double add = p->offset + (ref ? ((const float *)ref->data)[0] : 0);
+	double add = (p->offset < p->cap ? p->offset : p->cap) + (ref ? ((const float *)ref->data)[0] : 0);
 	vol_t *v = h->vol_convert((const vol_t *)st->in[0], DT_F32);
 	tab_t *t = h->tab_new();
 	if (!v || !t)
@@ -94,7 +100,8 @@ static int process(armstg_stage_t *st)
 		q = NAN;
 	if (row(st, t, "sq", "near", q) ||
 	    row(st, t, "sq", "far", far) ||
-	    row(st, t, "neg", "near", -q))
+	    row(st, t, "neg", "near", -q) ||
+	    row(st, t, "offset", "param", p->offset))
 		return h->fail(st, ARMSTG_ENOMEM, "out of memory");
 	if (p->path) {
 		char name[1024], tmp[4096];
