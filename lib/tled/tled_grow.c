@@ -123,10 +123,23 @@ static int cmp_layer(const void *a, const void *b)
 /* ------------------------------------------------------------ process */
 
 /* the `iterations` output: the log of tled_relax, one row per recorded
- * iteration (tled_solve.h); NULL when out of memory */
+ * iteration (tled_solve.h); no iteration (push_mm 0: no step taken): the
+ * columns and no row, so a reader finds its columns; NULL when out of
+ * memory */
 static tab_t *iter_table(const armstg_host_t *H, const tled_iter_log_t *lg)
 {
 	tab_t *t = H->tab_new();
+	if (t && lg->nrow == 0) {
+		int64_t row = H->tab_add_row(t);
+		for (int k = 0; k < TLED_IT_NCOL && row >= 0; k++)
+			if (H->tab_set_num(t, row, tled_itcol_name[k], NAN))
+				row = -1;
+		if (row < 0) {
+			H->msg_unref(&t->base);
+			return NULL;
+		}
+		t->nrows = 0; /* the columns stay: a table of no rows */
+	}
 	for (int64_t r = 0; t && r < lg->nrow; r++) {
 		int64_t row = H->tab_add_row(t);
 		for (int k = 0; k < TLED_IT_NCOL && row >= 0; k++)
@@ -220,6 +233,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	int32_t *dcomp = NULL, *dstep = NULL, *seedc = NULL, *att = NULL;
 	double *uh = NULL, *sely = NULL;
 	int64_t *selid = NULL;
+	uint8_t *ipoff = NULL; /* push_mm 0: the tumour's integration points */
 	tab_t *tab = NULL, *itab = NULL;
 	tled_iter_log_t itl = { .every = 1 };
 	ps_t *on = NULL, *ot = NULL;
@@ -306,6 +320,17 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	 * spacing (the sampler's seeds sit 0.5 mm apart) are nearly
 	 * dependent and make the projection ill-conditioned. */
 	mo.ebc = pv->drive == 1;
+	/* front = push at push_mm 0 ("no push": the tumour infiltrates, no
+	 * tissue moves): only layer 0 is kept, nothing is driven, and the
+	 * growth's one step would relax a model with no load, u = 0 exactly.
+	 * The stage builds the geometry alone (tled_model_opts_t.
+	 * geometry_only: which nodes can move, the integration points and
+	 * their supports, which the tumour's relabelling reads) and takes
+	 * no step (tled_grow_replay with no solver): the same outputs as the
+	 * relaxation gave, but for the stats' iterations, dt_s, dt_crit_s
+	 * (tled_grow.h) */
+	int still = pv->front == 1 && pv->push_mm == 0;
+	mo.geometry_only = still;
 	if (tled_material_set(&mo.mat[MAT_BRAIN], pv->e_brain, pv->nu_brain,
 			      pv->density) ||
 	    tled_material_set(&mo.mat[MAT_CSF], pv->e_csf, pv->nu_csf,
@@ -335,9 +360,10 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 			goto out;
 		}
 	}
-	H->log(st, LOG_INFO, "model: %lld nodes (%lld merged), %lld "
+	H->log(st, LOG_INFO, "model%s: %lld nodes (%lld merged), %lld "
 	       "integration points, %lld support entries, mean spacing %.2f "
 	       "mm, min %.3f mm, built in %.2f s (%s backend)",
+	       still ? " (geometry only: push_mm 0, nothing moves)" : "",
 	       (long long)m.n, (long long)m.n_merged, (long long)m.nip,
 	       (long long)m.ipptr[m.nip], m.h_mean / TLED_MM,
 	       m.h_min / TLED_MM, tled_grow_now() - t0,
@@ -387,7 +413,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	for (int64_t a = 0; a < m.n; a++)
 		if (m.label[a] == TL_TUMOUR || m.label[a] == TL_TUMOUR_BND)
 			m.label[a] = TL_TISSUE;
-	if (tled_solver_init(&s, &m, err, sizeof err)) {
+	if (!still && tled_solver_init(&s, &m, err, sizeof err)) {
 		rc = H->fail(st, ARMSTG_ENOMEM, "solver: %s", err);
 		goto out;
 	}
@@ -526,6 +552,28 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	for (int j = 0; j < nl; j++)
 		if (L[j].layer > lmax)
 			lmax = L[j].layer;
+	if (still && lmax > 0) {
+		/* a layer below layer 0 whose points did not travel (parent =
+		 * point) is kept at push_mm 0, and the growth has more than one
+		 * step: the whole model, as at any depth */
+		H->log(st, LOG_INFO, "push_mm 0: layer %d of a component has "
+		       "no travel and is kept: the full model", lmax);
+		still = 0;
+		mo.geometry_only = 0;
+		tled_model_free(&m);
+		if (tled_model_build(&m, Xin, pn->label, nin, NULL, NULL, &mo,
+				     err, sizeof err)) {
+			rc = H->fail(st, ARMSTG_EINVAL, "model: %s", err);
+			goto out;
+		}
+		for (int64_t a = 0; a < m.n; a++)
+			if (m.label[a] == TL_TUMOUR || m.label[a] == TL_TUMOUR_BND)
+				m.label[a] = TL_TISSUE;
+		if (tled_solver_init(&s, &m, err, sizeof err)) {
+			rc = H->fail(st, ARMSTG_ENOMEM, "solver: %s", err);
+			goto out;
+		}
+	}
 
 	/* ---- seeds -> components (nearest contour point) ---- */
 	int64_t npc = pc->n;
@@ -583,8 +631,15 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	/* the growth: front = expand grows the core by a growth stretch
 	 * (tled_grow_expand.c), the kinematic fronts replay the layers
 	 * (tled_grow_replay.c) */
+	if (still) {
+		/* the tumour's integration points (none on yet) */
+		ipoff = calloc((size_t)(m.nip > 0 ? m.nip : 1), 1);
+		if (!ipoff)
+			goto oom;
+	}
 	tled_growth_t g = {
-		.st = st, .pv = pv, .m = &m, .s = &s, .so = &so, .hk = &hk,
+		.st = st, .pv = pv, .m = &m, .s = still ? NULL : &s,
+		.ipoff = still ? ipoff : s.ipoff, .so = &so, .hk = &hk,
 		.itl = &itl, .tab = tab, .L = L, .nl = nl, .lmax = lmax,
 		.pos_u = pos_u, .h = h, .margin = margin, .dcomp = dcomp,
 		.dstep = dstep, .seedc = seedc, .att = att, .tgt = tgt,
@@ -612,6 +667,11 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	 * +0.04..+0.13 mm for both tumour models; bench/pipeline/results.md,
 	 * "How hard does the growth push?"). */
 	for (int64_t a = 0; a < m.n; a++) {
+		if (still) {
+			/* nothing moved: u = 0 (+0, as u^h of a zero u) */
+			uh[3 * a] = uh[3 * a + 1] = uh[3 * a + 2] = 0;
+			continue;
+		}
 		pos_u(&s, a, uh + 3 * a);
 		if (m.kind[a] == TLED_FIXED && !(m.ebc && m.ebc_fixed))
 			uh[3 * a] = uh[3 * a + 1] = uh[3 * a + 2] = 0;
@@ -757,6 +817,7 @@ out:
 	free(uh);
 	free(selid);
 	free(sely);
+	free(ipoff);
 	tled_grid_free(&cg);
 	tled_grid_free(&ing);
 	tled_solver_free(&s);

@@ -50,7 +50,12 @@
  *                strain_energy_J, residual_N, err_est_mm, jmin, driven,
  *                swept, collocated, contacts, integration_points, wall_s
  *                (front = expand: growth_stretch and core_volume_fraction,
- *                the core's deformed volume / the tumour's)
+ *                the core's deformed volume / the tumour's).  front = push
+ *                at push_mm 0 takes no step (below): its one row has
+ *                iterations 0, converged 1, dt_s and dt_crit_s NaN (no
+ *                time step computed), energies, residual and err_est_mm
+ *                0, jmin 1, and the other columns as the relaxed step
+ *                gave them (integration_points: the geometry's)
  *      iterations one row per relaxation iteration of every growth step
  *                (tled_iter_log_t, tled_solve.h): step, iteration (1, 2,
  *                ... within the step, over the relax calls whose result
@@ -58,7 +63,28 @@
  *                `iterations`), err_est_mm, kinetic_energy_J,
  *                strain_energy_J, jmin, omega_min_per_s, damping_per_s,
  *                dt_s; above 20000 rows only every 2nd, 4th, ... iteration
- *                (and each step's last)
+ *                (and each step's last); no step taken (push_mm 0): these
+ *                columns and no row
+ *
+ * push_mm 0 with front = push ("no push": the tumour infiltrates, nothing
+ * moves).  Only layer 0 is kept, so the growth is one step that drives no
+ * node: the relaxation of the full model started from u = 0 and ended
+ * there (204 iterations on BraTS pat0001 and pat0003, 6 mm nodes).  The
+ * stage builds the model's geometry alone (tled_model_opts_t.
+ * geometry_only: merged nodes, spacing, boundary, integration points,
+ * their supports and masses; no shape functions, rows nor correction)
+ * and runs the replay's step 0 with no solver (tled_grow_replay, s NULL,
+ * u = 0): the tumour is the seeds and the movable nodes inside layer 0,
+ * the nodes left with no integration point on (swept) and the layer-0
+ * outline, the same nodes, labels and bytes as the relaxed run
+ * (lib/tled/tests/tled_stage_tests.h, test_push_zero; graphs/armstg.ini
+ * on BraTS pat0001 and pat0003: every output the same bytes,
+ * bench/pipeline/results.md, "The growth at push 0").  The supports'
+ * integration points are kept because they decide which nodes can move
+ * (a node in no support is fixed) and which are swept.  Not checked at
+ * push 0: the moment matrices (a support singular somewhere fails the
+ * full model, not this one).  A layer below layer 0 whose points did not
+ * travel (parent = point) is kept at push 0: then the full model.
  *
  * Growth replay (thesis section 3.6, in 3-D).  Layers are replayed from the
  * innermost to layer 0.  At the innermost layer of a component the tumour

@@ -47,7 +47,11 @@ typedef struct tled_growth {
 	armstg_stage_t *st;
 	const tled_grow_params_t *pv;
 	tled_model_t *m;
-	tled_solver_t *s;
+	tled_solver_t *s;    /* NULL: push_mm 0, a geometry-only model
+				(tled_model_opts_t.geometry_only): u = 0,
+				nothing relaxed (tled_grow_replay) */
+	uint8_t *ipoff;      /* nip: integration points switched off (in the
+				tumour): s->ipoff, or the caller's */
 	tled_solver_opts_t *so;
 	tled_grow_hook_t *hk;
 	tled_iter_log_t *itl;

@@ -15,13 +15,17 @@
 
 #include "tled_grow_int.h"
 
-/* where node a is now (m): X_a + its displacement as pos_u reads it */
-static void node_at(const tled_solver_t *s, tled_node_u_fn pos_u, int64_t a,
-		    double y[3])
+/* where node a of m is now (m): X_a + its displacement as pos_u reads it
+ * (s NULL, push_mm 0: X_a, nothing moved) */
+static void node_at(const tled_model_t *m, const tled_solver_t *s,
+		    tled_node_u_fn pos_u, int64_t a, double y[3])
 {
-	pos_u(s, a, y);
+	if (s)
+		pos_u(s, a, y);
+	else
+		y[0] = y[1] = y[2] = 0; /* then + X_a as below (a -0 is +0) */
 	for (int k = 0; k < 3; k++)
-		y[k] += s->m->X[3 * a + k];
+		y[k] += m->X[3 * a + k];
 }
 
 /*
@@ -47,7 +51,7 @@ static int64_t select_driven(tled_model_t *m, const tled_solver_t *s,
 	for (int64_t q = 0; q < nt; q++) {
 		int64_t a = ids[q];
 		double *ya = y + 3 * q;
-		node_at(s, pos_u, a, ya);
+		node_at(m, s, pos_u, a, ya);
 		int ok = 1;
 		/* nor within sep of a fixed (brain boundary) node: u^h = 0
 		 * there, and two conflicting constraints that close are
@@ -113,6 +117,7 @@ int tled_grow_replay(tled_growth_t *g)
 		*att = g->att;
 	double *tgt = g->tgt, *sely = g->sely;
 	int64_t *selid = g->selid;
+	uint8_t *ipoff = g->ipoff;
 	tab_t *tab = g->tab;
 	char *err = g->err;
 	size_t errsize = g->errsize;
@@ -126,7 +131,7 @@ int tled_grow_replay(tled_growth_t *g)
 		g->itl->step = step + 1;
 		int moved = 0;
 		int64_t created = 0;
-		for (int64_t a = 0; a < m->n; a++)
+		for (int64_t a = 0; s && a < m->n; a++)
 			tled_solver_nodal_u(s, a, tgt + 3 * a);
 		for (int j = 0; j < nl; j++) {
 			if (L[j].layer != l)
@@ -162,7 +167,7 @@ int tled_grow_replay(tled_growth_t *g)
 					if (m->kind[a] == TLED_FIXED || dcomp[a] >= 0)
 						continue;
 					double y[3];
-					node_at(s, pos_u, a, y);
+					node_at(m, s, pos_u, a, y);
 					ins[a] = seedc[a] == c ||
 						 tled_layer_side(&L[j], y, h) < 0;
 					dcen[a] = 0;
@@ -201,7 +206,7 @@ int tled_grow_replay(tled_growth_t *g)
 					    att[a])
 						continue;
 					double y[3];
-					node_at(s, pos_u, a, y);
+					node_at(m, s, pos_u, a, y);
 					double sd = tled_layer_side(&L[jp], y, h);
 					if (sd < 0) {
 						dcomp[a] = c;
@@ -268,7 +273,20 @@ int tled_grow_replay(tled_growth_t *g)
 					m->kind[a] = TLED_DRIVEN;
 		tled_relax_stats_t rs;
 		memset(&rs, 0, sizeof rs);
-		if (moved || step == 0) {
+		if (!s) {
+			/* push_mm 0: no step taken.  Every layer is its
+			 * component's innermost (lmax 0): nothing is driven
+			 * anywhere and u = 0 is the equilibrium itself, exact
+			 * (F = I at every point: det F 1, no stress, no
+			 * energy); no time step was computed (NaN) */
+			if (moved || lmax > 0)
+				return H->fail(st, ARMSTG_EINTERNAL, "growth "
+					       "without a solver moved a node "
+					       "(push_mm 0, %d steps)", lmax + 1);
+			rs.converged = 1;
+			rs.dt = rs.dt_crit = NAN;
+			rs.jmin = 1;
+		} else if (moved || step == 0) {
 			char tag[64];
 			snprintf(tag, sizeof tag, "growth step %d (layer %d)",
 				 step + 1, l);
@@ -290,7 +308,7 @@ int tled_grow_replay(tled_growth_t *g)
 				if (m->kind[a] != TLED_FREE || dcomp[a] >= 0)
 					continue;
 				double y[3];
-				node_at(s, pos_u, a, y);
+				node_at(m, s, pos_u, a, y);
 				if (tled_layer_side(&L[j], y, h) < -margin) {
 					dcomp[a] = L[j].comp;
 					dstep[a] = step;
@@ -301,16 +319,19 @@ int tled_grow_replay(tled_growth_t *g)
 			/* integration points inside the tumour: switched off */
 #pragma omp parallel for schedule(dynamic, 256) num_threads(m->nthreads)
 			for (int64_t p = 0; p < m->nip; p++) {
-				if (s->ipoff[p])
+				if (ipoff[p])
 					continue;
+				/* u^h at the point (s NULL: 0, no shape
+				 * functions) */
 				double y[3] = { 0, 0, 0 };
-				for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++)
+				for (int64_t e = m->ipptr[p]; s && e < m->ipptr[p + 1];
+				     e++)
 					for (int k = 0; k < 3; k++)
 						y[k] += m->N[e] * s->u[3 * m->ipnode[e] + k];
 				for (int k = 0; k < 3; k++)
 					y[k] += m->ipX[3 * p + k];
 				if (tled_layer_side(&L[j], y, h) < -0.5 * m->ip_h)
-					s->ipoff[p] = 1;
+					ipoff[p] = 1;
 			}
 		}
 		/* a free node none of whose integration points is still on
@@ -323,7 +344,7 @@ int tled_grow_replay(tled_growth_t *g)
 				continue;
 			int on = 0;
 			for (int64_t q = m->nptr[a]; q < m->nptr[a + 1] && !on; q++)
-				on = !s->ipoff[m->entip[m->nent[q]]];
+				on = !ipoff[m->entip[m->nent[q]]];
 			if (on)
 				continue;
 			int c = 0;

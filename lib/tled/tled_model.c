@@ -731,6 +731,12 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		}
 
 	phase_mark(m, 4, &tmark);
+	if (o->geometry_only) {
+		/* no rows, no correction (tled_model_opts_t.geometry_only) */
+		m->ebc = o->ebc != 0;
+		m->ebc_fixed = o->ebc_fixed != 0;
+		goto dt_wave;
+	}
 	/* ---- nodal rows (tled_model_mls.c) ---- */
 	prc = tled_build_rows(m, &ng, o, K, err, errsize);
 	if (prc)
@@ -748,6 +754,7 @@ int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		goto oom;
 
 	phase_mark(m, 6, &tmark);
+dt_wave:
 	/* wave-speed time step estimate: h_min / c_max */
 	{
 		double cmax = 0;

@@ -164,6 +164,16 @@ typedef struct tled_model_opts {
 	 * tled_mat_id, or -1 to use the default (label of the nearest node). */
 	int (*material)(const double x[3], void *ctx);
 	void *material_ctx;
+	/* 1: the geometry only, what says where things are and which nodes
+	 * can move, not how they move: the merged nodes (X, label, kind,
+	 * rep), the spacing, the boundary normals, the integration points
+	 * and their supports (ipptr, ipnode, entip, nptr, nent) with the
+	 * lumped masses (the orphans fixed, as in a full build), ebc flags
+	 * and dt_wave; no shape functions (N, dN NULL), nodal rows nor
+	 * correction, so no solver can run on it.  The growth at push_mm 0
+	 * (tled_grow.c: nothing moves) builds this; the same arithmetic as
+	 * a full build for every field it sets.  0 (default): the model. */
+	int geometry_only;
 } tled_model_opts_t;
 
 /* Write a printf-style message to err (n bytes) and return -1: the error

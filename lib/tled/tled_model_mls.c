@@ -249,6 +249,21 @@ int tled_mls(const double *X, const int64_t *ids, int k, const double x[3],
  * the support on the evaluation point), and dN is their exact gradient.
  * Basis p(y) = [1, (y - x)/L].  Nodes with w = 0 get N = dN = 0.
  */
+/* the weight w_a(x) = W(|X_a - x| / R_a) of support node X_a (q), with
+ * d = X_a - x and its length for the derivatives: one expression for the
+ * shape functions and the masses of a geometry-only build
+ * (tled_model_opts_t.geometry_only), which must agree to the bit */
+static inline double mls_weight(const double *q, const double x[3],
+				double Ra, double d[3], double *dist,
+				double *dwdr)
+{
+	d[0] = q[0] - x[0];
+	d[1] = q[1] - x[1];
+	d[2] = q[2] - x[2];
+	*dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+	return tled_weight(*dist / Ra, dwdr);
+}
+
 int tled_mls_nodal(const double *X, const int64_t *ids, int k,
 		   const double x[3], const double *Ra, double L, double *N,
 		   double *dN, double *w)
@@ -257,10 +272,8 @@ int tled_mls_nodal(const double *X, const int64_t *ids, int k,
 	double pa[4];
 	for (int i = 0; i < k; i++) {
 		const double *q = X + 3 * ids[i];
-		double d[3] = { q[0] - x[0], q[1] - x[1], q[2] - x[2] };
-		double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-		double dwdr, dw[3];
-		w[i] = tled_weight(dist / Ra[i], &dwdr);
+		double d[3], dist, dwdr, dw[3];
+		w[i] = mls_weight(q, x, Ra[i], d, &dist, &dwdr);
 		if (!(w[i] > 0))
 			continue;
 		for (int c = 0; c < 3; c++)
@@ -513,15 +526,21 @@ int tled_build_supports(tled_model_t *m, const tled_grid_t *ng,
 			m->ipptr[p + 1] += m->ipptr[p];
 	}
 	ne = m->ipptr[nip];
+	/* geometry only: the supports and their weights (the masses), no
+	 * shape functions (N, dN, P, Mi stay NULL) */
+	int shape = !o->geometry_only;
 	m->ipnode = malloc((size_t)(ne ? ne : 1) * sizeof *m->ipnode);
-	m->N = malloc((size_t)(ne ? ne : 1) * sizeof *m->N);
-	m->dN = malloc((size_t)(3 * (ne ? ne : 1)) * sizeof *m->dN);
 	w = malloc((size_t)(ne ? ne : 1) * sizeof *w);
-	P = malloc((size_t)(4 * (ne ? ne : 1)) * sizeof *P);
-	Mi = malloc((size_t)(16 * nip) * sizeof *Mi);
 	R = malloc((size_t)nip * sizeof *R);
 	ent_ip = m->entip = malloc((size_t)(ne ? ne : 1) * sizeof *ent_ip);
-	if (!m->ipnode || !m->N || !m->dN || !w || !P || !Mi || !R || !ent_ip)
+	if (shape) {
+		m->N = malloc((size_t)(ne ? ne : 1) * sizeof *m->N);
+		m->dN = malloc((size_t)(3 * (ne ? ne : 1)) * sizeof *m->dN);
+		P = malloc((size_t)(4 * (ne ? ne : 1)) * sizeof *P);
+		Mi = malloc((size_t)(16 * nip) * sizeof *Mi);
+	}
+	if (!m->ipnode || !w || !R || !ent_ip ||
+	    (shape && (!m->N || !m->dN || !P || !Mi)))
 		goto oom;
 	int64_t bad = -1;
 	int badk = K;
@@ -557,17 +576,40 @@ int tled_build_supports(tled_model_t *m, const tled_grid_t *ng,
 					ok = tled_grid_knn(ng, x, 1, -1, &nearest,
 							   &dd) == 1;
 				}
-				ok = ok && !tled_mls_cover(m, sid, k, x, m->N + e0,
-							   m->dN + 3 * e0, w + e0,
-							   rr, &R[p]);
+				if (ok && shape)
+					ok = !tled_mls_cover(m, sid, k, x,
+							     m->N + e0,
+							     m->dN + 3 * e0,
+							     w + e0, rr, &R[p]);
+				else if (ok)
+					/* tled_mls_cover's weights alone */
+					for (int i = 0; i < k; i++) {
+						double d[3], dist, dwdr;
+						w[e0 + i] = mls_weight(
+							m->X + 3 * sid[i], x,
+							m->Ra[sid[i]], d, &dist,
+							&dwdr);
+					}
 			} else {
 				k = kd2 ? tled_grid_knn(ng, x, K, -1, sid, kd2) : 0;
 				ok = k == K;
 				if (ok) {
 					nearest = sid[0];
 					R[p] = o->support_dilation * sqrt(kd2[K - 1]);
-					ok = !tled_mls(m->X, sid, K, x, R[p], m->N + e0,
-						       m->dN + 3 * e0, w + e0);
+					if (shape)
+						ok = !tled_mls(m->X, sid, K, x, R[p],
+							       m->N + e0,
+							       m->dN + 3 * e0,
+							       w + e0);
+					else
+						/* tled_mls's weights alone */
+						for (int i = 0; i < K; i++) {
+							double d[3], dist, dwdr;
+							w[e0 + i] = mls_weight(
+								m->X + 3 * sid[i],
+								x, R[p], d, &dist,
+								&dwdr);
+						}
 				}
 			}
 			if (ok) {
@@ -583,6 +625,8 @@ int tled_build_supports(tled_model_t *m, const tled_grid_t *ng,
 						      : MAT_BRAIN;
 				}
 				m->ipmat[p] = mat;
+			}
+			if (ok && shape) {
 				/* moment matrix inverse for the correction */
 				double M[16] = { 0 };
 				for (int i = 0; i < k; i++) {

@@ -1026,6 +1026,215 @@ static void test_wrong_normals(void **state)
 	assert_true(rmax < Rt + 0.5 * h);
 }
 
+/*
+ * push_mm 0 ("no push": the tumour infiltrates, nothing moves) builds the
+ * model's geometry only and takes no step (tled_grow.c, the growth's
+ * `still` path).  Its outputs against the full growth at a push too small
+ * to keep any layer but layer 0 (push_mm 1e-6: the same single step, no
+ * node driven anywhere, relaxed by the solver from u = 0):
+ *   - nodes: every u exactly +0 (bytes), labels, positions and the
+ *     other attributes the same bytes as the full run's;
+ *   - tumour: the same points, labels, u, ref, step, component (bytes):
+ *     the seeds and the nodes inside layer 0, the nodes left with no
+ *     integration point on (swept) and the outline;
+ *   - stats: one row, iterations 0 (no step; the full run iterates),
+ *     converged 1, dt_s and dt_crit_s NaN (no time step computed), every
+ *     other column but wall_s equal;
+ *   - iterations: its columns and no row.
+ * Scenes: a centred tumour (nodal driving, the default domain), a tumour
+ * sticking out of the labels' domain with collocated driving (tissue
+ * nodes just outside it and the brain have integration points inside the
+ * tumour only: swept, 1 node; with the
+ * replay's integration-point rule disabled at push 0 this test fails,
+ * checked 2026-11-26), and contours whose layer 1 did not travel (parent
+ * = point: that layer is kept at push 0, the growth has two steps, and
+ * the stage falls back to the full model).  A depth below 0 or NaN is
+ * refused naming push_mm.
+ */
+static void push0_pair(const ps_t *nodes, const ps_t *co, const vol_t *lab,
+		       const char *extra, grow_out_t g[2])
+{
+	const char *depth[2] = { "push_mm=0", "push_mm=1e-6" };
+	for (int k = 0; k < 2; k++) {
+		const char *params[] = { "tol=0.005", "front=push", depth[k],
+					 extra, NULL };
+		const msg_t *in[3] = { &nodes->base, &co->base,
+				       lab ? &lab->base : NULL };
+		memset(&g[k], 0, sizeof g[k]);
+		char err[1024] = "";
+		int rc = tu_run(TU_PLUGIN(), params, in, g[k].out, err,
+				sizeof err);
+		for (int o = 0; o < 4; o++)
+			keep(g[k].out[o]);
+		if (rc)
+			print_message("%s: error: %s\n", depth[k], err);
+		assert_int_equal(rc, 0);
+		g[k].on = (const ps_t *)g[k].out[0];
+		g[k].ot = (const ps_t *)g[k].out[1];
+		g[k].tb = (const tab_t *)g[k].out[2];
+		g[k].it = (const tab_t *)g[k].out[3];
+		g[k].u = attr(g[k].on, "u");
+		assert_non_null(g[k].u);
+	}
+}
+
+/* two point sets the same to the byte: points, labels, attributes */
+static void same_points(const ps_t *a, const ps_t *b)
+{
+	assert_int_equal(a->n, b->n);
+	assert_int_equal(a->nattr, b->nattr);
+	assert_memory_equal(a->xyz, b->xyz, (size_t)(3 * a->n) * sizeof(double));
+	assert_memory_equal(a->label, b->label, (size_t)a->n * sizeof(int32_t));
+	for (int i = 0; i < a->nattr; i++) {
+		const ps_attr_t *x = &a->attr[i], *y = attr(b, x->name);
+		assert_non_null(y);
+		assert_int_equal(x->ncomp, y->ncomp);
+		assert_memory_equal(x->data, y->data,
+				    (size_t)(a->n * x->ncomp) * sizeof(double));
+	}
+}
+
+/* g[0] push 0, g[1] the full growth: the same outputs (above); returns the
+ * push-0 stats' swept */
+static double push0_same(const grow_out_t g[2], const char *scene,
+			 int full_steps)
+{
+	same_points(g[0].on, g[1].on);
+	same_points(g[0].ot, g[1].ot);
+	/* u = +0 at every node, to the bit */
+	double *zero = calloc((size_t)(3 * g[0].on->n), sizeof *zero);
+	assert_non_null(zero);
+	assert_memory_equal(g[0].u->data, zero,
+			    (size_t)(3 * g[0].on->n) * sizeof(double));
+	free(zero);
+	const tab_t *a = g[0].tb, *b = g[1].tb;
+	assert_int_equal(a->nrows, b->nrows);
+	assert_int_equal(a->ncols, b->ncols);
+	int still = full_steps == 1;
+	for (int c = 0; c < a->ncols; c++) {
+		const char *n = a->col[c].name;
+		assert_string_equal(n, b->col[c].name);
+		for (int64_t r = 0; r < a->nrows; r++) {
+			double x = a->col[c].num[r], y = b->col[c].num[r];
+			if (!strcmp(n, "wall_s"))
+				continue;
+			if (still && !strcmp(n, "iterations")) {
+				assert_true(x == 0 && y > 0);
+			} else if (still && (!strcmp(n, "dt_s") ||
+					     !strcmp(n, "dt_crit_s"))) {
+				assert_true(isnan(x) && y > 0);
+			} else if (!(x == y)) {
+				print_message("%s: stats row %lld column %s: "
+					      "%.17g (push 0) vs %.17g\n", scene,
+					      (long long)r, n, x, y);
+				fail();
+			}
+		}
+	}
+	assert_int_equal(a->nrows, full_steps);
+	if (still) {
+		/* no step: the iterations' columns, no row */
+		assert_int_equal(g[0].it->nrows, 0);
+		assert_int_equal(g[0].it->ncols, g[1].it->ncols);
+		for (int c = 0; c < g[0].it->ncols; c++)
+			assert_string_equal(g[0].it->col[c].name,
+					    g[1].it->col[c].name);
+		assert_int_equal(g[1].it->nrows,
+				 (int64_t)tab_num(b, "iterations", 0));
+		assert_true(tab_num(a, "converged", 0) == 1);
+		assert_true(tab_num(a, "jmin", 0) == 1);
+	} else {
+		assert_int_equal(g[0].it->nrows, g[1].it->nrows);
+	}
+	double swept = tab_num(a, "swept", a->nrows - 1);
+	print_message("push 0, %s: %lld nodes, %lld tumour points, %g driven, "
+		      "%g swept, %g integration points, %lld steps; full "
+		      "growth: %g iterations\n", scene, (long long)g[0].on->n,
+		      (long long)g[0].ot->n, tab_num(a, "driven", 0), swept,
+		      tab_num(a, "integration_points", 0), (long long)a->nrows,
+		      tab_num(b, "iterations", 0));
+	assert_true(tab_num(a, "driven", 0) > 4);
+	return swept;
+}
+
+static void test_push_zero(void **state)
+{
+	TLED_TEST_REQUIRE();
+	(void)state;
+	const double Rb = tled_quick() ? 16 : 20, h = tled_quick() ? 4 : 3;
+	grow_out_t g[2];
+	double swept = 0;
+	/* a centred tumour */
+	memset(g_csf, 0, sizeof g_csf);
+	memset(g_cen, 0, sizeof g_cen);
+	ps_t *nodes = brain_nodes(Rb, h, 11);
+	keep(&nodes->base);
+	ps_t *co = sphere_contours(1.5, 8, 4, 1.5);
+	keep(&co->base);
+	msg_freeze(&nodes->base);
+	msg_freeze(&co->base);
+	push0_pair(nodes, co, NULL, NULL, g);
+	swept += push0_same(g, "centred", 1);
+
+	/* a tumour that sticks out of the brain (the labels' domain) with
+	 * tissue nodes just outside both: their supports reach integration
+	 * points inside the tumour only, so they are swept (the rule only
+	 * the integration points tell); collocated driving.  A 20 mm brain
+	 * and 3 mm nodes in quick mode too (16 mm, 4 mm: no node swept) */
+	const double Rt = 8, Rbp = 20, hp = 3;
+	g_cen[0] = Rbp - 2;
+	ps_t *nb = brain_nodes(Rbp, hp, 11);
+	keep(&nb->base);
+	const double out[4][3] = { { Rt + 1, 0, 0 }, { Rt + 0.5, 2, 0 },
+				   { Rt + 0.5, 0, 2 }, { Rt + 0.5, -2, -1 } };
+	ps_t *nt = ps_new(nb->n + 4);
+	keep(&nt->base);
+	memcpy(nt->xyz, nb->xyz, (size_t)(3 * nb->n) * sizeof(double));
+	memcpy(nt->label, nb->label, (size_t)nb->n * sizeof(int32_t));
+	for (int i = 0; i < 4; i++) {
+		for (int d = 0; d < 3; d++)
+			nt->xyz[3 * (nb->n + i) + d] = g_cen[d] + out[i][d];
+		nt->label[nb->n + i] = TL_TISSUE;
+	}
+	ps_t *ct = sphere_contours(1.5, Rt, 3, 1.5);
+	keep(&ct->base);
+	vol_t *lab = ball_labels(Rbp, 1.5);
+	keep(&lab->base);
+	msg_freeze(&nt->base);
+	msg_freeze(&ct->base);
+	msg_freeze(&lab->base);
+	push0_pair(nt, ct, lab, "drive=collocated", g);
+	swept += push0_same(g, "protruding, labels, collocated", 1);
+	assert_true(swept > 0);
+
+	/* layer 1 with no travel: kept at push 0, two steps, the full model */
+	memset(g_cen, 0, sizeof g_cen);
+	ps_t *cz = sphere_contours(1.5, 8, 4, 1.5);
+	keep(&cz->base);
+	const ps_attr_t *lay = attr(cz, "layer"), *par = attr(cz, "parent");
+	for (int64_t i = 0; i < cz->n; i++)
+		if (lround(lay->data[i]) == 1)
+			memcpy(par->data + 3 * i, cz->xyz + 3 * i,
+			       3 * sizeof(double));
+	msg_freeze(&cz->base);
+	push0_pair(nodes, cz, NULL, NULL, g);
+	push0_same(g, "layer 1 without travel", 2);
+	assert_true(tab_num(g[0].tb, "iterations", 0) > 0);
+
+	/* a depth below 0 or not a number: refused, naming the key */
+	char err[1024] = "";
+	const msg_t *in[3] = { &nodes->base, &co->base, NULL };
+	const char *bad[][3] = { { "front=push", "push_mm=-1", NULL },
+				 { "front=push", "push_mm=nan", NULL } };
+	for (int k = 0; k < 2; k++) {
+		assert_int_equal(tu_run(TU_PLUGIN(), bad[k], in, NULL, err,
+					sizeof err),
+				 ARMSTG_EINVAL);
+		print_message("%s: %s\n", bad[k][1], err);
+		assert_non_null(strstr(err, "push_mm"));
+	}
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1034,6 +1243,7 @@ int main(void)
 		cmocka_unit_test_teardown(test_grow_collocated, teardown),
 		cmocka_unit_test_teardown(test_grow_push, teardown),
 		cmocka_unit_test_teardown(test_push_depth, teardown),
+		cmocka_unit_test_teardown(test_push_zero, teardown),
 		cmocka_unit_test_teardown(test_grow_expand, teardown),
 		cmocka_unit_test_teardown(test_ip_factor, teardown),
 		cmocka_unit_test_teardown(test_soft_ventricles, teardown),
