@@ -408,7 +408,7 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	char *aff = calloc(n, 1); /* search_set: the overridden and readers */
 	char *early = NULL, *ereq = NULL; /* require_early */
 	char *pre = NULL; /* same_skip: the stages run before comparing */
-	int rc = 0, any = 0, nshared = 0, nper = 0, nok = 0, best = -1;
+	int rc = 0, any = 0, nshared = 0, nper = 0, nok = 0, ncopy = 0, best = -1;
 	int nskip = 0;
 	tune_keep_t kp = { .st = calloc(n, sizeof *kp.st),
 			   .meta = calloc(n, sizeof *kp.meta), .k = -1 };
@@ -632,7 +632,11 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 			}
 		}
 		if (row->ok) {
-			nok++;
+			/* a same_skip copy was not scored: counted apart */
+			if (row->same_as)
+				ncopy++;
+			else
+				nok++;
 			rt_log(NULL, LOG_INFO, "tune %s.%s = %s: %s %.6g "
 			       "(%.1f s)", ts->name, t->key, t->values[k], sel,
 			       row->score, row->wall_s);
@@ -724,10 +728,14 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	if (rc)
 		goto out;
 	r->best = best;
+	char copies[64] = "";
+	if (ncopy)
+		snprintf(copies, sizeof copies, ", %d the same as an earlier one",
+			 ncopy);
 	rt_log(NULL, LOG_INFO, "tune %s.%s = %s chosen (%s %s %.6g; %d of %d "
-	       "values scored, %d skipped)", ts->name, t->key, t->values[best],
+	       "values scored%s, %d skipped)", ts->name, t->key, t->values[best],
 	       t->goal_max ? "max" : "min", sel, r->rows[best].score, nok,
-	       t->nvalues, nskip);
+	       t->nvalues, copies, nskip);
 out:
 	/* the final run's stages again (run.tsv shows those and the ones
 	 * that ran for the tuning only) */
