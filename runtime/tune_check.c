@@ -190,20 +190,30 @@ static int tune_req_parse(graph_t *g, int line, const char *a, const char *b,
 	return 0;
 }
 
+/* The item of a separated list that starts at p: [*a, *b) with the blanks
+ * around it trimmed; returns where it ends (the separator or the NUL). */
+static const char *tune_item(const char *p, char sep, const char **a,
+			     const char **b)
+{
+	const char *end = strchr(p, sep);
+	if (!end)
+		end = p + strlen(p);
+	*a = p;
+	*b = end;
+	while (*a < *b && (**a == ' ' || **a == '\t'))
+		(*a)++;
+	while (*b > *a && ((*b)[-1] == ' ' || (*b)[-1] == '\t'))
+		(*b)--;
+	return end;
+}
+
 /* require: conditions separated by commas, each parsed (tune_req_parse);
  * at most G_TUNE_NREQ; an empty condition is an error. */
 static void tune_req_split(graph_t *g, const g_kv_t *rk)
 {
 	g_tune_t *t = &g->tune;
 	for (const char *p = rk->val;;) {
-		const char *end = strchr(p, ',');
-		if (!end)
-			end = p + strlen(p);
-		const char *a = p, *b = end;
-		while (a < b && (*a == ' ' || *a == '\t'))
-			a++;
-		while (b > a && (b[-1] == ' ' || b[-1] == '\t'))
-			b--;
+		const char *a, *b, *end = tune_item(p, ',', &a, &b);
 		if (a == b) {
 			g_err(g, rk->line, NULL, "require", "[tune] require: "
 			      "empty condition in '%s' (conditions are "
@@ -360,14 +370,7 @@ static int tune_set_parse(graph_t *g, int line, const char *a, const char *b)
 static void tune_set_split(graph_t *g, const g_kv_t *k)
 {
 	for (const char *p = k->val;;) {
-		const char *end = strchr(p, ';');
-		if (!end)
-			end = p + strlen(p);
-		const char *a = p, *b = end;
-		while (a < b && (*a == ' ' || *a == '\t'))
-			a++;
-		while (b > a && (b[-1] == ' ' || b[-1] == '\t'))
-			b--;
+		const char *a, *b, *end = tune_item(p, ';', &a, &b);
 		if (a == b) {
 			g_err(g, k->line, NULL, "search_set", "[tune] "
 			      "search_set: empty override in '%s' (overrides "
