@@ -154,6 +154,30 @@ static tab_t *iter_table(const armstg_host_t *H, const tled_iter_log_t *lg)
 	return t;
 }
 
+/* model_reuse's key: what the model build reads (tled_model_build's
+ * nodes and labels, the build settings, and through the callbacks
+ * mat_of / tled_labels_inside the label volume and csf_labels) and
+ * ip_spacing, which rebuilds it */
+static uint64_t grow_model_key(const double *Xin, const ps_t *pn,
+			       const vol_t *lv, const tled_grow_params_t *pv,
+			       const tled_model_opts_t *mo)
+{
+	uint64_t h = TLED_HASH_INIT;
+	h = tled_hash_bytes(h, Xin, (size_t)(3 * pn->n) * sizeof *Xin);
+	h = tled_hash_bytes(h, pn->label, (size_t)pn->n * sizeof *pn->label);
+	h = tled_model_opts_hash(h, mo);
+	h = tled_hash_bytes(h, &pv->ip_spacing, sizeof pv->ip_spacing);
+	if (lv) {
+		h = tled_hash_bytes(h, &lv->nx, 6 * sizeof(int32_t));
+		h = tled_hash_bytes(h, lv->affine, sizeof lv->affine);
+		h = tled_hash_bytes(h, lv->data, (size_t)vol_nvox(lv) * lv->nc *
+					 vol_dtype_size(lv->dtype));
+		const char *c = pv->csf_labels ? pv->csf_labels : "";
+		h = tled_hash_bytes(h, c, strlen(c));
+	}
+	return h;
+}
+
 int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 		      const tled_ops_t *ops)
 {
@@ -237,6 +261,10 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	tab_t *tab = NULL, *itab = NULL;
 	tled_iter_log_t itl = { .every = 1 };
 	ps_t *on = NULL, *ot = NULL;
+	tled_model_snap_t snap; /* model_reuse: the model as built */
+	uint64_t mkey = 0;
+	int keepm = 0; /* 1: the model goes back to the cache at the end */
+	memset(&snap, 0, sizeof snap);
 	if (!Xin)
 		return H->fail(st, ARMSTG_ENOMEM, "out of memory (%lld nodes)",
 			       (long long)nin);
@@ -342,34 +370,56 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	}
 	for (int i = 0; i < MAT_N; i++)
 		mo.mat[i].vol = pv->vol_law;
-	H->progress(st, 0, "building the model: %lld nodes", (long long)nin);
-	if (tled_model_build(&m, Xin, pn->label, nin, NULL, NULL, &mo, err,
-			     sizeof err)) {
-		rc = H->fail(st, ARMSTG_EINVAL, "model: %s", err);
-		goto out;
+	/* model_reuse: the model depends on the nodes, their labels, the
+	 * label volume (the materials and the domain), csf_labels, ip_spacing
+	 * and the build settings, not on push_mm or the contours */
+	int reused = 0;
+	if (pv->model_reuse) {
+		mkey = grow_model_key(Xin, pn, lv, pv, &mo);
+		reused = tled_model_cache_take(mkey, &m, &snap);
 	}
-	/* ip_factor is relative to the mean node spacing, known only once the
-	 * model is built: an explicit ip_spacing rebuilds it */
-	if (pv->ip_spacing > 0 &&
-	    fabs(pv->ip_spacing * TLED_MM - m.ip_h) > 1e-9 * m.ip_h) {
-		mo.ip_factor = pv->ip_spacing * TLED_MM / m.h_mean;
-		tled_model_free(&m);
+	if (!reused) {
+		H->progress(st, 0, "building the model: %lld nodes",
+			    (long long)nin);
 		if (tled_model_build(&m, Xin, pn->label, nin, NULL, NULL, &mo,
 				     err, sizeof err)) {
 			rc = H->fail(st, ARMSTG_EINVAL, "model: %s", err);
 			goto out;
 		}
+		/* ip_factor is relative to the mean node spacing, known only
+		 * once the model is built: an explicit ip_spacing rebuilds it */
+		if (pv->ip_spacing > 0 &&
+		    fabs(pv->ip_spacing * TLED_MM - m.ip_h) > 1e-9 * m.ip_h) {
+			mo.ip_factor = pv->ip_spacing * TLED_MM / m.h_mean;
+			tled_model_free(&m);
+			if (tled_model_build(&m, Xin, pn->label, nin, NULL, NULL,
+					     &mo, err, sizeof err)) {
+				rc = H->fail(st, ARMSTG_EINVAL, "model: %s",
+					     err);
+				goto out;
+			}
+		}
+		/* without the snapshot the model is simply not kept */
+		if (pv->model_reuse && tled_model_snap(&snap, &m) == 0) {
+			snap.ip_factor = mo.ip_factor;
+			keepm = 1;
+		}
+	} else {
+		mo.ip_factor = snap.ip_factor; /* as the build left it */
+		keepm = 1;
 	}
 	H->log(st, LOG_INFO, "model%s: %lld nodes (%lld merged), %lld "
 	       "integration points, %lld support entries, mean spacing %.2f "
-	       "mm, min %.3f mm, built in %.2f s (%s backend)",
+	       "mm, min %.3f mm, %s in %.2f s (%s backend)",
 	       still ? " (geometry only: push_mm 0, nothing moves)" : "",
 	       (long long)m.n, (long long)m.n_merged, (long long)m.nip,
 	       (long long)m.ipptr[m.nip], m.h_mean / TLED_MM,
-	       m.h_min / TLED_MM, tled_grow_now() - t0,
-	       ops && ops->name ? ops->name : "cpu");
+	       m.h_min / TLED_MM,
+	       reused ? "the previous growth's (the same nodes, labels and "
+			"model parameters: model_reuse)" : "built",
+	       tled_grow_now() - t0, ops && ops->name ? ops->name : "cpu");
 	t_built = tled_grow_now();
-	{
+	if (!reused) {
 		char ph[512];
 		int o = 0;
 		for (int i = 0; i < TLED_NPHASE && o < (int)sizeof ph; i++)
@@ -561,6 +611,8 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 		still = 0;
 		mo.geometry_only = 0;
 		tled_model_free(&m);
+		tled_model_snap_free(&snap); /* not kept: built here */
+		keepm = 0;
 		if (tled_model_build(&m, Xin, pn->label, nin, NULL, NULL, &mo,
 				     err, sizeof err)) {
 			rc = H->fail(st, ARMSTG_EINVAL, "model: %s", err);
@@ -821,7 +873,10 @@ out:
 	tled_grid_free(&cg);
 	tled_grid_free(&ing);
 	tled_solver_free(&s);
+	if (keepm && rc == 0)
+		tled_model_cache_keep(mkey, &m, &snap);
 	tled_model_free(&m);
+	tled_model_snap_free(&snap);
 	free(Xin);
 	return rc;
 }

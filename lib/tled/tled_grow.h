@@ -150,6 +150,7 @@ typedef struct tled_grow_params {
 	int vol_law;   /* enum tled_vol */
 	double push_mm;
 	double push_wall;
+	int model_reuse;
 } tled_grow_params_t;
 
 /* Run the stage: inputs st->in[0..2] (nodes, contours, labels), outputs

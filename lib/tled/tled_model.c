@@ -494,13 +494,19 @@ const char *const tled_phase_name[TLED_NPHASE] = {
 	"masses", "nodal rows", "consistency correction"
 };
 
+static uint64_t g_builds;
+
+uint64_t tled_model_next_gen(void)
+{
+	return __atomic_add_fetch(&g_builds, 1, __ATOMIC_RELAXED);
+}
+
 int tled_model_build(tled_model_t *m, const double *Xin, const int32_t *lab,
 		     int64_t nin, const uint8_t *kind0, const uint8_t *constrain,
 		     const tled_model_opts_t *o, char *err, size_t errsize)
 {
-	static uint64_t builds;
 	memset(m, 0, sizeof *m);
-	m->gen = __atomic_add_fetch(&builds, 1, __ATOMIC_RELAXED);
+	m->gen = tled_model_next_gen();
 	m->nthreads = nthreads_of(o->nthreads);
 	int rc = -1, prc;
 	int64_t *par = NULL;

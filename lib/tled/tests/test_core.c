@@ -388,6 +388,69 @@ static void test_corr_coarse(void **state)
 	synth_free(&c);
 }
 
+/* The model build is the same bits on 1, 2 and 3 threads (model_reuse's
+ * key leaves the thread count out: tled_model_cache.c), and a model kept
+ * in the cache after a growth changed it comes back as it was built: its
+ * hash is the fresh build's, under its key only, with a new build number. */
+static void test_model_reuse(void **state)
+{
+	TLED_TEST_REQUIRE();
+	(void)state;
+	synth_cloud_t c = { 0 };
+	double L = 16;
+	synth_cube(&c, L, 2, 0.3, 5);
+	tled_model_t m[3];
+	uint64_t h[3];
+	for (int k = 0; k < 3; k++) {
+		tled_model_opts_t mo;
+		tled_model_opts_default(&mo);
+		mo.nthreads = k + 1;
+		cube_build(&m[k], &c, L, &mo);
+		h[k] = tled_model_hash(&m[k]);
+	}
+	print_message("model hash on 1, 2, 3 threads: %016llx %016llx "
+		      "%016llx (%lld nodes, %lld entries)\n",
+		      (unsigned long long)h[0], (unsigned long long)h[1],
+		      (unsigned long long)h[2], (long long)m[0].n,
+		      (long long)m[0].ipptr[m[0].nip]);
+	assert_true(h[0] == h[1] && h[1] == h[2]);
+	/* the hash sees a change of one entry */
+	m[2].dN[7] = nextafter(m[2].dN[7], INFINITY);
+	assert_true(tled_model_hash(&m[2]) != h[0]);
+	tled_model_free(&m[1]);
+	tled_model_free(&m[2]);
+
+	/* what a growth changes, then kept */
+	tled_model_snap_t s;
+	assert_int_equal(tled_model_snap(&s, &m[0]), 0);
+	uint64_t gen0 = m[0].gen;
+	for (int64_t a = 0; a < m[0].n; a += 3) {
+		m[0].label[a] = TL_TUMOUR;
+		m[0].kind[a] = TLED_DRIVEN;
+	}
+	m[0].ipmat[0] = MAT_TUMOUR + 7;
+	m[0].ipg = calloc((size_t)m[0].nip, sizeof *m[0].ipg);
+	assert_true(tled_model_hash(&m[0]) != h[0]);
+	const uint64_t key = 0x1234;
+	tled_model_cache_keep(key, &m[0], &s);
+	assert_null(m[0].X); /* emptied: owned by the cache */
+	tled_model_t r;
+	tled_model_snap_t rs;
+	assert_int_equal(tled_model_cache_take(key + 1, &r, &rs), 0);
+	assert_int_equal(tled_model_cache_take(key, &r, &rs), 1);
+	assert_true(tled_model_hash(&r) == h[0]);
+	assert_true(r.gen != gen0);
+	assert_int_equal(rs.valid, 1);
+	/* taken: the cache is empty until a model is kept again */
+	tled_model_t r2;
+	tled_model_snap_t rs2;
+	assert_int_equal(tled_model_cache_take(key, &r2, &rs2), 0);
+	tled_model_cache_keep(key, &r, &rs);
+	tled_model_cache_clear();
+	assert_int_equal(tled_model_cache_take(key, &r2, &rs2), 0);
+	synth_free(&c);
+}
+
 /* The coarse level's blocked Cholesky solve (tled_chol_solve3) against
  * LAPACK's dpotrs on a random SPD matrix larger than several of its
  * 128-row blocks: the same solution to round-off, and the same bits on
@@ -625,6 +688,7 @@ int main(void)
 		cmocka_unit_test(test_chol_solve3),
 		cmocka_unit_test(test_dt_critical),
 		cmocka_unit_test(test_coincident),
+		cmocka_unit_test(test_model_reuse),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

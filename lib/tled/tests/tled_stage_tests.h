@@ -1235,6 +1235,81 @@ static void test_push_zero(void **state)
 	}
 }
 
+/* model_reuse: a growth at 6 mm after one at 3 mm of the same nodes and
+ * labels takes the model the first one built (tled_model_cache.c) and
+ * gives the bits of a growth at 6 mm that builds its own
+ * (model_reuse=false, which keeps none); other nodes build their own */
+static void test_model_reuse(void **state)
+{
+	TLED_TEST_REQUIRE();
+	(void)state;
+	const double Rb = 16, h = 4;
+	memset(g_csf, 0, sizeof g_csf);
+	memset(g_cen, 0, sizeof g_cen);
+	ps_t *nodes[2] = { brain_nodes(Rb, h, 11), brain_nodes(Rb, h, 12) };
+	ps_t *co = sphere_contours(1.5, 8, 4, 1.5);
+	vol_t *lab = ball_labels(Rb, 1.5);
+	keep(&nodes[0]->base);
+	keep(&nodes[1]->base);
+	keep(&co->base);
+	keep(&lab->base);
+	msg_freeze(&nodes[0]->base);
+	msg_freeze(&nodes[1]->base);
+	msg_freeze(&co->base);
+	msg_freeze(&lab->base);
+	static const struct {
+		int nodes;
+		const char *depth, *reuse;
+		int hit; /* the model comes from the cache */
+	} run[] = {
+		{ 0, "push_mm=6", "model_reuse=false", 0 },
+		{ 0, "push_mm=3", "model_reuse=true", 0 },
+		{ 0, "push_mm=6", "model_reuse=true", 1 },
+		{ 1, "push_mm=6", "model_reuse=true", 0 },
+	};
+	grow_out_t g[4];
+	tled_model_cache_clear();
+	for (int k = 0; k < 4; k++) {
+		const char *params[] = { "tol=0.005", "front=push",
+					 run[k].depth, run[k].reuse, NULL };
+		const msg_t *in[3] = { &nodes[run[k].nodes]->base, &co->base,
+				       &lab->base };
+		memset(&g[k], 0, sizeof g[k]);
+		char err[1024] = "";
+		uint64_t hits = tled_model_cache_hits();
+		int rc = tu_run(TU_PLUGIN(), params, in, g[k].out, err,
+				sizeof err);
+		for (int o = 0; o < 4; o++)
+			keep(g[k].out[o]);
+		if (rc)
+			print_message("run %d: error: %s\n", k, err);
+		assert_int_equal(rc, 0);
+		assert_int_equal(tled_model_cache_hits() - hits, run[k].hit);
+		g[k].on = (const ps_t *)g[k].out[0];
+		g[k].ot = (const ps_t *)g[k].out[1];
+		g[k].tb = (const tab_t *)g[k].out[2];
+	}
+	/* 6 mm with the kept model = 6 mm built afresh, to the bit */
+	same_points(g[0].on, g[2].on);
+	same_points(g[0].ot, g[2].ot);
+	const tab_t *a = g[0].tb, *b = g[2].tb;
+	assert_int_equal(a->nrows, b->nrows);
+	assert_true(a->nrows > 1); /* a growth, not the geometry alone */
+	for (int c = 0; c < a->ncols; c++)
+		for (int64_t r = 0; r < a->nrows; r++)
+			if (strcmp(a->col[c].name, "wall_s"))
+				assert_true(memcmp(&a->col[c].num[r],
+						   &b->col[c].num[r],
+						   sizeof(double)) == 0);
+	/* and the depth matters: 3 mm is another growth */
+	const ps_attr_t *u1 = attr(g[1].on, "u"), *u2 = attr(g[2].on, "u");
+	assert_non_null(u1);
+	assert_non_null(u2);
+	assert_true(memcmp(u1->data, u2->data,
+			   (size_t)(3 * g[1].on->n) * sizeof(double)) != 0);
+	tled_model_cache_clear();
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1244,6 +1319,7 @@ int main(void)
 		cmocka_unit_test_teardown(test_grow_push, teardown),
 		cmocka_unit_test_teardown(test_push_depth, teardown),
 		cmocka_unit_test_teardown(test_push_zero, teardown),
+		cmocka_unit_test_teardown(test_model_reuse, teardown),
 		cmocka_unit_test_teardown(test_grow_expand, teardown),
 		cmocka_unit_test_teardown(test_ip_factor, teardown),
 		cmocka_unit_test_teardown(test_soft_ventricles, teardown),
