@@ -113,48 +113,8 @@
 #include "field/field.h"
 #include "img/box.h"
 #include "img/sample.h"
+#include "demons_int.h"
 #include "demons_label.h"
-
-#define MAX_LEVELS 8
-
-enum { FORCE_SYMMETRIC, FORCE_THIRION };
-enum { METRIC_SSD, METRIC_LNCC };
-enum { UPD_DIFFEO, UPD_ADDITIVE };
-enum { NORM_HIST, NORM_MINMAX, NORM_NONE, NORM_LOCAL };
-enum { SIGMA_MM, SIGMA_VOXEL, SIGMA_IMAGE_VOXEL };
-enum { IN_FIXED, IN_MOVING, IN_FMASK, IN_MMASK, IN_INIT, IN_FLABEL, IN_MLABEL };
-enum { WHERE_ALL, WHERE_UNMASKED, WHERE_AFTER };
-enum { OUT_FIELD, OUT_WARPED, OUT_TABLE };
-
-typedef struct demons_priv {
-	int force;
-	int update;
-	double sigma_field;  /* mm, or voxels of the level (sigma_unit) */
-	double sigma_fluid;  /* mm, or voxels of the level (sigma_unit) */
-	int sigma_unit;
-	int levels;
-	const char *iterations;
-	double max_step;     /* voxels */
-	double tol;
-	int tol_window;      /* iterations */
-	int tol_best;
-	double diff_threshold;
-	int normalize;
-	double local_sigma;  /* mm */
-	int metric;
-	int radius;          /* voxels of the level (lncc window) */
-	int crop;
-	double label_weight;
-	double label_reach;  /* mm */
-	int label_levels;
-	int label_where;     /* WHERE_* */
-	double label_blend;  /* mm */
-	double label_jmin;
-	int label_iterations;
-	/* parsed in init */
-	int niter[MAX_LEVELS];
-	int nlist;
-} demons_priv_t;
 
 static const armstg_port_t demons_inputs[] = {
 	{ "fixed", MSG_VOLUME, 0, "fixed volume (the field lives on its grid)" },
@@ -315,666 +275,6 @@ static double now_s(void)
 	return t.tv_sec + 1e-9 * t.tv_nsec;
 }
 
-/* min/max of an image (exact on any thread count) */
-static void minmax(const fimg_t *f, float *lo, float *hi, int nt)
-{
-	int64_t n = fgrid_nvox(&f->g);
-	float a = f->d[0], b = f->d[0];
-#pragma omp parallel for num_threads(nt) schedule(static) \
-	reduction(min : a) reduction(max : b)
-	for (int64_t e = 1; e < n; e++) {
-		if (f->d[e] < a)
-			a = f->d[e];
-		if (f->d[e] > b)
-			b = f->d[e];
-	}
-	*lo = a;
-	*hi = b;
-}
-
-static void rescale(fimg_t *f, float lo, float hi, int nt)
-{
-	int64_t n = fgrid_nvox(&f->g);
-	float s = 1.0f / (hi - lo);
-#pragma omp parallel for num_threads(nt) schedule(static)
-	for (int64_t e = 0; e < n; e++)
-		f->d[e] = (f->d[e] - lo) * s;
-}
-
-/*
- * Quantiles q[0..nq-1] (levels 0..1) of the voxels of f above its mean
- * intensity (background excluded, as ITK's HistogramMatchingImageFilter
- * with ThresholdAtMeanIntensity), from a 4096-bin histogram.
- */
-#define NQ 65
-#define NBIN 4096
-static int quantiles(const fimg_t *f, float lo, float hi, double *q, int nt)
-{
-	int64_t n = fgrid_nvox(&f->g), cnt = 0;
-	/* the mean in one sequential sum (about 10 ms at 1 mm; the bits the
-	 * quantiles have always had) */
-	double mean = 0;
-	for (int64_t e = 0; e < n; e++)
-		mean += f->d[e];
-	mean /= (double)n;
-	int64_t *h = calloc(NBIN, sizeof *h);
-	if (!h)
-		return ARMSTG_ENOMEM;
-	double w = (hi - lo) / NBIN;
-	/* counts: integers, the same on any thread count */
-#pragma omp parallel num_threads(nt)
-	{
-		int64_t hl[NBIN] = { 0 }, cl = 0;
-#pragma omp for schedule(static) nowait
-		for (int64_t e = 0; e < n; e++) {
-			if (!(f->d[e] > mean))
-				continue;
-			int b = (int)((f->d[e] - lo) / w);
-			hl[b < 0 ? 0 : b >= NBIN ? NBIN - 1 : b]++;
-			cl++;
-		}
-#pragma omp critical(demons_quantiles)
-		{
-			for (int b = 0; b < NBIN; b++)
-				h[b] += hl[b];
-			cnt += cl;
-		}
-	}
-	int64_t acc = 0;
-	int b = 0;
-	for (int k = 0; k < NQ; k++) {
-		double want = (double)cnt * k / (NQ - 1);
-		while (b < NBIN - 1 && acc + h[b] < want)
-			acc += h[b++];
-		/* linear inside the bin */
-		double frac = h[b] ? (want - acc) / (double)h[b] : 0;
-		if (frac < 0)
-			frac = 0;
-		if (frac > 1)
-			frac = 1;
-		q[k] = lo + (b + frac) * w;
-	}
-	q[0] = q[0] < mean ? mean : q[0];
-	free(h);
-	return 0;
-}
-
-/* map moving intensities onto the fixed ones: piecewise linear between
- * matching quantiles, the background (min) onto the fixed min */
-static int match_hist(fimg_t *m, float mlo, float mhi, float flo, float fhi,
-		      const fimg_t *fx, int nt)
-{
-	double qm[NQ + 1], qf[NQ + 1];
-	if (quantiles(m, mlo, mhi, qm + 1, nt) || quantiles(fx, flo, fhi, qf + 1, nt))
-		return ARMSTG_ENOMEM;
-	qm[0] = mlo;
-	qf[0] = flo;
-	int64_t n = fgrid_nvox(&m->g);
-#pragma omp parallel for num_threads(nt) schedule(static)
-	for (int64_t e = 0; e < n; e++) {
-		double v = m->d[e];
-		int k = 0;
-		/* last segment whose start is <= v (ties: the later one) */
-		int lo = 0, hi = NQ;
-		while (lo < hi) {
-			int mid = (lo + hi + 1) / 2;
-			if (qm[mid] <= v)
-				lo = mid;
-			else
-				hi = mid - 1;
-		}
-		k = lo;
-		double out;
-		if (k >= NQ) {
-			out = qf[NQ] + (v - qm[NQ]);
-		} else {
-			double d = qm[k + 1] - qm[k];
-			out = d > 0 ? qf[k] + (v - qm[k]) * (qf[k + 1] - qf[k]) / d
-				    : qf[k];
-		}
-		m->d[e] = (float)out;
-	}
-	return 0;
-}
-
-/* resample a (field or image) src onto grid g, edge-clamped */
-static int resample_clamp(const fimg_t *src, const fgrid_t *g, fimg_t *out,
-			  int nt);
-
-/*
- * normalize=local: f <- f / B with B the local mean of the foreground
- * (voxels above the image mean), by normalised convolution (Knutsson and
- * Westin, CVPR 1993): B = G*(f m) / G*(m), Gaussian of sigma mm.  A smooth
- * multiplicative bias b(x) (wavelength >> sigma) cancels: (b f) / (b B).
- * G* runs on a grid coarser by f ~ sigma / 3 voxels (block sums, then
- * linear interpolation back), so it costs about one pass over the image.
- * Where no foreground lies within reach B blends into the global
- * foreground mean.
- */
-static int local_normalise(fimg_t *f, double sigma, int nt)
-{
-	const fgrid_t *g = &f->g;
-	const int64_t nv = fgrid_nvox(g);
-	/* the bias model needs 0 = no signal: shift images with negative
-	 * values (z-scored) so that their minimum is 0 */
-	float lo = f->d[0];
-	for (int64_t e = 1; e < nv; e++)
-		lo = fminf(lo, f->d[e]);
-	if (lo < 0)
-		for (int64_t e = 0; e < nv; e++)
-			f->d[e] -= lo;
-	double mean = 0;
-	for (int64_t e = 0; e < nv; e++)
-		mean += f->d[e];
-	mean /= (double)nv;
-	double spmin = fmin(g->sp[0], fmin(g->sp[1], g->sp[2]));
-	int fac = (int)floor(sigma / (3 * spmin));
-	if (fac < 1)
-		fac = 1;
-	fgrid_t cg;
-	fgrid_shrink(g, fac, &cg);
-	fimg_t S = { 0 }, B = { 0 };
-	int rc = fimg_alloc(&S, &cg, 2);
-	if (rc)
-		return rc;
-	const int64_t nc = fgrid_nvox(&cg);
-	double fsum = 0;
-	int64_t fcnt = 0;
-	for (int k = 0; k < g->nz; k++)
-		for (int j = 0; j < g->ny; j++) {
-			int64_t row = ((int64_t)k * g->ny + j) * g->nx;
-			int64_t crow = ((int64_t)(k / fac) * cg.ny + j / fac) * cg.nx;
-			for (int i = 0; i < g->nx; i++) {
-				float v = f->d[row + i];
-				if (!(v > mean))
-					continue;
-				S.d[crow + i / fac] += v;
-				S.d[nc + crow + i / fac] += 1;
-				fsum += v;
-				fcnt++;
-			}
-		}
-	if (!fcnt) {
-		fimg_free(&S);
-		return 0;
-	}
-	const double gm = fsum / (double)fcnt;
-	fimg_smooth(&S, sigma, nt);
-	float smax = 0;
-	for (int64_t e = 0; e < nc; e++)
-		smax = fmaxf(smax, S.d[nc + e]);
-	/* ratio, blended into gm where the weight is below 1% of its max */
-	const double eps = 0.01 * smax;
-	for (int64_t e = 0; e < nc; e++)
-		S.d[e] = (float)((S.d[e] + eps * gm) / (S.d[nc + e] + eps));
-	S.nc = 1;
-	rc = resample_clamp(&S, g, &B, nt);
-	fimg_free(&S);
-	if (rc)
-		return rc;
-#pragma omp parallel for num_threads(nt) schedule(static)
-	for (int64_t e = 0; e < nv; e++)
-		f->d[e] /= B.d[e];
-	fimg_free(&B);
-	return 0;
-}
-
-/* resample a (field or image) src onto grid g, edge-clamped */
-static int resample_clamp(const fimg_t *src, const fgrid_t *g, fimg_t *out,
-			  int nt)
-{
-	int rc = fimg_alloc(out, g, src->nc);
-	if (rc)
-		return rc;
-	const int64_t nv = fgrid_nvox(g);
-	const int n[3] = { src->g.nx, src->g.ny, src->g.nz };
-	const int64_t ns = fgrid_nvox(&src->g);
-	/* fimg_sample_clamp's arithmetic (world point, then src voxel), its
-	 * stencil found once for every component */
-#pragma omp parallel for num_threads(nt > 0 ? nt : 1) schedule(static)
-	for (int64_t e = 0; e < nv; e++) {
-		double p[3] = { (double)(e % g->nx), (double)(e / g->nx % g->ny),
-				(double)(e / ((int64_t)g->nx * g->ny)) },
-		       w[3], v[3];
-		aff_apply(g->v2w, p, w);
-		aff_apply(src->g.w2v, w, v);
-		img_linf_t s;
-		img_linf_at(n, v, IMG_EDGE_CLAMP, &s);
-		for (int c = 0; c < src->nc; c++)
-			out->d[e + c * nv] = img_linf_f32(src->d + c * ns, &s);
-	}
-	return 0;
-}
-
-/* dst[0..n-1] = src, in chunks over the threads */
-static void copy_par(float *dst, const float *src, int64_t n, int nt)
-{
-	const int64_t ch = 65536, nch = (n + ch - 1) / ch;
-#pragma omp parallel for num_threads(nt) schedule(static)
-	for (int64_t c = 0; c < nch; c++)
-		memcpy(dst + c * ch, src + c * ch,
-		       sizeof(float) * (size_t)(c * ch + ch < n ? ch : n - c * ch));
-}
-
-/*
- * crop=true: the bounding box lo..hi (voxels, inclusive) of mask > 0 on
- * its grid, grown by margin voxels and clipped to the grid; 1 when it is
- * smaller than the grid, 0 when the whole grid is needed (or the mask is
- * empty).
- */
-static int mask_box(const fimg_t *m, int margin, int lo[3], int hi[3], int nt)
-{
-	const fgrid_t *g = &m->g;
-	const int n[3] = { g->nx, g->ny, g->nz };
-	int l0 = n[0], l1 = n[1], l2 = n[2], h0 = -1, h1 = -1, h2 = -1;
-	/* extremes: the same on any thread count */
-#pragma omp parallel for num_threads(nt) schedule(static) \
-	reduction(min : l0, l1, l2) reduction(max : h0, h1, h2)
-	for (int64_t r = 0; r < (int64_t)n[1] * n[2]; r++) {
-		const int j = (int)(r % n[1]), k = (int)(r / n[1]);
-		const float *row = m->d + r * n[0];
-		int i0 = -1, i1 = -1;
-		for (int i = 0; i < n[0]; i++)
-			if (row[i] > 0) {
-				if (i0 < 0)
-					i0 = i;
-				i1 = i;
-			}
-		if (i0 < 0)
-			continue;
-		l0 = i0 < l0 ? i0 : l0;
-		h0 = i1 > h0 ? i1 : h0;
-		l1 = j < l1 ? j : l1;
-		h1 = j > h1 ? j : h1;
-		l2 = k < l2 ? k : l2;
-		h2 = k > h2 ? k : h2;
-	}
-	lo[0] = l0;
-	lo[1] = l1;
-	lo[2] = l2;
-	hi[0] = h0;
-	hi[1] = h1;
-	hi[2] = h2;
-	if (hi[0] < 0)
-		return 0;
-	int64_t nbox = 1;
-	for (int a = 0; a < 3; a++) {
-		lo[a] = lo[a] - margin < 0 ? 0 : lo[a] - margin;
-		hi[a] = hi[a] + margin > n[a] - 1 ? n[a] - 1 : hi[a] + margin;
-		nbox *= hi[a] - lo[a] + 1;
-	}
-	return nbox < fgrid_nvox(g);
-}
-
-/* the sub-grid lo..hi of g (the same voxels, fewer of them) */
-static void sub_grid(const fgrid_t *g, const int lo[3], const int hi[3],
-		     fgrid_t *out)
-{
-	double A[16];
-	memcpy(A, g->v2w, sizeof A);
-	for (int r = 0; r < 3; r++)
-		for (int c = 0; c < 3; c++)
-			A[r * 4 + 3] += g->v2w[r * 4 + c] * lo[c];
-	fgrid_make(out, hi[0] - lo[0] + 1, hi[1] - lo[1] + 1,
-		   hi[2] - lo[2] + 1, A);
-}
-
-/* sub <- the block of big that starts at voxel lo (sub's grid is a
- * sub-grid of big's) */
-static void block_copy(const fimg_t *big, fimg_t *sub, const int lo[3], int nt)
-{
-	const fgrid_t *G = &big->g, *g = &sub->g;
-	const int64_t NV = fgrid_nvox(G), nv = fgrid_nvox(g);
-	const int nc = sub->nc;
-#pragma omp parallel for num_threads(nt) schedule(static) collapse(3)
-	for (int c = 0; c < nc; c++)
-		for (int k = 0; k < g->nz; k++)
-			for (int j = 0; j < g->ny; j++)
-				memcpy(sub->d + c * nv + ((int64_t)k * g->ny + j) * g->nx,
-				       big->d + c * NV +
-					       ((int64_t)(k + lo[2]) * G->ny + j + lo[1]) *
-						       G->nx + lo[0],
-				       sizeof(float) * (size_t)g->nx);
-}
-
-/*
- * big <- w sub + (1 - w) big over the block of sub (at voxel lo of big),
- * w = 1 at ramp voxels or more from the block's faces inside big (faces on
- * big's own faces do not count), falling linearly to 1 / (ramp + 1) on
- * them: the cropped level's field joins the field carried over from the
- * coarser level without a step.
- */
-static void block_blend(fimg_t *big, const fimg_t *sub, const int lo[3],
-			int ramp, int nt)
-{
-	const fgrid_t *G = &big->g, *g = &sub->g;
-	const int64_t NV = fgrid_nvox(G), nv = fgrid_nvox(g);
-	const int N[3] = { G->nx, G->ny, G->nz }, n[3] = { g->nx, g->ny, g->nz };
-	int in_lo[3], in_hi[3]; /* the face is inside big */
-	for (int a = 0; a < 3; a++) {
-		in_lo[a] = lo[a] > 0;
-		in_hi[a] = lo[a] + n[a] < N[a];
-	}
-#pragma omp parallel for num_threads(nt) schedule(static)
-	for (int k = 0; k < n[2]; k++)
-		for (int j = 0; j < n[1]; j++)
-			for (int i = 0; i < n[0]; i++) {
-				const int idx[3] = { i, j, k };
-				int dmin = ramp;
-				for (int a = 0; a < 3; a++) {
-					if (in_lo[a] && idx[a] < dmin)
-						dmin = idx[a];
-					if (in_hi[a] && n[a] - 1 - idx[a] < dmin)
-						dmin = n[a] - 1 - idx[a];
-				}
-				const float w = (float)(dmin + 1) / (float)(ramp + 1);
-				const int64_t e = ((int64_t)k * n[1] + j) * n[0] + i;
-				const int64_t E = ((int64_t)(k + lo[2]) * N[1] +
-						   j + lo[1]) * N[0] + i + lo[0];
-				for (int c = 0; c < 3; c++) {
-					float *b = big->d + c * NV + E;
-					const float v = sub->d[c * nv + e];
-					*b = dmin >= ramp ? v : w * v + (1 - w) * *b;
-				}
-			}
-}
-
-/* replace f by its block lo.. on the sub-grid gs */
-static int crop_img(fimg_t *f, const int lo[3], const fgrid_t *gs, int nt)
-{
-	fimg_t c = { 0 };
-	int rc = fimg_alloc(&c, gs, f->nc);
-	if (rc)
-		return rc;
-	block_copy(f, &c, lo, nt);
-	fimg_free(f);
-	*f = c;
-	return 0;
-}
-
-/* Everything one level needs. */
-typedef struct level {
-	fgrid_t g;
-	fimg_t F;   /* fixed, smoothed and shrunk */
-	fimg_t M;   /* moving, smoothed, on the moving grid */
-	fimg_t FM;  /* fixed mask on g (0/1), or empty */
-	fimg_t W;   /* warped moving (NaN outside) */
-	fimg_t WM;  /* warped moving mask, or empty */
-	/* W and WM are computed on the block wlo..whi only: with a fixed
-	 * mask, its bounding box grown by the one voxel of the gradients'
-	 * stencil (no force, no window sum reads W outside the mask) */
-	int wlo[3], whi[3];
-	float *sums; /* metric=lncc: the 6 window sums, one level's buffer */
-	/* per row (j, k) of the level grid: partial sums and counts, added
-	 * in row order afterwards, so that the costs and statistics are the
-	 * same bits on any thread count */
-	double *rsum;
-	int64_t *rcnt;
-} level_t;
-
-/* the rows' sums and counts in row order */
-static void rows_total(const level_t *L, double *sum, int64_t *cnt)
-{
-	const int64_t nr = (int64_t)L->g.ny * L->g.nz;
-	double s = 0;
-	int64_t n = 0;
-	for (int64_t r = 0; r < nr; r++) {
-		s += L->rsum[r];
-		n += L->rcnt[r];
-	}
-	*sum = s;
-	*cnt = n;
-}
-
-static void level_free(level_t *L)
-{
-	fimg_free(&L->F);
-	fimg_free(&L->M);
-	fimg_free(&L->FM);
-	fimg_free(&L->W);
-	fimg_free(&L->WM);
-	free(L->sums);
-	L->sums = NULL;
-	free(L->rsum);
-	L->rsum = NULL;
-	free(L->rcnt);
-	L->rcnt = NULL;
-}
-
-/*
- * Demons force into U (nc 3) for the current W; returns the number of
- * voxels used and the sum of squared differences.
- */
-static void compute_force(const demons_priv_t *p, const level_t *L,
-			  fimg_t *U, double sx2, double *ssd, int64_t *nused,
-			  int nt)
-{
-	const fgrid_t *g = &L->g;
-	const int nx = g->nx, ny = g->ny, nz = g->nz;
-	const int64_t nv = fgrid_nvox(g);
-	const int64_t st[3] = { 1, nx, (int64_t)nx * ny };
-	const int dims[3] = { nx, ny, nz };
-	double Li[3][3];
-	for (int a = 0; a < 3; a++)
-		for (int w = 0; w < 3; w++)
-			Li[a][w] = g->w2v[a * 4 + w];
-	const float *F = L->F.d, *W = L->W.d;
-	const float *FM = L->FM.d, *WM = L->WM.d;
-	const int sym = p->force == FORCE_SYMMETRIC;
-	const double thr = p->diff_threshold;
-#pragma omp parallel for num_threads(nt) schedule(static)
-	for (int64_t r = 0; r < (int64_t)ny * nz; r++) {
-		const int j = (int)(r % ny), k = (int)(r / ny);
-		double s2 = 0;
-		int64_t nu = 0;
-			for (int i = 0; i < nx; i++) {
-				int64_t e = ((int64_t)k * ny + j) * nx + i;
-				U->d[e] = U->d[e + nv] = U->d[e + 2 * nv] = 0;
-				float w = W[e];
-				if (isnan(w) || (FM && FM[e] <= 0) ||
-				    (WM && !(WM[e] > 0.5f)))
-					continue;
-				double diff = (double)F[e] - w;
-				s2 += diff * diff;
-				nu++;
-				if (fabs(diff) < thr)
-					continue;
-				const int idx[3] = { i, j, k };
-				double gf[3], gw[3];
-				for (int a = 0; a < 3; a++) {
-					int lo = idx[a] > 0, hi = idx[a] < dims[a] - 1;
-					int64_t el = lo ? e - st[a] : e,
-						eh = hi ? e + st[a] : e;
-					double h = lo + hi;
-					gf[a] = h > 0 ? (F[eh] - F[el]) / h : 0;
-					if (sym) {
-						/* one-sided where a neighbour is
-						 * outside the moving image */
-						float wl = W[el], wh = W[eh];
-						if (isnan(wl)) {
-							wl = w;
-							h -= lo;
-						}
-						if (isnan(wh)) {
-							wh = w;
-							h -= hi;
-						}
-						gw[a] = h > 0 ? (wh - wl) / h : 0;
-					}
-				}
-				double J[3];
-				for (int c = 0; c < 3; c++) {
-					double sf = 0, sw = 0;
-					for (int a = 0; a < 3; a++) {
-						sf += gf[a] * Li[a][c];
-						if (sym)
-							sw += gw[a] * Li[a][c];
-					}
-					J[c] = sym ? 0.5 * (sf + sw) : sf;
-				}
-				double den = J[0] * J[0] + J[1] * J[1] + J[2] * J[2] +
-					     diff * diff / sx2;
-				if (den < 1e-12)
-					continue;
-				double f = diff / den;
-				U->d[e] = (float)(f * J[0]);
-				U->d[e + nv] = (float)(f * J[1]);
-				U->d[e + 2 * nv] = (float)(f * J[2]);
-			}
-		L->rsum[r] = s2;
-		L->rcnt[r] = nu;
-	}
-	rows_total(L, ssd, nused);
-}
-
-/*
- * metric=lncc: the gradient of the local normalised cross-correlation into
- * U (nc 3, world vectors per unit step; see the header); *score = sum of
- * (1 - CC) and *nused the voxels used.  Returns 0 or ARMSTG_ENOMEM.
- */
-static int compute_force_lncc(const demons_priv_t *p, const level_t *L,
-			      fimg_t *U, double *score, int64_t *nused, int nt)
-{
-	/* the window sums of V, V F, V W, V F^2, V W^2, V F W over valid
-	 * voxels, in the level's buffer (6 nv floats) */
-	float *S = L->sums;
-	const fgrid_t *g = &L->g;
-	const int nx = g->nx, ny = g->ny, nz = g->nz;
-	const int64_t nv = fgrid_nvox(g);
-	const int64_t st[3] = { 1, nx, (int64_t)nx * ny };
-	const int dims[3] = { nx, ny, nz };
-	const float *F = L->F.d, *W = L->W.d;
-	const float *FM = L->FM.d, *WM = L->WM.d;
-#pragma omp parallel for num_threads(nt) schedule(static)
-	for (int64_t e = 0; e < nv; e++) {
-		float w = W[e], f = F[e];
-		int ok = !isnan(w) && !(FM && FM[e] <= 0) && !(WM && !(WM[e] > 0.5f));
-		if (!ok)
-			w = f = 0;
-		S[e] = (float)ok;
-		S[e + nv] = f;
-		S[e + 2 * nv] = w;
-		S[e + 3 * nv] = f * f;
-		S[e + 4 * nv] = w * w;
-		S[e + 5 * nv] = f * w;
-	}
-	if (img_box_sum(S, 6, dims, p->radius, nt))
-		return ARMSTG_ENOMEM;
-	double Li[3][3];
-	for (int a = 0; a < 3; a++)
-		for (int c = 0; c < 3; c++)
-			Li[a][c] = g->w2v[a * 4 + c];
-	const double nmin = 0.25 * pow(2 * p->radius + 1, 3);
-#pragma omp parallel for num_threads(nt) schedule(static)
-	for (int64_t r = 0; r < (int64_t)ny * nz; r++) {
-		const int j = (int)(r % ny), k = (int)(r / ny);
-		double sc = 0;
-		int64_t nu = 0;
-			for (int i = 0; i < nx; i++) {
-				int64_t e = ((int64_t)k * ny + j) * nx + i;
-				U->d[e] = U->d[e + nv] = U->d[e + 2 * nv] = 0;
-				if (!(S[e] > 0) || isnan(W[e]) ||
-				    (FM && FM[e] <= 0) || (WM && !(WM[e] > 0.5f)))
-					continue;
-				/* too few valid voxels in the window (a mask's
-				 * edge): no statistics */
-				const double n = S[e];
-				if (n < nmin)
-					continue;
-				const double mf = S[e + nv] / n, mw = S[e + 2 * nv] / n;
-				const double sff = S[e + 3 * nv] - n * mf * mf;
-				const double sww = S[e + 4 * nv] - n * mw * mw;
-				const double sfw = S[e + 5 * nv] - n * mf * mw;
-				/* flat windows (float sums: relative precision
-				 * ~1e-5 after 125 terms) carry no correlation */
-				if (!(sff > 1e-5 * S[e + 3 * nv] + 1e-30) ||
-				    !(sww > 1e-5 * S[e + 4 * nv] + 1e-30))
-					continue;
-				const double cc = sfw * sfw / (sff * sww);
-				sc += 1 - cc;
-				nu++;
-				const double coef = 2 * sfw / (sff * sww) *
-						    ((F[e] - mf) - sfw / sww * (W[e] - mw));
-				const int idx[3] = { i, j, k };
-				double gw[3];
-				for (int a = 0; a < 3; a++) {
-					int lo = idx[a] > 0, hi = idx[a] < dims[a] - 1;
-					int64_t el = lo ? e - st[a] : e,
-						eh = hi ? e + st[a] : e;
-					double h = lo + hi;
-					float wl = W[el], wh = W[eh];
-					if (isnan(wl)) {
-						wl = W[e];
-						h -= lo;
-					}
-					if (isnan(wh)) {
-						wh = W[e];
-						h -= hi;
-					}
-					gw[a] = h > 0 ? (wh - wl) / h : 0;
-				}
-				for (int c = 0; c < 3; c++) {
-					double sw = 0;
-					for (int a = 0; a < 3; a++)
-						sw += gw[a] * Li[a][c];
-					U->d[e + c * nv] = (float)(coef * sw);
-				}
-			}
-		L->rsum[r] = sc;
-		L->rcnt[r] = nu;
-	}
-	rows_total(L, score, nused);
-	return 0;
-}
-
-/*
- * One pass over the update U (nc 3): scaled in place by scale (when
- * scale != 1: the LNCC step), then its mean length over nonzero vectors and
- * largest length (mm), and its largest length in voxels of its grid (the
- * number of squarings of the exponential): what the table reports and
- * fimg_field_maxnorm gives, in one read.  Sums per row of the level grid
- * (U's grid), then over the rows in order; maxima exact.
- */
-static void update_stats(fimg_t *U, const level_t *L, float scale,
-			 double *mean, double *max, double *max_vox, int nt)
-{
-	const fgrid_t *g = &U->g;
-	const int64_t nv = fgrid_nvox(g);
-	double m = 0, mv = 0;
-#pragma omp parallel for num_threads(nt) schedule(static) \
-	reduction(max : m, mv)
-	for (int64_t r = 0; r < (int64_t)g->ny * g->nz; r++) {
-		double s = 0;
-		int64_t n = 0;
-		for (int64_t e = r * g->nx; e < (r + 1) * g->nx; e++) {
-			if (scale != 1.0f) {
-				U->d[e] *= scale;
-				U->d[e + nv] *= scale;
-				U->d[e + 2 * nv] *= scale;
-			}
-			double d[3] = { U->d[e], U->d[e + nv], U->d[e + 2 * nv] }, c[3];
-			double q = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-			if (q > 0) {
-				s += q;
-				n++;
-			}
-			if (q > m)
-				m = q;
-			aff_apply_vec(g->w2v, d, c);
-			double v2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
-			if (v2 > mv)
-				mv = v2;
-		}
-		L->rsum[r] = s;
-		L->rcnt[r] = n;
-	}
-	double s;
-	int64_t n;
-	rows_total(L, &s, &n);
-	*mean = n ? s / (double)n : 0;
-	*max = m;
-	*max_vox = sqrt(mv);
-}
 
 /* squarings of the exponential: the update's largest vector, mvox voxels,
  * scaled to at most half a voxel (with max_step 1 the LNCC update comes out
@@ -1062,16 +362,16 @@ static int demons_process(armstg_stage_t *st)
 		goto out;
 	}
 	float flo, fhi, mlo, mhi;
-	minmax(&F0, &flo, &fhi, nt);
-	minmax(&M0, &mlo, &mhi, nt);
+	dm_minmax(&F0, &flo, &fhi, nt);
+	dm_minmax(&M0, &mlo, &mhi, nt);
 	if ((fhi > flo) && (mhi > mlo) && p->normalize == NORM_LOCAL) {
-		if ((rc = local_normalise(&F0, p->local_sigma, nt)) ||
-		    (rc = local_normalise(&M0, p->local_sigma, nt))) {
+		if ((rc = dm_local_normalise(&F0, p->local_sigma, nt)) ||
+		    (rc = dm_local_normalise(&M0, p->local_sigma, nt))) {
 			rc = FAIL(rc, "out of memory (normalize=local)");
 			goto out;
 		}
-		minmax(&F0, &flo, &fhi, nt);
-		minmax(&M0, &mlo, &mhi, nt);
+		dm_minmax(&F0, &flo, &fhi, nt);
+		dm_minmax(&M0, &mlo, &mhi, nt);
 	}
 	if (!(fhi > flo) || !(mhi > mlo)) {
 		int fx = !(fhi > flo);
@@ -1083,15 +383,15 @@ static int demons_process(armstg_stage_t *st)
 		goto out;
 	}
 	if (p->normalize == NORM_HIST || p->normalize == NORM_LOCAL) {
-		if ((rc = match_hist(&M0, mlo, mhi, flo, fhi, &F0, nt))) {
+		if ((rc = dm_match_hist(&M0, mlo, mhi, flo, fhi, &F0, nt))) {
 			rc = FAIL(rc, "out of memory (normalize)");
 			goto out;
 		}
-		rescale(&F0, flo, fhi, nt);
-		rescale(&M0, flo, fhi, nt);
+		dm_rescale(&F0, flo, fhi, nt);
+		dm_rescale(&M0, flo, fhi, nt);
 	} else if (p->normalize == NORM_MINMAX) {
-		rescale(&F0, flo, fhi, nt);
-		rescale(&M0, mlo, mhi, nt);
+		dm_rescale(&F0, flo, fhi, nt);
+		dm_rescale(&M0, mlo, mhi, nt);
 	}
 	if ((vfm && (rc = field_mask_from_vol(vfm, "fixed_mask", 2, &F0.g, &FM0,
 					      nt, err, sizeof err))) ||
@@ -1154,7 +454,7 @@ static int demons_process(armstg_stage_t *st)
 		/* fixed: smooth by 0.5 f voxels, sample on the coarse grid */
 		double sig_f = f > 1 ? 0.5 * f * (F0.g.sp[0] + F0.g.sp[1] + F0.g.sp[2]) / 3 : 0;
 		double sig_m = f > 1 ? 0.5 * f * (M0.g.sp[0] + M0.g.sp[1] + M0.g.sp[2]) / 3 : 0;
-		level_free(&L);
+		dm_level_free(&L);
 		L.g = g;
 		fimg_t Fs = { 0 };
 		if ((rc = fimg_alloc(&Fs, &F0.g, 1)) ||
@@ -1165,8 +465,8 @@ static int demons_process(armstg_stage_t *st)
 			rc = FAIL(rc, "out of memory (level %d)", l);
 			goto out;
 		}
-		copy_par(Fs.d, F0.d, fgrid_nvox(&F0.g), nt);
-		copy_par(L.M.d, M0.d, fgrid_nvox(&M0.g), nt);
+		dm_copy_par(Fs.d, F0.d, fgrid_nvox(&F0.g), nt);
+		dm_copy_par(L.M.d, M0.d, fgrid_nvox(&M0.g), nt);
 		fimg_smooth(&Fs, sig_f, nt);
 		fimg_smooth(&L.M, sig_m, nt);
 		fimg_resample(&Fs, NULL, FIELD_LINEAR, 0, &L.F, nt);
@@ -1200,12 +500,12 @@ static int demons_process(armstg_stage_t *st)
 					   (int)ceil(3 * sg_fluid / spmin) +
 					   (int)ceil(3 * sg_field / spmin) + 2;
 			int hi[3];
-			if (mask_box(&L.FM, margin, crop_lo, hi, nt)) {
+			if (dm_mask_box(&L.FM, margin, crop_lo, hi, nt)) {
 				fgrid_t gc;
-				sub_grid(&g, crop_lo, hi, &gc);
-				if ((rc = crop_img(&L.F, crop_lo, &gc, nt)) ||
-				    (rc = crop_img(&L.FM, crop_lo, &gc, nt)) ||
-				    (rc = crop_img(&L.W, crop_lo, &gc, nt))) {
+				dm_sub_grid(&g, crop_lo, hi, &gc);
+				if ((rc = dm_crop_img(&L.F, crop_lo, &gc, nt)) ||
+				    (rc = dm_crop_img(&L.FM, crop_lo, &gc, nt)) ||
+				    (rc = dm_crop_img(&L.W, crop_lo, &gc, nt))) {
 					rc = FAIL(rc, "out of memory (level %d)", l);
 					goto out;
 				}
@@ -1233,7 +533,7 @@ static int demons_process(armstg_stage_t *st)
 		 * sum is zero outside the fixed mask, the gradients read one
 		 * voxel beyond it; outside the block W stays NaN (outside the
 		 * moving image) and WM 0 */
-		if (!L.FM.d || !mask_box(&L.FM, 1, L.wlo, L.whi, nt)) {
+		if (!L.FM.d || !dm_mask_box(&L.FM, 1, L.wlo, L.whi, nt)) {
 			L.wlo[0] = L.wlo[1] = L.wlo[2] = 0;
 			L.whi[0] = g.nx - 1;
 			L.whi[1] = g.ny - 1;
@@ -1251,7 +551,7 @@ static int demons_process(armstg_stage_t *st)
 		fimg_t Snew = { 0 };
 		const fimg_t *from = S.d ? &S : init.d ? &init : NULL;
 		if (from)
-			rc = resample_clamp(from, &gfull, &Snew, nt);
+			rc = dm_resample_clamp(from, &gfull, &Snew, nt);
 		else
 			rc = fimg_alloc(&Snew, &gfull, 3);
 		fimg_free(&S);
@@ -1262,7 +562,7 @@ static int demons_process(armstg_stage_t *st)
 			Sfull = S;
 			S = (fimg_t){ 0 };
 			if (!(rc = fimg_alloc(&S, &g, 3)))
-				block_copy(&Sfull, &S, crop_lo, nt);
+				dm_block_copy(&Sfull, &S, crop_lo, nt);
 		}
 		if (rc || (rc = fimg_alloc(&A, &g, 3)) ||
 		    (rc = fimg_alloc(&B, &g, 3)) ||
@@ -1316,14 +616,14 @@ static int demons_process(armstg_stage_t *st)
 			int64_t nused;
 			const int lncc = p->metric == METRIC_LNCC;
 			if (lncc) {
-				if ((rc = compute_force_lncc(p, &L, &A, &ssd, &nused,
+				if ((rc = dm_compute_force_lncc(p, &L, &A, &ssd, &nused,
 							     nt))) {
 					rc = FAIL(rc, "out of memory (lncc sums, "
 						  "level %d)", l + 1);
 					goto out;
 				}
 			} else {
-				compute_force(p, &L, &A, sx2, &ssd, &nused, nt);
+				dm_compute_force(p, &L, &A, sx2, &ssd, &nused, nt);
 			}
 			if (nused == 0) {
 				rc = FAIL(ARMSTG_EINVAL,
@@ -1374,7 +674,7 @@ static int demons_process(armstg_stage_t *st)
 				}
 			}
 			double mu, mx, mvox;
-			update_stats(&A, &L, sc, &mu, &mx, &mvox, nt);
+			dm_update_stats(&A, &L, sc, &mu, &mx, &mvox, nt);
 			if (p->update == UPD_DIFFEO) {
 				/* s <- s o exp(u): scaling and squaring fused
 				 * with the composition (lib/field) */
@@ -1434,7 +734,7 @@ static int demons_process(armstg_stage_t *st)
 			}
 		}
 		if (crop_now) {
-			block_blend(&Sfull, &S, crop_lo, (margin + 1) / 2, nt);
+			dm_block_blend(&Sfull, &S, crop_lo, (margin + 1) / 2, nt);
 			fimg_free(&S);
 			S = Sfull;
 			Sfull = (fimg_t){ 0 };
@@ -1528,7 +828,7 @@ out:
 		h->msg_unref(&owarp->base);
 	if (tab)
 		h->msg_unref(&tab->base);
-	level_free(&L);
+	dm_level_free(&L);
 	dlabel_free(&DL);
 	free(best);
 	free(lbest);
