@@ -1,0 +1,345 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * field_points.c: the dense displacement field from scattered points
+ * (field_from_points: moving least squares with a taper; see field.h).
+ * Pure C + OpenMP; no runtime calls.
+ */
+#include "field/field.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "armstg/plugin.h"
+#include "armstg/volmath.h"
+#include "img/gauss.h"
+#include "img/kdtree.h"
+#include "img/sample.h"
+
+#include "field/field_int.h"
+
+/* cubic smoothstep: 0 for x <= a, 1 for x >= b, C1 in between */
+static double smoothstep(double x, double a, double b)
+{
+	if (x <= a)
+		return 0;
+	if (x >= b)
+		return 1;
+	double t = (x - a) / (b - a);
+	return t * t * (3 - 2 * t);
+}
+
+/*
+ * Moving least squares at y (Lancaster & Salkauskas 1981, Math. Comp. 37:
+ * 141-158): order-1 fit with Gaussian weights, guarded against
+ * extrapolation.  Let m be the weighted mean offset of the nodes from y and
+ * C their weighted covariance (mm^2).
+ *  - conditioning c = det C / (tr C / 3)^3 in [0, 1] (1: isotropic spread);
+ *  - one-sidedness rho = |m| / sqrt(tr C / 3): ~0 inside a uniform cloud,
+ *    ~0.9 on its face, growing linearly with the distance outside it
+ *    (thresholds 1.5, 2.5 keep the fit exact 3 mm inside a cloud corner
+ *    at sigma 4: test_from_points_linear).
+ * The result is beta * (order-1 fit) + (1 - beta) * (weighted mean,
+ * Shepard 1968, order 0), beta = [1 - S(rho; 1.5, 2.5)] * S(c; 1e-4, 1e-2)
+ * with S the cubic smoothstep, so the linear fit (exact for linear fields)
+ * is used wherever y is surrounded by nodes, and only the bounded weighted
+ * mean where it would extrapolate.  The magnitude is then capped at the
+ * largest nodal |d| within the search radius (a linear field inside the
+ * nodes' hull never exceeds it, so exactness is kept), and multiplied by
+ * the taper 1 - S(dmin; sigma, sigma + taper), dmin = distance to the
+ * nearest node, so the field falls smoothly to zero away from the cloud.
+ * Weights are exp(-(r^2 - dmin^2) / 2 sigma^2) (a common factor, which
+ * cancels in every normalised moment, avoids underflow far from nodes).
+ * dmin is searched within Rs = max(3 sigma, sigma + taper) (lib/img's
+ * k-d tree for both queries); the fit uses the nodes within
+ * min(Rs, dmin + 3 sigma) (relative weight >= exp(-4.5), as the plain 3 sigma
+ * cut-off had).  Returns 0 (and out = 0) when no node is within Rs.
+ */
+typedef struct mls_acc {
+	double S0, S1[3], S2[3][3], R0[3], R1[3][3], dmax2;
+} mls_acc_t;
+
+/* the nodes within radius R of y (the k-d tree's radius query into the
+ * caller's buffer, grown as needed); *m gets their count.  0 or ENOMEM. */
+typedef struct mls_buf {
+	int64_t *idx, cap;
+} mls_buf_t;
+
+static int mls_near(const kdtree_t *t, const double y[3], double R,
+		    mls_buf_t *B, int64_t *m)
+{
+	int64_t k = kd_within(t, y, R, B->idx, B->cap);
+	if (k > B->cap) {
+		int64_t cap = k + k / 2 + 64;
+		int64_t *nb = realloc(B->idx, sizeof(int64_t) * (size_t)cap);
+		if (!nb)
+			return ARMSTG_ENOMEM;
+		B->idx = nb;
+		B->cap = cap;
+		k = kd_within(t, y, R, B->idx, B->cap);
+	}
+	*m = k;
+	return 0;
+}
+
+/* accumulate the weighted moments of nodes idx[0..m) with
+ * w = exp(-(r^2 - rmin2) is2) */
+static void mls_sum(const double *xyz, const double *vec, const int64_t *idx,
+		    int64_t m, const double y[3], double is2, double rmin2,
+		    mls_acc_t *acc)
+{
+	for (int64_t t = 0; t < m; t++) {
+		int64_t p = idx[t];
+		double q[3] = { xyz[3 * p] - y[0], xyz[3 * p + 1] - y[1],
+				xyz[3 * p + 2] - y[2] };
+		double r2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2];
+		double w = exp(-(r2 - rmin2) * is2);
+		const double *d = vec + 3 * p;
+		double dn2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+		if (dn2 > acc->dmax2)
+			acc->dmax2 = dn2;
+		acc->S0 += w;
+		for (int a = 0; a < 3; a++) {
+			acc->S1[a] += w * q[a];
+			acc->R0[a] += w * d[a];
+			for (int bb = 0; bb < 3; bb++) {
+				acc->S2[a][bb] += w * q[a] * q[bb];
+				acc->R1[a][bb] += w * q[a] * d[bb];
+			}
+		}
+	}
+}
+
+/* 1 with out set, 0 (out = 0) when no node is within Rs, ENOMEM */
+static int mls_at(const kdtree_t *t, const double *xyz, const double *vec,
+		  const double y[3], double sigma, double taper,
+		  mls_buf_t *B, double out[3])
+{
+	const double Rs = fmax(3 * sigma, sigma + taper),
+		     is2 = 0.5 / (sigma * sigma);
+	out[0] = out[1] = out[2] = 0;
+	/* the nearest node within Rs (inclusive) */
+	double rmin2 = nextafter(Rs * Rs, INFINITY);
+	if (kd_nearest(t, y, &rmin2) < 0)
+		return 0;
+	const double dmin = sqrt(rmin2);
+	mls_acc_t A;
+	memset(&A, 0, sizeof A);
+	int64_t nnear;
+	if (mls_near(t, y, fmin(Rs, dmin + 3 * sigma), B, &nnear))
+		return ARMSTG_ENOMEM;
+	mls_sum(xyz, vec, B->idx, nnear, y, is2, rmin2, &A);
+	if (!(A.S0 > 0))
+		return 0;
+	double m[3], md[3], C[3][3], X[3][3];
+	for (int a = 0; a < 3; a++) {
+		m[a] = A.S1[a] / A.S0;
+		md[a] = A.R0[a] / A.S0;
+	}
+	for (int a = 0; a < 3; a++)
+		for (int bb = 0; bb < 3; bb++) {
+			C[a][bb] = A.S2[a][bb] / A.S0 - m[a] * m[bb];
+			X[a][bb] = A.R1[a][bb] / A.S0 - m[a] * md[bb];
+		}
+	double tr = C[0][0] + C[1][1] + C[2][2];
+	double det = C[0][0] * (C[1][1] * C[2][2] - C[1][2] * C[2][1]) -
+		     C[0][1] * (C[1][0] * C[2][2] - C[1][2] * C[2][0]) +
+		     C[0][2] * (C[1][0] * C[2][1] - C[1][1] * C[2][0]);
+	double t3 = tr / 3;
+	double beta = 0, lin[3] = { 0 };
+	if (tr > 1e-12 * sigma * sigma) {
+		double cond = det / (t3 * t3 * t3);
+		double rho = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]) /
+			     sqrt(t3);
+		beta = (1 - smoothstep(rho, 1.5, 2.5)) *
+		       smoothstep(cond, 1e-4, 1e-2);
+	}
+	if (beta > 0) {
+		double Ci[3][3];
+		Ci[0][0] = (C[1][1] * C[2][2] - C[1][2] * C[2][1]) / det;
+		Ci[0][1] = (C[0][2] * C[2][1] - C[0][1] * C[2][2]) / det;
+		Ci[0][2] = (C[0][1] * C[1][2] - C[0][2] * C[1][1]) / det;
+		Ci[1][0] = (C[1][2] * C[2][0] - C[1][0] * C[2][2]) / det;
+		Ci[1][1] = (C[0][0] * C[2][2] - C[0][2] * C[2][0]) / det;
+		Ci[1][2] = (C[0][2] * C[1][0] - C[0][0] * C[1][2]) / det;
+		Ci[2][0] = (C[1][0] * C[2][1] - C[1][1] * C[2][0]) / det;
+		Ci[2][1] = (C[0][1] * C[2][0] - C[0][0] * C[2][1]) / det;
+		Ci[2][2] = (C[0][0] * C[1][1] - C[0][1] * C[1][0]) / det;
+		/* gradient G[a][c] = d d_c / d q_a = (C^-1 X)[a][c];
+		 * value at q = 0: md - G^T m */
+		for (int c = 0; c < 3; c++) {
+			double v = md[c];
+			for (int a = 0; a < 3; a++) {
+				double G = 0;
+				for (int bb = 0; bb < 3; bb++)
+					G += Ci[a][bb] * X[bb][c];
+				v -= G * m[a];
+			}
+			lin[c] = v;
+		}
+	}
+	double v[3], vn2 = 0;
+	for (int c = 0; c < 3; c++) {
+		v[c] = beta * lin[c] + (1 - beta) * md[c];
+		vn2 += v[c] * v[c];
+	}
+	double sc = vn2 > A.dmax2 ? sqrt(A.dmax2 / vn2) : 1;
+	sc *= 1 - smoothstep(dmin, sigma, sigma + taper);
+	for (int c = 0; c < 3; c++)
+		out[c] = v[c] * sc;
+	return 1;
+}
+
+int field_from_points(const double *xyz, const double *vec, int64_t n,
+		      double sigma_mm, double taper_mm, int passes,
+		      fimg_t *out, int64_t *n_unsupported, int nthreads)
+{
+	if (taper_mm == 0) {
+		/* auto: 2 sigma, and at least 3 x the largest nodal |d|, so the
+		 * taper's gradient (<= 1.5 |d| / taper for the smoothstep) stays
+		 * <= 0.5 and cannot fold the field */
+		taper_mm = 2 * sigma_mm;
+		for (int64_t p = 0; p < n && vec; p++) {
+			const double *d = vec + 3 * p;
+			double dn = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+			if (3 * dn > taper_mm)
+				taper_mm = 3 * dn;
+		}
+	}
+	if (!out || out->nc != 3 || !(sigma_mm > 0) || !(taper_mm > 0) ||
+	    !isfinite(taper_mm) || n < 0 || passes < 1 || passes > 8 ||
+	    (n > 0 && (!xyz || !vec)))
+		return ARMSTG_EINVAL;
+	const fgrid_t *g = &out->g;
+	const int64_t nv = fgrid_nvox(g);
+	memset(out->d, 0, sizeof(float) * (size_t)nv * 3);
+	if (n == 0) {
+		if (n_unsupported)
+			*n_unsupported = nv;
+		return 0;
+	}
+	/* evaluation grid: nodes at fine indices f*I */
+	double maxsp = fmax(g->sp[0], fmax(g->sp[1], g->sp[2]));
+	int f = (int)floor(sigma_mm / (2 * maxsp));
+	if (f < 1)
+		f = 1;
+	double A[16];
+	memcpy(A, g->v2w, sizeof A);
+	for (int r = 0; r < 3; r++)
+		for (int c = 0; c < 3; c++)
+			A[r * 4 + c] *= f;
+	int cn[3] = { (g->nx - 1 + f - 1) / f + 1, (g->ny - 1 + f - 1) / f + 1,
+		      (g->nz - 1 + f - 1) / f + 1 };
+	fgrid_t cg;
+	if (fgrid_make(&cg, cn[0], cn[1], cn[2], A))
+		return ARMSTG_EINVAL;
+	const int64_t cnv = fgrid_nvox(&cg);
+	double *cv = calloc((size_t)cnv * 3, sizeof(double));
+	double *pv = passes > 1 ? malloc(sizeof(double) * (size_t)cnv * 3) : NULL;
+	double *res = passes > 1 ? malloc(sizeof(double) * (size_t)n * 3) : NULL;
+	double *fit = passes > 1 ? malloc(sizeof(double) * (size_t)n * 3) : NULL;
+	uint8_t *ok = malloc((size_t)cnv);
+	kdtree_t t;
+	int rc = kd_build(&t, xyz, n);
+	if (!cv || !ok || rc || (passes > 1 && (!pv || !res || !fit))) {
+		free(cv);
+		free(pv);
+		free(res);
+		free(fit);
+		free(ok);
+		if (!rc)
+			kd_free(&t);
+		return ARMSTG_ENOMEM;
+	}
+	int fail = 0;
+	/* pass k fits vk (pass 0: the values; then the residuals at the
+	 * points) and adds the fit to cv */
+	const double *vk = vec;
+	if (passes > 1)
+		memcpy(res, vec, sizeof(double) * (size_t)n * 3);
+	for (int k = 0; k < passes && !fail; k++) {
+		double *dst = k ? pv : cv;
+#pragma omp parallel num_threads(NT(nthreads))
+		{
+			mls_buf_t B = { NULL, 0 };
+#pragma omp for schedule(dynamic, 64)
+			for (int64_t e = 0; e < cnv; e++) {
+				double p[3] = { (double)(e % cn[0]),
+						(double)(e / cn[0] % cn[1]),
+						(double)(e / ((int64_t)cn[0] * cn[1])) },
+				       y[3];
+				aff_apply(cg.v2w, p, y);
+				int o = mls_at(&t, xyz, vk, y, sigma_mm, taper_mm,
+					       &B, dst + 3 * e);
+				if (o < 0) {
+#pragma omp atomic write
+					fail = 1;
+				}
+				if (!k)
+					ok[e] = (uint8_t)(o > 0);
+			}
+			free(B.idx);
+		}
+		if (k)
+			for (int64_t e = 0; e < 3 * cnv; e++)
+				cv[e] += pv[e];
+		if (k + 1 == passes || fail)
+			break;
+		/* residuals at the points: r -= S r */
+#pragma omp parallel num_threads(NT(nthreads))
+		{
+			mls_buf_t B = { NULL, 0 };
+#pragma omp for schedule(dynamic, 64)
+			for (int64_t q = 0; q < n; q++)
+				if (mls_at(&t, xyz, res, xyz + 3 * q, sigma_mm,
+					   taper_mm, &B, fit + 3 * q) < 0) {
+#pragma omp atomic write
+					fail = 1;
+				}
+			free(B.idx);
+		}
+		for (int64_t q = 0; q < 3 * n; q++)
+			res[q] -= fit[q];
+		vk = res;
+	}
+	free(pv);
+	free(res);
+	free(fit);
+	kd_free(&t);
+	if (fail) {
+		free(cv);
+		free(ok);
+		return ARMSTG_ENOMEM;
+	}
+	/* trilinear refinement onto the output grid (exact for linear) */
+	int64_t nuns = 0;
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static) \
+	reduction(+ : nuns)
+	for (int k = 0; k < g->nz; k++)
+		for (int j = 0; j < g->ny; j++)
+			for (int i = 0; i < g->nx; i++) {
+				int64_t e = ((int64_t)k * g->ny + j) * g->nx + i;
+				double c[3] = { (double)i / f, (double)j / f,
+						(double)k / f };
+				/* float weights, double sums (as measured) */
+				img_linf_t s;
+				img_linf_at(cn, c, IMG_EDGE_CLAMP, &s);
+				for (int q = 0; q < 3; q++) {
+					double v = 0;
+					for (int t = 0; t < 8; t++)
+						v += s.w[t] * cv[3 * s.o[t] + q];
+					out->d[e + q * nv] = (float)v;
+				}
+				int64_t nn = ((int64_t)lround(c[2]) * cn[1] +
+					      lround(c[1])) * cn[0] + lround(c[0]);
+				if (!ok[nn])
+					nuns++;
+			}
+	if (n_unsupported)
+		*n_unsupported = nuns;
+	free(cv);
+	free(ok);
+	return 0;
+}
