@@ -139,6 +139,10 @@ typedef struct g_tune {
 	 * those that read them run again (tune.c) */
 	g_tset_t *set;
 	int nset;
+	/* parallel = N (default 1): up to N candidates run at once, each on
+	 * its own instances of the stages that depend on the tuned one, with
+	 * the same choice as one after the other (tune.c) */
+	int parallel;
 	int search;                /* 1: try the candidates when running */
 	int one_value;             /* no search: the single value is used */
 	char why[512];             /* when present but no search: why */
@@ -299,6 +303,14 @@ typedef struct g_run {
 				       chosen candidate ([tune] reuse) */
 	const char *staging;        /* the output folder's staging folder
 				       (outdir.h), for stages made anew */
+	/* a [tune] parallel candidate's run (tune.c), NULL otherwise:
+	 * shared[i]: rs[i].st is another run's instance (done, read only:
+	 * sched_pass leaves it alone); share: the threads split with the
+	 * other candidates' running stages; cancel: set (atomically) to end
+	 * the pass early, like rt_interrupted for this run only */
+	const char *shared;
+	struct sched_share *share;
+	int *cancel;
 } g_run_t;
 
 /* run.c: a run's stages, each a fresh instance with the graph's
@@ -319,6 +331,16 @@ void sched_mark_needed(g_run_t *r, int v);
  * Files stay pending.  0, or a negative code with err. */
 int sched_pass(g_run_t *r, char *err, size_t errsize);
 double sched_now(void);
+/* the OpenMP threads a pass shares: OMP_NUM_THREADS when set, else the
+ * cores (omp_get_max_threads of the calling thread) */
+int sched_threads_total(void);
+/* The OpenMP threads of several runs that run at once (a [tune] parallel
+ * search: one run per candidate), split over every running stage of all
+ * of them as in one run (sched.c, resplit).  total: the threads they
+ * share; cap: the most stages running at once.  NULL when out of memory. */
+typedef struct sched_share sched_share_t;
+sched_share_t *sched_share_new(int total, int cap);
+void sched_share_free(sched_share_t *sh);
 /* peak resident set (VmHWM) in MiB */
 double sched_peak_rss_mb(void);
 

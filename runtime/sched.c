@@ -9,6 +9,12 @@
  * remote.h; the rest in this process.  Per stage: wall time, peak resident
  * memory (VmHWM, reset before each stage when one runs at a time) and the
  * size of its outputs, for the run table.
+ *
+ * A [tune] parallel search runs one pass per candidate at once, each on
+ * its own g_run_t (tune.c): such a run leaves the instances it shares
+ * with the others (r->shared) alone, splits the threads with their
+ * running stages (r->share, a sched_share_t), and ends early when
+ * r->cancel is set.  A run without them (every other) is unchanged.
  */
 #include <pthread.h>
 #ifdef _OPENMP
@@ -30,6 +36,68 @@ typedef struct runner {
 	int threads_total; /* the OpenMP threads the stages share */
 	char err[2048];
 } runner_t;
+
+/* the running stages of every run that shares the threads, in the order
+ * they started (share mode of resplit) */
+typedef struct share_ent {
+	r_stage_t *x;
+	int key;                   /* its `threads` key, 0: none */
+} share_ent_t;
+
+struct sched_share {
+	pthread_mutex_t mu;
+	int total, n, cap;
+	share_ent_t *e;
+};
+
+sched_share_t *sched_share_new(int total, int cap)
+{
+	sched_share_t *sh = calloc(1, sizeof *sh);
+	if (!sh || !(sh->e = calloc((size_t)(cap > 0 ? cap : 1),
+				    sizeof *sh->e))) {
+		free(sh);
+		return NULL;
+	}
+	pthread_mutex_init(&sh->mu, NULL);
+	sh->total = total > 0 ? total : 1;
+	sh->cap = cap > 0 ? cap : 1;
+	return sh;
+}
+
+void sched_share_free(sched_share_t *sh)
+{
+	if (!sh)
+		return;
+	pthread_mutex_destroy(&sh->mu);
+	free(sh->e);
+	free(sh);
+}
+
+static void share_add(sched_share_t *sh, r_stage_t *x, int key)
+{
+	pthread_mutex_lock(&sh->mu);
+	if (sh->n < sh->cap) /* cap: every stage of every run, never hit */
+		sh->e[sh->n++] = (share_ent_t){ .x = x, .key = key };
+	pthread_mutex_unlock(&sh->mu);
+}
+
+static void share_del(sched_share_t *sh, const r_stage_t *x)
+{
+	pthread_mutex_lock(&sh->mu);
+	for (int k = 0; k < sh->n; k++)
+		if (sh->e[k].x == x) {
+			memmove(&sh->e[k], &sh->e[k + 1],
+				(size_t)(sh->n - k - 1) * sizeof *sh->e);
+			sh->n--;
+			break;
+		}
+	pthread_mutex_unlock(&sh->mu);
+}
+
+static int cancelled(const g_run_t *r)
+{
+	return r->cancel && __atomic_load_n(r->cancel, __ATOMIC_RELAXED);
+}
 
 void sched_mark_needed(g_run_t *r, int v)
 {
@@ -94,7 +162,8 @@ static void run_one(g_run_t *r, int v)
 			in[ip] = stage_output(r->rs[s->src[ip]].st,
 					      s->src_port[ip]);
 	stage_set_outdir(x->st, r->o.outdir);
-	if (r->o.jobs <= 1)
+	/* not while other runs' stages run beside (r->share) */
+	if (r->o.jobs <= 1 && !r->share)
 		reset_peak_rss();
 	double t0 = sched_now();
 	rt_log(s->name, LOG_DEBUG, "start (plugin %s, %d threads)", d->name,
@@ -164,9 +233,45 @@ static void release_inputs(g_run_t *r, int v)
  * bench/pipeline/results.md).  Results do not depend on the thread count
  * (the plugins' sums are in row order).
  */
+/* the same split over the running stages of every run that shares the
+ * threads (r->share), the remainder to the earliest started */
+static void resplit_shared(sched_share_t *sh)
+{
+	pthread_mutex_lock(&sh->mu);
+	int avail = sh->total, ndyn = 0;
+	for (int k = 0; k < sh->n; k++)
+		if (sh->e[k].key > 0)
+			avail -= sh->e[k].key;
+		else
+			ndyn++;
+	const int each = ndyn ? avail / ndyn : 0;
+	int extra = ndyn && avail > 0 ? avail % ndyn : 0;
+	for (int k = 0; ndyn && k < sh->n; k++) {
+		r_stage_t *x = sh->e[k].x;
+		int n = sh->e[k].key;
+		if (n <= 0) {
+			n = each + (extra > 0);
+			if (extra > 0)
+				extra--;
+			if (n < 1)
+				n = 1;
+		}
+		stage_set_threads(x->st, n);
+		if (x->threads_start == 0)
+			x->threads_start = n;
+		if (x->threads_min == 0 || n < x->threads_min)
+			x->threads_min = n;
+	}
+	pthread_mutex_unlock(&sh->mu);
+}
+
 static void resplit(runner_t *rn)
 {
 	g_run_t *r = rn->r;
+	if (r->share) {
+		resplit_shared(r->share);
+		return;
+	}
 	const graph_t *g = r->g;
 	int avail = rn->threads_total, ndyn = 0;
 	for (int i = 0; i < g->nstages; i++)
@@ -208,7 +313,7 @@ static void *worker(void *arg)
 	pthread_mutex_lock(&rn->mu);
 	for (;;) {
 		int pick = -1;
-		if (!rn->failed && !rt_interrupted)
+		if (!rn->failed && !rt_interrupted && !cancelled(r))
 			for (int i = 0; i < g->nstages && pick < 0; i++)
 				if (r->rs[i].needed &&
 				    r->rs[i].state == ST_WAIT && ready(r, i))
@@ -216,7 +321,7 @@ static void *worker(void *arg)
 		if (pick < 0) {
 			if (rn->running == 0 &&
 			    (rn->remaining == 0 || rn->failed ||
-			     rt_interrupted))
+			     rt_interrupted || cancelled(r)))
 				break;
 			pthread_cond_wait(&rn->cv, &rn->mu);
 			continue;
@@ -224,6 +329,8 @@ static void *worker(void *arg)
 		r_stage_t *x = &r->rs[pick];
 		x->state = ST_RUNNING;
 		x->threads_start = x->threads_min = 0;
+		if (r->share)
+			share_add(r->share, x, g->stages[pick].threads);
 		resplit(rn);
 		rn->running++;
 		pthread_mutex_unlock(&rn->mu);
@@ -231,6 +338,8 @@ static void *worker(void *arg)
 		pthread_mutex_lock(&rn->mu);
 		rn->running--;
 		rn->remaining--;
+		if (r->share)
+			share_del(r->share, x);
 		if (x->rc) {
 			x->state = ST_FAILED;
 			if (!rn->failed)
@@ -252,6 +361,17 @@ static void *worker(void *arg)
 	return NULL;
 }
 
+int sched_threads_total(void)
+{
+	int n = 1;
+#ifdef _OPENMP
+	n = omp_get_max_threads();
+	if (n < 1)
+		n = 1;
+#endif
+	return n;
+}
+
 int sched_pass(g_run_t *r, char *err, size_t errsize)
 {
 	const graph_t *g = r->g;
@@ -260,15 +380,12 @@ int sched_pass(g_run_t *r, char *err, size_t errsize)
 	 * cores (omp_get_max_threads); split over --jobs.  (Counting the
 	 * cores alone ignored OMP_NUM_THREADS: tled_cpu ran 16 threads when
 	 * told 1, 2026-11-25.) */
-	int nthreads_total = 1;
-#ifdef _OPENMP
-	nthreads_total = omp_get_max_threads();
-	if (nthreads_total < 1)
-		nthreads_total = 1;
-#endif
+	int nthreads_total = sched_threads_total();
 	int jobs = r->o.jobs > 0 ? r->o.jobs : 1;
 	int per = nthreads_total / jobs;
 	rn.threads_total = nthreads_total;
+	if (r->share) /* the search's threads, shared with the others */
+		rn.threads_total = r->share->total;
 	/* what made the run, for the stages that report it
 	 * (host->run_graph); after a [tune] search, with its candidates */
 	tab_t *gt = run_graph_table(r);
@@ -277,7 +394,8 @@ int sched_pass(g_run_t *r, char *err, size_t errsize)
 		return ARMSTG_ENOMEM;
 	}
 	for (int i = 0; i < g->nstages; i++)
-		stage_set_run_graph(r->rs[i].st, &gt->base);
+		if (!r->shared || !r->shared[i])
+			stage_set_run_graph(r->rs[i].st, &gt->base);
 	msg_unref(&gt->base);
 	for (int i = 0; i < g->nstages; i++) {
 		r_stage_t *x = &r->rs[i];
@@ -316,12 +434,14 @@ int sched_pass(g_run_t *r, char *err, size_t errsize)
 		pthread_join(th[i], NULL);
 	pthread_mutex_destroy(&rn.mu);
 	pthread_cond_destroy(&rn.cv);
-	if (!rn.failed && !rt_interrupted)
+	if (!rn.failed && !rt_interrupted && !cancelled(r))
 		return 0;
 	int rc = rn.failed ? ARMSTG_EINVAL : ARMSTG_ECANCELLED;
 	for (int i = 0; i < g->nstages; i++)
-		if (r->rs[i].rc)
+		if (r->rs[i].rc && (!r->shared || !r->shared[i]))
 			rc = r->rs[i].rc;
-	snprintf(err, errsize, "%s", rn.failed ? rn.err : "interrupted");
+	snprintf(err, errsize, "%s", rn.failed ? rn.err
+				     : rt_interrupted ? "interrupted"
+				     : "cancelled");
 	return rc;
 }

@@ -50,8 +50,10 @@
  * search_set when there are some.
  */
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "graph_int.h"
 
@@ -180,12 +182,28 @@ static int tune_require(const g_run_t *r, const char *only, char *why,
 	return 1;
 }
 
+/* the candidates after k skipped by [tune] stop (why), r->nrows covering
+ * them; what a parallel search ran of them is dropped */
+static void stop_mark(g_run_t *r, int k, const char *why)
+{
+	const g_tune_t *t = &r->g->tune;
+	for (int j = k + 1; j < t->nvalues; j++) {
+		tune_row_t *x = &r->rows[j];
+		memset(x, 0, sizeof *x);
+		x->skipped = 1;
+		x->score = NAN;
+		x->rc = ARMSTG_EINVAL;
+		snprintf(x->err, sizeof x->err, "%s", why);
+	}
+	r->nrows = t->nvalues;
+}
+
 /*
  * [tune] stop, after candidate k (not the last) has run; best is the best
  * so far (-1: none).  require: k failed a condition of require.
  * past_peak: k scored worse than the best so far by more than the
- * tolerance.  Then the candidates after k are marked skipped (r->nrows
- * covers them) and their count returned; else 0.
+ * tolerance.  Then the count of the candidates after k is returned, the
+ * reason in why (stop_mark marks them skipped); else 0.
  *
  * Why the choice is that of the whole list.  require: when a value fails
  * it, so does every later one (the deeper pushes fold more), so none of
@@ -197,18 +215,18 @@ static int tune_require(const g_run_t *r, const char *only, char *why,
  * the candidates run.  Neither holds for a score with two peaks, or a
  * condition that later values meet again: the search then misses them.
  */
-static int tune_stop(g_run_t *r, int k, int best, const char *sel)
+static int tune_stop(g_run_t *r, int k, int best, const char *sel,
+		     char *why, size_t whysize)
 {
 	const g_tune_t *t = &r->g->tune;
 	const tune_row_t *row = &r->rows[k];
-	char why[512];
 	if (t->stop_require && row->req_failed) {
-		snprintf(why, sizeof why, "stop = require: %s failed it",
+		snprintf(why, whysize, "stop = require: %s failed it",
 			 t->values[k]);
 	} else if (t->stop_peak && row->ok && best >= 0 && best != k &&
 		   (t->goal_max ? row->score < r->rows[best].score - t->tol
 				: row->score > r->rows[best].score + t->tol)) {
-		snprintf(why, sizeof why, "stop = past_peak: %s scored %s "
+		snprintf(why, whysize, "stop = past_peak: %s scored %s "
 			 "%.6g, worse than the best so far (%s: %.6g) by more "
 			 "than the tolerance %g", t->values[k], sel, row->score,
 			 t->values[best], r->rows[best].score, t->tol);
@@ -216,14 +234,6 @@ static int tune_stop(g_run_t *r, int k, int best, const char *sel)
 		return 0;
 	}
 	const g_stage_t *ts = &r->g->stages[t->stage];
-	for (int j = k + 1; j < t->nvalues; j++) {
-		tune_row_t *x = &r->rows[j];
-		x->skipped = 1;
-		x->score = NAN;
-		x->rc = ARMSTG_EINVAL;
-		snprintf(x->err, sizeof x->err, "%s", why);
-	}
-	r->nrows = t->nvalues;
 	rt_log(NULL, LOG_INFO, "tune %s.%s: %d value%s after %s skipped (%s)",
 	       ts->name, t->key, t->nvalues - k - 1,
 	       t->nvalues - k - 1 > 1 ? "s" : "", t->values[k], why);
@@ -386,6 +396,458 @@ static int tune_set_restore(g_run_t *r, const char *aff, const char *down,
 	return n;
 }
 
+/* What every candidate of one search shares (tune_search): the stage sets
+ * and, in a parallel search, the candidates' progress. */
+typedef struct tctx {
+	g_run_t *r;                 /* the run: rows, shared stages */
+	const char *down, *cand;    /* stage sets (tune_search) */
+	const char *early, *ereq, *pre;
+	int nearly;
+	const char *sel;            /* "METRIC [STRUCTURE]" */
+	/* parallel = N > 1, else 0 and none of these */
+	int par;
+	pthread_mutex_t mu;
+	pthread_cond_t cv;
+	signed char *phase;         /* per candidate: 0 running, 1 its tuned
+				       stage's hash known (same_skip), 2
+				       ended */
+} tctx_t;
+
+/* same_skip: tune_same for candidate k once it is final.  In a parallel
+ * search an earlier candidate may still run: wait until each earlier one
+ * has ended or is known to have other outputs (its hash), so that the
+ * rule reads what the search one after the other reads (the earliest
+ * scored one with these outputs).  -1 when x is cancelled (stop). */
+static int same_wait(tctx_t *c, g_run_t *x, int k)
+{
+	g_run_t *r = c->r;
+	if (!c->par)
+		return tune_same(r, k);
+	int same = -1;
+	pthread_mutex_lock(&c->mu);
+	c->phase[k] = 1;
+	pthread_cond_broadcast(&c->cv);
+	for (;;) {
+		if (rt_interrupted || __atomic_load_n(x->cancel,
+						      __ATOMIC_RELAXED))
+			break;
+		int ready = 1;
+		for (int j = 0; j < k && ready; j++)
+			ready = c->phase[j] == 2 ||
+				(c->phase[j] == 1 &&
+				 r->rows[j].hash != r->rows[k].hash);
+		if (ready) {
+			same = tune_same(r, k);
+			break;
+		}
+		/* timed: rt_interrupted comes from a signal handler */
+		struct timespec ts;
+		clock_gettime(CLOCK_REALTIME, &ts);
+		ts.tv_nsec += 50000000L;
+		if (ts.tv_nsec >= 1000000000L) {
+			ts.tv_sec++;
+			ts.tv_nsec -= 1000000000L;
+		}
+		pthread_cond_timedwait(&c->cv, &c->mu, &ts);
+	}
+	pthread_mutex_unlock(&c->mu);
+	return same;
+}
+
+/*
+ * Candidate k on the stages of x (the run itself, or a parallel
+ * candidate's run, whose instances of the stages that depend on the tuned
+ * one are its own): the stages reset, the value set, the passes, the score
+ * and conditions read into r->rows[k].  *counted: the row is the search's
+ * (it ran to its end, not interrupted).  0, or a negative code with err
+ * (a graph error: the run fails).
+ */
+static int cand_run(tctx_t *c, g_run_t *x, int k, int *counted, char *err,
+		    size_t errsize)
+{
+	g_run_t *r = c->r;
+	const graph_t *g = r->g;
+	const g_tune_t *t = &g->tune;
+	const g_stage_t *ts = &g->stages[t->stage];
+	tune_row_t *row = &r->rows[k];
+	int rc;
+	*counted = 0;
+	tune_reset(x, c->down);
+	rc = stage_set_param(x->rs[t->stage].st, t->key, t->values[k],
+			     row->err, sizeof row->err);
+	if (rc) { /* checked at load: cannot happen */
+		snprintf(err, errsize, "[tune] %s", row->err);
+		return rc;
+	}
+	double t0 = sched_now();
+	int efail = 0, same = -1;
+	row->rc = 0;
+	if (c->nearly || c->pre) {
+		/* phase one: the early conditions' stages (or the tuned stage
+		 * alone, for same_skip), then them */
+		for (int i = 0; i < g->nstages; i++)
+			x->rs[i].needed = c->nearly ? c->early[i] : c->pre[i];
+		row->rc = sched_pass(x, row->err, sizeof row->err);
+	}
+	if (c->nearly) {
+		if (!row->rc && !rt_interrupted) {
+			int req = tune_require(x, c->ereq, row->err,
+					       sizeof row->err, err, errsize);
+			if (req < 0)
+				return req;
+			efail = !req;
+		}
+	}
+	if (t->same_skip && !row->rc && !efail && !rt_interrupted) {
+		row->hash = tune_out_hash(x);
+		same = same_wait(c, x, k);
+	}
+	if (!row->rc && !efail && same < 0 && !rt_interrupted) {
+		for (int i = 0; i < g->nstages; i++)
+			x->rs[i].needed = c->cand[i];
+		row->rc = sched_pass(x, row->err, sizeof row->err);
+	}
+	row->wall_s = sched_now() - t0;
+	row->score = NAN;
+	if (rt_interrupted)
+		return 0;
+	*counted = 1;
+	if (efail) {
+		row->rc = ARMSTG_ENUMERIC;
+		row->req_failed = 1;
+		size_t l = strlen(row->err);
+		snprintf(row->err + l, sizeof row->err - l, " (require_early: "
+			 "the score was not computed)");
+	} else if (same >= 0) {
+		/* the earlier candidate's score and status, not computed
+		 * again */
+		const tune_row_t *e = &r->rows[same];
+		row->same_as = same + 1;
+		row->score = e->score;
+		row->ok = e->ok;
+		row->rc = e->rc;
+		row->req_failed = e->req_failed;
+		char why[sizeof row->err];
+		snprintf(why, sizeof why, "%s", e->err);
+		snprintf(row->err, sizeof row->err, "same %s outputs as %s%s%s",
+			 ts->name, t->values[same], e->ok ? "" : ": ",
+			 e->ok ? "" : why);
+		rt_log(NULL, LOG_INFO, "tune %s.%s = %s: stage '%s' gave the "
+		       "volumes and point sets of %s: not run further, its "
+		       "score taken", ts->name, t->key, t->values[k], ts->name,
+		       t->values[same]);
+	} else if (!row->rc) {
+		rc = tune_score(x, &row->score, err, errsize);
+		if (rc)
+			return rc;
+		row->scored = 1;
+		int req = isfinite(row->score)
+				  ? tune_require(x, NULL, row->err,
+						 sizeof row->err, err, errsize)
+				  : 1;
+		if (req < 0)
+			return req;
+		if (!req) {
+			row->rc = ARMSTG_ENUMERIC;
+			row->req_failed = 1;
+		} else if (isfinite(row->score)) {
+			row->ok = 1;
+		} else {
+			row->rc = ARMSTG_ENUMERIC;
+			snprintf(row->err, sizeof row->err, "score %s is %s",
+				 c->sel, isnan(row->score) ? "NaN"
+				 : row->score > 0 ? "inf" : "-inf");
+		}
+	}
+	return 0;
+}
+
+/* The search's state between candidates, which tune_commit advances in
+ * the candidates' order. */
+typedef struct tstate {
+	int best, nok, ncopy, nskip;
+	char why[512];              /* stop: the reason (nskip > 0) */
+} tstate_t;
+
+/* Candidate k has run (on x's stages) and r->rows[k] is its row: logged,
+ * the best so far, [tune] reuse's kept stages, [tune] stop.  The same for
+ * a parallel search, in the candidates' order.  0, or a negative code
+ * with err. */
+static int cand_commit(tctx_t *c, g_run_t *x, tune_keep_t *kp,
+		       const char *ksel, int k, tstate_t *s, char *err,
+		       size_t errsize)
+{
+	g_run_t *r = c->r;
+	const g_tune_t *t = &r->g->tune;
+	const g_stage_t *ts = &r->g->stages[t->stage];
+	tune_row_t *row = &r->rows[k];
+	if (row->ok) {
+		/* a same_skip copy was not scored: counted apart */
+		if (row->same_as)
+			s->ncopy++;
+		else
+			s->nok++;
+		rt_log(NULL, LOG_INFO, "tune %s.%s = %s: %s %.6g (%.1f s)",
+		       ts->name, t->key, t->values[k], c->sel, row->score,
+		       row->wall_s);
+		const tune_row_t *b = s->best >= 0 ? &r->rows[s->best] : NULL;
+		/* ties: the earlier value stays (same_skip: a copy ties with
+		 * its earlier candidate, never chosen) */
+		if (!row->same_as &&
+		    (!b || (t->goal_max ? row->score > b->score
+					: row->score < b->score)))
+			s->best = k;
+		/* the choice if the search ended now: keep it */
+		if (t->reuse && !row->same_as && tune_choice(r, s->best) == k) {
+			int rc = keep_take(x, kp, k, ksel, err, errsize);
+			if (rc)
+				return rc;
+		}
+	} else {
+		rt_log(NULL, LOG_WARN, "tune %s.%s = %s: failed (%.1f s): %s",
+		       ts->name, t->key, t->values[k], row->wall_s, row->err);
+	}
+	if (k + 1 < t->nvalues)
+		s->nskip = tune_stop(r, k, s->best, c->sel, s->why,
+				     sizeof s->why);
+	return 0;
+}
+
+/* One candidate at a time: 0, or a negative code with err. */
+static int search_serial(tctx_t *c, tune_keep_t *kp, const char *ksel,
+			 tstate_t *s, char *err, size_t errsize)
+{
+	g_run_t *r = c->r;
+	const g_tune_t *t = &r->g->tune;
+	for (int k = 0; k < t->nvalues && !rt_interrupted; k++) {
+		int counted = 0;
+		int rc = cand_run(c, r, k, &counted, err, errsize);
+		if (counted)
+			r->nrows = k + 1;
+		if (rc)
+			return rc;
+		if (!counted)
+			break; /* interrupted */
+		rc = cand_commit(c, r, kp, ksel, k, s, err, errsize);
+		if (rc)
+			return rc;
+		if (s->nskip) {
+			stop_mark(r, k, s->why);
+			break;
+		}
+	}
+	return 0;
+}
+
+/* [tune] parallel: one candidate's run, on its own instances of the stages
+ * that depend on the tuned one (the others: the run's, done, shared) */
+typedef struct tlane {
+	g_run_t run;
+	tctx_t *c;
+	int k;                      /* the candidate it runs */
+	int active;                 /* a thread runs or ran k (not joined) */
+	int cancel;                 /* atomic: end early (stop) */
+	int counted, rc;
+	pthread_t th;
+	char err[2048];
+} tlane_t;
+
+static void *lane_main(void *arg)
+{
+	tlane_t *l = arg;
+	tctx_t *c = l->c;
+	l->rc = cand_run(c, &l->run, l->k, &l->counted, l->err,
+			 sizeof l->err);
+	pthread_mutex_lock(&c->mu);
+	c->phase[l->k] = 2;
+	pthread_cond_broadcast(&c->cv);
+	pthread_mutex_unlock(&c->mu);
+	return NULL;
+}
+
+/* the lane's run: fresh instances (with the search_set overrides) of the
+ * stages that depend on the tuned one, the run's for the others.  0, or a
+ * negative code with err. */
+static int lane_init(tctx_t *c, tlane_t *l, const char *shared,
+		     sched_share_t *share, char *err, size_t errsize)
+{
+	g_run_t *r = c->r;
+	const graph_t *g = r->g;
+	const g_tune_t *t = &g->tune;
+	l->c = c;
+	l->run.g = g;
+	l->run.o = r->o;
+	l->run.best = -1;
+	l->run.staging = r->staging;
+	l->run.shared = shared;
+	l->run.share = share;
+	l->run.cancel = &l->cancel;
+	l->run.rs = calloc((size_t)g->nstages, sizeof *l->run.rs);
+	if (!l->run.rs) {
+		snprintf(err, errsize, "[tune] out of memory");
+		return ARMSTG_ENOMEM;
+	}
+	for (int i = 0; i < g->nstages; i++) {
+		r_stage_t *x = &l->run.rs[i];
+		if (shared[i]) {
+			*x = r->rs[i];
+			continue;
+		}
+		x->keep = r->rs[i].keep;
+		x->st = run_stage_new(g, i, err, errsize);
+		if (!x->st)
+			return ARMSTG_ENOMEM;
+		stage_set_outdir(x->st, r->o.outdir);
+		if (r->staging)
+			stage_set_staging(x->st, r->staging);
+		for (int j = 0; j < t->nset; j++) {
+			if (t->set[j].stage != i)
+				continue;
+			char e[1024];
+			int rc = stage_set_param(x->st, t->set[j].key,
+						 t->set[j].val, e, sizeof e);
+			if (rc) { /* checked at load: cannot happen */
+				snprintf(err, errsize, "[tune] search_set: "
+					 "stage '%s': %s", g->stages[i].name,
+					 e);
+				return rc;
+			}
+		}
+	}
+	return 0;
+}
+
+/* the lane's own instances, with their outputs and pending files */
+static void lane_free(tctx_t *c, tlane_t *l)
+{
+	const graph_t *g = c->r->g;
+	for (int i = 0; l->run.rs && i < g->nstages; i++) {
+		rt_stage_t *st = l->run.rs[i].st;
+		if (!c->down[i] || !st)
+			continue;
+		stage_fini(st);
+		for (int o = 0; o < g->stages[i].plug.desc->n_outputs; o++)
+			msg_unref(stage_take_output(st, o));
+		stage_discard_files(st);
+		stage_free(st);
+	}
+	free(l->run.rs);
+	l->run.rs = NULL;
+}
+
+/*
+ * [tune] parallel = N: up to N candidates run at once, each on its own
+ * thread and instances, in the candidates' order; each is committed
+ * (cand_commit: the best so far, reuse, stop) in that order once it and
+ * every earlier one have ended, so the rows and the choice are those of
+ * the search one after the other.  The candidates after one that stops
+ * the search may have started: they are cancelled (their running stages
+ * end first), what they ran is dropped and tune.tsv lists them skipped;
+ * same_skip waits (same_wait) where an earlier candidate with the same
+ * outputs still runs.  0, or a negative code with err.
+ */
+static int search_parallel(tctx_t *c, tune_keep_t *kp, const char *ksel,
+			   tstate_t *s, char *err, size_t errsize)
+{
+	g_run_t *r = c->r;
+	const graph_t *g = r->g;
+	const g_tune_t *t = &g->tune;
+	int par = t->parallel < t->nvalues ? t->parallel : t->nvalues;
+	int rc = 0, next = 0, stop_k = -1;
+	tlane_t *lanes = calloc((size_t)par, sizeof *lanes);
+	char *shared = calloc((size_t)g->nstages, 1);
+	sched_share_t *share = sched_share_new(sched_threads_total(),
+					       par * g->nstages);
+	c->phase = calloc((size_t)t->nvalues, 1);
+	if (!lanes || !shared || !share || !c->phase) {
+		snprintf(err, errsize, "[tune] out of memory");
+		rc = ARMSTG_ENOMEM;
+		goto out;
+	}
+	for (int i = 0; i < g->nstages; i++)
+		shared[i] = (char)!c->down[i];
+	for (int l = 0; l < par && !rc; l++)
+		rc = lane_init(c, &lanes[l], shared, share, err, errsize);
+	if (rc)
+		goto out;
+	rt_log(NULL, LOG_INFO, "tune: up to %d candidates at once "
+	       "(parallel = %d), sharing %d threads", par, t->parallel,
+	       sched_threads_total());
+	for (int k = 0; k < t->nvalues; k++) {
+		/* the next candidates into the free lanes, in order */
+		while (next < t->nvalues && next < k + par && !rt_interrupted) {
+			tlane_t *l = &lanes[next % par];
+			l->k = next;
+			l->cancel = 0;
+			l->counted = l->rc = 0;
+			l->err[0] = 0;
+			if (pthread_create(&l->th, NULL, lane_main, l)) {
+				snprintf(err, errsize, "[tune] parallel: cannot "
+					 "start a thread for candidate %s",
+					 t->values[next]);
+				rc = ARMSTG_ENOMEM;
+				goto out;
+			}
+			l->active = 1;
+			next++;
+		}
+		if (next <= k)
+			break; /* interrupted */
+		tlane_t *l = &lanes[k % par];
+		pthread_mutex_lock(&c->mu);
+		while (c->phase[k] != 2)
+			pthread_cond_wait(&c->cv, &c->mu);
+		pthread_mutex_unlock(&c->mu);
+		pthread_join(l->th, NULL);
+		l->active = 0;
+		if (l->counted)
+			r->nrows = k + 1;
+		if (l->rc) {
+			rc = l->rc;
+			snprintf(err, errsize, "%s", l->err);
+			goto out;
+		}
+		if (!l->counted)
+			break; /* interrupted */
+		rc = cand_commit(c, &l->run, kp, ksel, k, s, err, errsize);
+		if (rc)
+			goto out;
+		if (s->nskip) {
+			stop_k = k;
+			break;
+		}
+	}
+out:
+	/* the candidates still running (after a stop, a failure or an
+	 * interruption): cancelled, waited for, dropped */
+	for (int l = 0; lanes && l < par; l++)
+		if (lanes[l].active)
+			__atomic_store_n(&lanes[l].cancel, 1, __ATOMIC_RELAXED);
+	if (c->phase) {
+		pthread_mutex_lock(&c->mu);
+		pthread_cond_broadcast(&c->cv);
+		pthread_mutex_unlock(&c->mu);
+	}
+	for (int l = 0; lanes && l < par; l++)
+		if (lanes[l].active) {
+			pthread_join(lanes[l].th, NULL);
+			lanes[l].active = 0;
+		}
+	if (stop_k >= 0)
+		stop_mark(r, stop_k, s->why);
+	else /* rows the search does not count (the table stops before) */
+		for (int j = r->nrows; j < t->nvalues; j++)
+			memset(&r->rows[j], 0, sizeof r->rows[j]);
+	for (int l = 0; lanes && l < par; l++)
+		lane_free(c, &lanes[l]);
+	free(lanes);
+	free(shared);
+	sched_share_free(share);
+	free(c->phase);
+	c->phase = NULL;
+	return rc;
+}
+
 /*
  * The [tune] search, before the final run.  Stages the score needs that do
  * not depend on the tuned stage run once (pass 0) and keep their outputs
@@ -535,135 +997,25 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	rc = sched_pass(r, err, errsize);
 	if (rc)
 		goto out;
-	for (int k = 0; k < t->nvalues && !rt_interrupted; k++) {
-		tune_row_t *row = &r->rows[k];
-		tune_reset(r, down);
-		rc = stage_set_param(r->rs[t->stage].st, t->key, t->values[k],
-				     row->err, sizeof row->err);
-		if (rc) { /* checked at load: cannot happen */
-			snprintf(err, errsize, "[tune] %s", row->err);
-			goto out;
-		}
-		double t0 = sched_now();
-		int efail = 0, same = -1;
-		row->rc = 0;
-		if (nearly || pre) {
-			/* phase one: the early conditions' stages (or the
-			 * tuned stage alone, for same_skip), then them */
-			for (int i = 0; i < g->nstages; i++)
-				r->rs[i].needed = nearly ? early[i] : pre[i];
-			row->rc = sched_pass(r, row->err, sizeof row->err);
-		}
-		if (nearly) {
-			if (!row->rc && !rt_interrupted) {
-				int req = tune_require(r, ereq, row->err,
-						       sizeof row->err, err,
-						       errsize);
-				if (req < 0) {
-					rc = req;
-					goto out;
-				}
-				efail = !req;
-			}
-		}
-		if (t->same_skip && !row->rc && !efail && !rt_interrupted) {
-			row->hash = tune_out_hash(r);
-			same = tune_same(r, k);
-		}
-		if (!row->rc && !efail && same < 0 && !rt_interrupted) {
-			for (int i = 0; i < g->nstages; i++)
-				r->rs[i].needed = cand[i];
-			row->rc = sched_pass(r, row->err, sizeof row->err);
-		}
-		row->wall_s = sched_now() - t0;
-		row->score = NAN;
-		if (rt_interrupted)
-			break;
-		r->nrows = k + 1;
-		if (efail) {
-			row->rc = ARMSTG_ENUMERIC;
-			row->req_failed = 1;
-			size_t l = strlen(row->err);
-			snprintf(row->err + l, sizeof row->err - l, " (require_early: "
-				 "the score was not computed)");
-		} else if (same >= 0) {
-			/* the earlier candidate's score and status, not
-			 * computed again */
-			const tune_row_t *e = &r->rows[same];
-			row->same_as = same + 1;
-			row->score = e->score;
-			row->ok = e->ok;
-			row->rc = e->rc;
-			row->req_failed = e->req_failed;
-			char why[sizeof row->err];
-			snprintf(why, sizeof why, "%s", e->err);
-			snprintf(row->err, sizeof row->err, "same %s outputs as "
-				 "%s%s%s", ts->name, t->values[same],
-				 e->ok ? "" : ": ", e->ok ? "" : why);
-			rt_log(NULL, LOG_INFO, "tune %s.%s = %s: stage '%s' gave "
-			       "the volumes and point sets of %s: not run "
-			       "further, its score taken", ts->name, t->key,
-			       t->values[k], ts->name, t->values[same]);
-		} else if (!row->rc) {
-			rc = tune_score(r, &row->score, err, errsize);
-			if (rc)
-				goto out;
-			row->scored = 1;
-			int req = isfinite(row->score)
-					  ? tune_require(r, NULL, row->err,
-							 sizeof row->err, err,
-							 errsize)
-					  : 1;
-			if (req < 0) {
-				rc = req;
-				goto out;
-			}
-			if (!req) {
-				row->rc = ARMSTG_ENUMERIC;
-				row->req_failed = 1;
-			} else if (isfinite(row->score)) {
-				row->ok = 1;
-			} else {
-				row->rc = ARMSTG_ENUMERIC;
-				snprintf(row->err, sizeof row->err,
-					 "score %s is %s", sel,
-					 isnan(row->score) ? "NaN"
-					 : row->score > 0 ? "inf" : "-inf");
-			}
-		}
-		if (row->ok) {
-			/* a same_skip copy was not scored: counted apart */
-			if (row->same_as)
-				ncopy++;
-			else
-				nok++;
-			rt_log(NULL, LOG_INFO, "tune %s.%s = %s: %s %.6g "
-			       "(%.1f s)", ts->name, t->key, t->values[k], sel,
-			       row->score, row->wall_s);
-			const tune_row_t *b = best >= 0 ? &r->rows[best] : NULL;
-			/* ties: the earlier value stays (same_skip: a copy
-			 * ties with its earlier candidate, never chosen) */
-			if (!row->same_as &&
-			    (!b || (t->goal_max ? row->score > b->score
-						: row->score < b->score)))
-				best = k;
-			/* the choice if the search ended now: keep it */
-			if (t->reuse && !row->same_as &&
-			    tune_choice(r, best) == k) {
-				rc = keep_take(r, &kp, k, ksel, err, errsize);
-				if (rc)
-					goto out;
-			}
-		} else {
-			rt_log(NULL, LOG_WARN, "tune %s.%s = %s: failed "
-			       "(%.1f s): %s", ts->name, t->key, t->values[k],
-			       row->wall_s, row->err);
-		}
-		if (k + 1 < t->nvalues)
-			nskip = tune_stop(r, k, best, sel);
-		if (nskip)
-			break;
+	tctx_t c = { .r = r, .down = down, .cand = cand, .early = early,
+		     .ereq = ereq, .pre = pre, .nearly = nearly, .sel = sel,
+		     .par = t->parallel > 1 && t->nvalues > 1 };
+	tstate_t ss = { .best = -1 };
+	if (c.par) {
+		pthread_mutex_init(&c.mu, NULL);
+		pthread_cond_init(&c.cv, NULL);
+		rc = search_parallel(&c, &kp, ksel, &ss, err, errsize);
+		pthread_mutex_destroy(&c.mu);
+		pthread_cond_destroy(&c.cv);
+	} else {
+		rc = search_serial(&c, &kp, ksel, &ss, err, errsize);
 	}
+	best = ss.best;
+	nok = ss.nok;
+	ncopy = ss.ncopy;
+	nskip = ss.nskip;
+	if (rc)
+		goto out;
 	tune_reset(r, down);
 	if (rt_interrupted) {
 		snprintf(err, errsize, "interrupted");

@@ -12,6 +12,7 @@
  * what exists and is read by the search, the other keys are well formed.
  * Errors go through g_err, naming the [tune] key.
  */
+#include <errno.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -31,7 +32,8 @@ static const char *const tune_keys[] = { "param", "values", "score", "metric",
 					 "tolerance", "metric_column",
 					 "structure_column", "value_column",
 					 "stop", "reuse", "require_early",
-					 "search_set", "same_skip" };
+					 "search_set", "same_skip",
+					 "parallel" };
 
 /* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
  * with an error reported when the list is empty or has an empty item. */
@@ -440,7 +442,7 @@ void tune_check(graph_t *g)
 			     "structure, goal, require, tolerance, "
 			     "metric_column, structure_column, value_column, "
 			     "stop, reuse, require_early, search_set, "
-			     "same_skip)");
+			     "same_skip, parallel)");
 		else if (!kv->val[0] && strcmp(kv->key, "values"))
 			g_err(g, kv->line, NULL, kv->key, "empty value");
 	}
@@ -606,6 +608,21 @@ void tune_check(graph_t *g)
 			      q->structure, q->structure[0] ? " " : "", q->op,
 			      q->value);
 		free(memo);
+	}
+	/* parallel = N: candidates at once, a whole number 1..64 */
+	const g_kv_t *pk2 = g_kv_find(t->kv, t->nkv, "parallel");
+	t->parallel = 1;
+	if (pk2 && pk2->val[0]) {
+		char *end = NULL;
+		errno = 0;
+		long n = strtol(pk2->val, &end, 10);
+		if (end == pk2->val || *end || errno || n < 1 || n > 64)
+			g_err(g, pk2->line, NULL, "parallel", "[tune] parallel "
+			      "must be a whole number from 1 to 64 (the "
+			      "candidates run at once; 1: one after the "
+			      "other), got '%s'", pk2->val);
+		else
+			t->parallel = (int)n;
 	}
 	/* after param (the tuned parameter) and require (the tables read) */
 	const g_kv_t *xk = g_kv_find(t->kv, t->nkv, "search_set");

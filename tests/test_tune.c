@@ -29,6 +29,9 @@
 #include <signal.h>
 #include <sys/wait.h>
 #include <time.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 #include "testutil.h"
 #include "graph_int.h"
@@ -628,7 +631,24 @@ static void test_set_rules(void **state)
 		{ "tune.steps=3", "key 'steps': unknown key in [tune] (known: "
 		  "param, values, score, metric, structure, goal, require, "
 		  "tolerance, metric_column, structure_column, value_column, "
-		  "stop, reuse, require_early, search_set, same_skip)" },
+		  "stop, reuse, require_early, search_set, same_skip, "
+		  "parallel)" },
+		/* parallel: a whole number 1..64 */
+		{ "tune.parallel=0", "key 'parallel': [tune] parallel must be "
+		  "a whole number from 1 to 64 (the candidates run at once; "
+		  "1: one after the other), got '0'" },
+		{ "tune.parallel=-2", "key 'parallel': [tune] parallel must "
+		  "be a whole number from 1 to 64 (the candidates run at "
+		  "once; 1: one after the other), got '-2'" },
+		{ "tune.parallel=2.5", "key 'parallel': [tune] parallel must "
+		  "be a whole number from 1 to 64 (the candidates run at "
+		  "once; 1: one after the other), got '2.5'" },
+		{ "tune.parallel=two", "key 'parallel': [tune] parallel must "
+		  "be a whole number from 1 to 64 (the candidates run at "
+		  "once; 1: one after the other), got 'two'" },
+		{ "tune.parallel=65", "key 'parallel': [tune] parallel must "
+		  "be a whole number from 1 to 64 (the candidates run at "
+		  "once; 1: one after the other), got '65'" },
 		{ "tune.same_skip=yes", "key 'same_skip': [tune] same_skip "
 		  "must be true or false, got 'yes'" },
 		{ "tune.reuse=yes", "key 'reuse': [tune] reuse must be true "
@@ -1573,6 +1593,237 @@ static void test_shipped_push_rule(void **state)
 	setenv("ARMSTG_PLUGIN_PATH", plugdir, 1);
 }
 
+/* ---- [tune] parallel ---- */
+
+/* the committed files of a run, but run.tsv (times), and tune.tsv (or
+ * tune.failed.tsv) but its wall_s column: "NAME\nCONTENT\n..." sorted by
+ * name, into buf */
+static void out_digest(const char *out, char *buf, size_t n)
+{
+	struct dirent **de = NULL;
+	int m = scandir(out, &de, NULL, alphasort);
+	size_t o = 0;
+	buf[0] = 0;
+	assert_true(m >= 0);
+	for (int i = 0; i < m; i++) {
+		const char *nm = de[i]->d_name;
+		if (nm[0] != '.' && strcmp(nm, "run.tsv") &&
+		    strcmp(nm, "run.failed.tsv") && o < n) {
+			o += (size_t)snprintf(buf + o, n - o, "%s\n", nm);
+			if (!strncmp(nm, "tune", 4)) {
+				/* every column but wall_s (the third) */
+				char *t = strdup(slurp(in(out, nm)));
+				for (char *ln = strtok(t, "\n"); ln && o < n;
+				     ln = strtok(NULL, "\n")) {
+					int col = 0;
+					for (const char *c = ln; *c && o < n;
+					     c++) {
+						if (*c == '\t')
+							col++;
+						if (col != 2)
+							buf[o++] = *c;
+					}
+					if (o < n)
+						buf[o++] = '\n';
+				}
+				buf[o < n ? o : n - 1] = 0;
+				free(t);
+			} else {
+				o += (size_t)snprintf(buf + o, n - o, "%s",
+						      slurp(in(out, nm)));
+			}
+		}
+		free(de[i]);
+	}
+	free(de);
+}
+
+/* one configuration with parallel = 1 (the key absent) and parallel =
+ * par: the same rc and error, the same committed files (chosen.txt,
+ * fit-N.txt, pre-0.txt, ...) byte for byte, and the same tune.tsv but
+ * for the candidates' times */
+static void expect_parallel_same(const char *const *sets, int nsets,
+				 int jobs, int par)
+{
+	static char d1[65536], d2[65536];
+	const char *s2[16];
+	char pk[32];
+	assert_true(nsets < 15);
+	for (int i = 0; i < nsets; i++)
+		s2[i] = sets[i];
+	snprintf(pk, sizeof pk, "tune.parallel=%d", par);
+	s2[nsets] = pk;
+	trun_t a, b;
+	run_with(&a, sets, nsets, jobs, NULL, 0);
+	run_with(&b, s2, nsets + 1, jobs, NULL, 0);
+	if (a.rc != b.rc)
+		fail_msg("%s: rc %d (%s) with parallel = 1, %d (%s) with %d",
+			 nsets ? sets[0] : "-", a.rc, a.err, b.rc, b.err, par);
+	assert_string_equal(a.err, b.err);
+	out_digest(a.out, d1, sizeof d1);
+	out_digest(b.out, d2, sizeof d2);
+	assert_non_null(strstr(d1, "tune"));
+	if (strcmp(d1, d2))
+		fail_msg("%s: the outputs differ with parallel = %d:\n%s\n"
+			 "---\n%s", nsets ? sets[0] : "-", par, d1, d2);
+	done(&a);
+	done(&b);
+}
+
+/* parallel = 3 (and 2, 5) gives the choice, the tune.tsv rows and the
+ * files of the search one after the other, with each key and with every
+ * key of the shipped growth graphs at once: sim sleeps so that the
+ * candidates overlap, fit sleeps less so that a later candidate can end
+ * before an earlier one */
+static void test_parallel_same_choice(void **state)
+{
+	(void)state;
+	const char *fc = "fit.count_file=${TT_COUNT}/fit.count";
+	const char *sl = "sim.sleep_ms=40";
+	struct { const char *s[10]; } c[] = {
+		{ { sl } },
+		{ { sl, "tune.goal=max" } },
+		{ { sl, "tune.tolerance=1.5" } },
+		{ { sl, "tune.tolerance=1.5", "tune.reuse=true" } },
+		{ { sl, "tune.reuse=true", "fit.target=3",
+		    "tune.values=2, 2.3, 3", "tune.tolerance=0.6" } },
+		{ { sl, "sim.fail_at=2" } },
+		{ { sl, "sim.nan_at=4", "tune.reuse=true" } },
+		{ { sl, "tune.stop=past_peak" } },
+		{ { sl, "tune.stop=past_peak", "tune.goal=max" } },
+		{ { sl, "tune.stop=past_peak", "sim.fail_at=2" } },
+		{ { sl, "tune.require=sq far > 100", "tune.stop=require" } },
+		{ { sl, "tune.require=sq far > 110",
+		    "tune.stop=require past_peak", "tune.reuse=true" } },
+		{ { sl, "tune.require=sq far <= 150, alt.table: sq near < 1",
+		    "tune.require_early=true", fc } },
+		{ { sl, "sim.cap=3", "tune.same_skip=true", fc } },
+		{ { sl, "sim.cap=2", "tune.same_skip=true",
+		    "tune.require=sq far > 130", fc } },
+		{ { sl, "sim.cap=3", "tune.score=sim.table",
+		    "tune.metric=offset", "tune.goal=max",
+		    "tune.same_skip=true" } },
+		{ { sl, "tune.search_set=fit.offset=1", "tune.reuse=true", fc } },
+		{ { sl, "tune.search_set=pre.offset=1", "tune.reuse=true" } },
+		/* every key of graphs/armstg.ini's [tune] at once */
+		{ { sl, "sim.cap=4", "fit.sleep_ms=5",
+		    "tune.require=sq far <= 150, alt.table: sq near < 5",
+		    "tune.tolerance=0.5", "tune.stop=require",
+		    "tune.reuse=true", "tune.require_early=true",
+		    "tune.search_set=fit.offset=1", "tune.same_skip=true" } },
+		/* every value fails: the same error, tune.failed.tsv */
+		{ { sl, "tune.require=neg > 0", "tune.reuse=true" } },
+		{ { sl, "tune.require=sq far < 100", "tune.stop=require" } },
+	};
+	for (int i = 0; i < ARMSTG_COUNT(c); i++) {
+		int n = 0;
+		while (n < 10 && c[i].s[n])
+			n++;
+		expect_parallel_same(c[i].s, n, 1, 3);
+	}
+	/* two jobs per candidate; every candidate at once; two at once */
+	const char *shipped[] = { sl, "sim.cap=4",
+				  "tune.require=sq far <= 150, alt.table: sq "
+				  "near < 5", "tune.tolerance=0.5",
+				  "tune.stop=require", "tune.reuse=true",
+				  "tune.require_early=true",
+				  "tune.search_set=fit.offset=1",
+				  "tune.same_skip=true" };
+	expect_parallel_same(shipped, ARMSTG_COUNT(shipped), 2, 3);
+	expect_parallel_same(shipped, ARMSTG_COUNT(shipped), 1, 5);
+	expect_parallel_same(shipped, ARMSTG_COUNT(shipped), 1, 2);
+}
+
+/* the candidates overlap: with sim sleeping 300 ms per candidate, five
+ * candidates take >= 1.5 s one after the other (run.tsv's tune row sums
+ * their times; the run's total is at least that), and with parallel = 3
+ * the run's total is well under that sum (two waves of 0.3 s) */
+static double runtab_num(const char *out, const char *row)
+{
+	char key[64];
+	snprintf(key, sizeof key, "\n%s\t", row);
+	const char *p = strstr(slurp(in(out, "run.tsv")), key);
+	assert_non_null(p);
+	/* stage plugin status wall_s */
+	for (int tabs = 0; tabs < 3; p++)
+		tabs += *p == '\t';
+	return atof(p);
+}
+
+static void test_parallel_overlaps(void **state)
+{
+	(void)state;
+	const char *a[] = { "sim.sleep_ms=300" };
+	const char *b[] = { "sim.sleep_ms=300", "tune.parallel=3" };
+	trun_t r;
+	run_sets(&r, a, 1);
+	assert_int_equal(r.rc, 0);
+	double sum1 = runtab_num(r.out, "tune"), tot1 = runtab_num(r.out, "total");
+	assert_true(sum1 >= 1.5);
+	assert_true(tot1 >= sum1);
+	done(&r);
+	run_sets(&r, b, 2);
+	assert_int_equal(r.rc, 0);
+	double sum3 = runtab_num(r.out, "tune"), tot3 = runtab_num(r.out, "total");
+	assert_true(sum3 >= 1.5);
+	if (!(tot3 < 0.75 * sum3))
+		fail_msg("parallel = 3: total %.3f s, candidates %.3f s: no "
+			 "overlap", tot3, sum3);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 3.0, 0);
+	/* sim ran once per candidate and once in the final run */
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 6);
+	done(&r);
+}
+
+/* the running stages of every candidate share the threads: 8 threads,
+ * parallel = 2, sim sleeping 300 ms: the chosen candidate's sim (3, with
+ * 4's beside it), kept by reuse, ran with half of them (3 when a third
+ * stage ran beside it a moment); one after the other it had all 8.  (A
+ * candidate's own pass without the share would have had the default of
+ * its thread, OMP_NUM_THREADS = 2 under make test.) */
+static void test_parallel_thread_share(void **state)
+{
+	(void)state;
+#ifdef _OPENMP
+	const int prev = omp_get_max_threads();
+	omp_set_num_threads(8);
+	for (int par = 1; par <= 2; par++) {
+		trun_t r;
+		new_dirs(&r);
+		char pk[32];
+		snprintf(pk, sizeof pk, "tune.parallel=%d", par);
+		const char *s[] = { "sim.sleep_ms=300", "tune.reuse=true", pk };
+		graph_t *g = graph_load(graph_path, s, 3, r.err, sizeof r.err);
+		if (!g)
+			fail_msg("%s", r.err);
+		run_opts_t o = { .outdir = r.out, .jobs = 1, .quiet = 1 };
+		g_run_t *x = run_new(g, &o, r.err, sizeof r.err);
+		assert_non_null(x);
+		for (int i = 0; i < g->nstages; i++)
+			sched_mark_needed(x, i);
+		int rc = tune_search(x, r.err, sizeof r.err);
+		if (rc)
+			fail_msg("rc %d: %s", rc, r.err);
+		assert_int_equal(x->best, 2);
+		int sim = g_stage_index(g, "sim");
+		assert_int_equal(x->reused, 2); /* sim and fit */
+		assert_int_equal(x->rs[sim].state, ST_DONE);
+		int tm = x->rs[sim].threads_min;
+		if (par == 1 ? tm != 8 : tm < 3 || tm > 4)
+			fail_msg("parallel = %d: sim ran with %d threads", par,
+				 tm);
+		for (int i = 0; i < g->nstages; i++)
+			stage_discard_files(x->rs[i].st);
+		run_free(x);
+		graph_free(g);
+		done(&r);
+	}
+	omp_set_num_threads(prev);
+#else
+	skip();
+#endif
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1598,6 +1849,9 @@ int main(void)
 		cmocka_unit_test(test_targets),
 		cmocka_unit_test(test_interrupt),
 		cmocka_unit_test(test_run_graph_after_tune),
+		cmocka_unit_test(test_parallel_same_choice),
+		cmocka_unit_test(test_parallel_overlaps),
+		cmocka_unit_test(test_parallel_thread_share),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
