@@ -21,6 +21,8 @@
  *                       search_set = STAGE.KEY=VALUE; ... (optional:
  *                       overrides the candidates run with, not the
  *                       final run),
+ *                       parallel = N (optional, 1..64: candidates
+ *                       run at once; the same choice),
  *                       metric_column = C, structure_column = C,
  *                       value_column = C (optional: the score table's
  *                       columns; default metric, structure, value)

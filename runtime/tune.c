@@ -48,6 +48,29 @@
  * over it (tune_same).  tune.tsv lists the candidates
  * (tune_table_write), the skipped ones too, and the overrides in a column
  * search_set when there are some.
+ *
+ * parallel = N (search_parallel): up to N candidates run at once, each on
+ * its own thread with its own instances of the stages that depend on the
+ * tuned one (a g_run_t per lane: fresh instances with the graph's values,
+ * search_set's overrides and the candidate's value), reading the shared
+ * stages' outputs (run once, before) by reference: those instances are
+ * the run's, done and only read (msg_t refcounts are atomic, outputs
+ * frozen); sched_pass leaves them alone (g_run_t.shared).  The running
+ * stages of every lane split the threads as one run's do
+ * (sched_share_t).  The candidates start in order and are committed in
+ * order (cand_commit: the best so far, reuse's kept stages, stop) once
+ * they and the earlier ones have ended, so every rule reads what it reads
+ * one after the other and the rows, the choice and the final outputs are
+ * the same.  stop: the candidates after the one that stops the search
+ * may have started; they are cancelled (no further stage; the running one
+ * ends first), what they ran is dropped and tune.tsv lists them skipped
+ * as before.  same_skip: a candidate whose tuned stage's outputs match
+ * an earlier one that still runs waits for it (same_wait), then takes its
+ * score as before, or runs on if it was not scored.  Candidates run
+ * beyond those the search one after the other would run (after a stop)
+ * only cost time.  Memory: each lane holds one candidate's outputs
+ * (and reuse one more).  The times in tune.tsv are each candidate's own
+ * (their sum, run.tsv's row tune, exceeds the search's wall time).
  */
 #include <math.h>
 #include <pthread.h>

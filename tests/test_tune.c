@@ -1561,6 +1561,7 @@ static void test_shipped_push_rule(void **state)
 	snprintf(p, sizeof p, "%s/plugins", tu_build_dir());
 	setenv("ARMSTG_PLUGIN_PATH", p, 1);
 	unsetenv("PUSH_VALUES");
+	unsetenv("TUNE_PARALLEL");
 	for (size_t k = 0; k < ARMSTG_COUNT(graphs); k++) {
 		graph_t *g = graph_load(graphs[k], NULL, 0, err, sizeof err);
 		if (!g)
@@ -1588,7 +1589,22 @@ static void test_shipped_push_rule(void **state)
 		assert_string_equal(q->structure, "ventricles");
 		assert_string_equal(q->op, "<=");
 		assert_float_equal(q->value, 0.1, 0);
+		/* one candidate at a time unless TUNE_PARALLEL says more */
+		assert_int_equal(t->parallel, 1);
 		graph_free(g);
+		setenv("TUNE_PARALLEL", "3", 1);
+		g = graph_load(graphs[k], NULL, 0, err, sizeof err);
+		if (!g)
+			fail_msg("%s: %s", graphs[k], err);
+		assert_int_equal(g->tune.parallel, 3);
+		graph_free(g);
+		setenv("TUNE_PARALLEL", "1.5", 1);
+		assert_null(graph_load(graphs[k], NULL, 0, err, sizeof err));
+		assert_non_null(strstr(err, "key 'parallel': [tune] parallel "
+					    "must be a whole number from 1 to "
+					    "64 (the candidates run at once; 1: "
+					    "one after the other), got '1.5'"));
+		unsetenv("TUNE_PARALLEL");
 	}
 	setenv("ARMSTG_PLUGIN_PATH", plugdir, 1);
 }
