@@ -1727,6 +1727,9 @@ static void test_parallel_same_choice(void **state)
 		    "tune.tolerance=0.5", "tune.stop=require",
 		    "tune.reuse=true", "tune.require_early=true",
 		    "tune.search_set=fit.offset=1", "tune.same_skip=true" } },
+		/* a graph error (no such row in the score table): the run
+		 * fails at the first candidate with the same message */
+		{ { sl, "tune.metric=nosuch" } },
 		/* every value fails: the same error, tune.failed.tsv */
 		{ { sl, "tune.require=neg > 0", "tune.reuse=true" } },
 		{ { sl, "tune.require=sq far < 100", "tune.stop=require" } },
@@ -1788,6 +1791,38 @@ static void test_parallel_overlaps(void **state)
 	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 3.0, 0);
 	/* sim ran once per candidate and once in the final run */
 	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 6);
+	done(&r);
+}
+
+/* interrupted while three candidates run: the run stops as one after
+ * the other does, nothing written, no candidate counted */
+static void test_parallel_interrupt(void **state)
+{
+	(void)state;
+	trun_t r;
+	const char *sets[] = { "sim.sleep_ms=1000", "tune.parallel=3" };
+	new_dirs(&r);
+	graph_t *g = graph_load(graph_path, sets, 2, r.err, sizeof r.err);
+	assert_non_null(g);
+	pthread_t th;
+	char count[128];
+	snprintf(count, sizeof count, "%s/sim.count", r.cnt);
+	assert_int_equal(pthread_create(&th, NULL, interrupter, count), 0);
+	run_opts_t o = { .outdir = r.out, .jobs = 1, .quiet = 1 };
+	double t0 = sched_now();
+	int rc = graph_run(g, &o, r.err, sizeof r.err);
+	double wall = sched_now() - t0;
+	pthread_join(th, NULL);
+	rt_interrupted = 0;
+	graph_free(g);
+	assert_int_equal(rc, ARMSTG_ECANCELLED);
+	assert_string_equal(r.err, "interrupted");
+	/* up to three candidates started at once (the third may see the
+	 * interrupt first), no fourth */
+	assert_true(count_lines(count) >= 2 && count_lines(count) <= 3);
+	assert_true(wall < 5);
+	no_outputs_after_interrupt(r.out);
+	assert_false(tu_exists(in(r.out, "tune.failed.tsv")));
 	done(&r);
 }
 
@@ -1867,6 +1902,7 @@ int main(void)
 		cmocka_unit_test(test_run_graph_after_tune),
 		cmocka_unit_test(test_parallel_same_choice),
 		cmocka_unit_test(test_parallel_overlaps),
+		cmocka_unit_test(test_parallel_interrupt),
 		cmocka_unit_test(test_parallel_thread_share),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
