@@ -219,20 +219,6 @@ static void release_inputs(g_run_t *r, int v)
 	}
 }
 
-/*
- * The OpenMP threads of the running stages (rn->mu held), set again each
- * time a stage starts or ends: a stage's own `threads` key, else an equal
- * part of the threads the keyed stages leave (at least 1; the remainder to
- * the earliest in the graph).  A stage that runs alone has every thread.
- * The plugins read their share (host->threads) when they start, and the
- * long ones again as they go (demons: each iteration), so a registration
- * that started beside a few short stages gets the cores they free: a fixed
- * share of OMP_NUM_THREADS / --jobs left half of a 2-core machine idle
- * under --jobs 2 while the growth and the registration ran one after the
- * other (pat0001, one push depth: 71.5 s, against 51.2 s under --jobs 1;
- * bench/pipeline/results.md).  Results do not depend on the thread count
- * (the plugins' sums are in row order).
- */
 /* the same split over the running stages of every run that shares the
  * threads (r->share), the remainder to the earliest started */
 static void resplit_shared(sched_share_t *sh)
@@ -265,6 +251,20 @@ static void resplit_shared(sched_share_t *sh)
 	pthread_mutex_unlock(&sh->mu);
 }
 
+/*
+ * The OpenMP threads of the running stages (rn->mu held), set again each
+ * time a stage starts or ends: a stage's own `threads` key, else an equal
+ * part of the threads the keyed stages leave (at least 1; the remainder to
+ * the earliest in the graph).  A stage that runs alone has every thread.
+ * The plugins read their share (host->threads) when they start, and the
+ * long ones again as they go (demons: each iteration), so a registration
+ * that started beside a few short stages gets the cores they free: a fixed
+ * share of OMP_NUM_THREADS / --jobs left half of a 2-core machine idle
+ * under --jobs 2 while the growth and the registration ran one after the
+ * other (pat0001, one push depth: 71.5 s, against 51.2 s under --jobs 1;
+ * bench/pipeline/results.md).  Results do not depend on the thread count
+ * (the plugins' sums are in row order).
+ */
 static void resplit(runner_t *rn)
 {
 	g_run_t *r = rn->r;
