@@ -128,6 +128,10 @@ const char *stage_error(rt_stage_t *s);  /* last message, "" if none */
 void stage_set_outdir(rt_stage_t *s, const char *dir);
 void stage_set_threads(rt_stage_t *s, int n);
 int stage_threads(const rt_stage_t *s);
+/* host->cancelled also answers non-zero once *flag is (read atomically;
+ * NULL: only when the run is interrupted); a [tune] parallel candidate
+ * cancelled by stop (sched.c) */
+void stage_set_cancel(rt_stage_t *s, const int *flag);
 /* Write every file of the stage into this folder (a run's staging folder)
  * under a temporary name, whatever its final folder; NULL: beside the final
  * file (a stage run on its own).  The run commits them (outdir_commit). */

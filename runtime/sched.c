@@ -14,7 +14,8 @@
  * its own g_run_t (tune.c): such a run leaves the instances it shares
  * with the others (r->shared) alone, splits the threads with their
  * running stages (r->share, a sched_share_t), and ends early when
- * r->cancel is set.  A run without them (every other) is unchanged.
+ * r->cancel is set (its running stages see host->cancelled).  A run
+ * without them (every other) is unchanged.
  */
 #include <pthread.h>
 #ifdef _OPENMP
@@ -162,6 +163,8 @@ static void run_one(g_run_t *r, int v)
 			in[ip] = stage_output(r->rs[s->src[ip]].st,
 					      s->src_port[ip]);
 	stage_set_outdir(x->st, r->o.outdir);
+	/* a cancelled run's stage stops where its plugin asks */
+	stage_set_cancel(x->st, r->cancel);
 	/* not while other runs' stages run beside (r->share) */
 	if (r->o.jobs <= 1 && !r->share)
 		reset_peak_rss();
@@ -197,7 +200,9 @@ static void run_one(g_run_t *r, int v)
 	}
 	x->out_mb = ob / 1048576.0;
 	x->rc = rc;
-	if (rc)
+	if (rc && cancelled(r)) /* [tune] stop: no error of the run's */
+		rt_log(s->name, LOG_DEBUG, "cancelled: %s", stage_error(x->st));
+	else if (rc)
 		rt_log(s->name, LOG_ERROR, "%s", stage_error(x->st));
 	else
 		rt_log(s->name, LOG_DEBUG, "done in %.2f s", x->wall_s);

@@ -48,6 +48,8 @@ struct rt_stage {
 	double last_progress;         /* monotonic seconds */
 	double last_fraction;
 	msg_t *run_graph;             /* host->run_graph's table (a ref) */
+	const int *cancel;            /* host->cancelled's flag besides
+				         rt_interrupted (NULL: none) */
 };
 
 static double now_s(void)
@@ -109,8 +111,9 @@ static void h_progress(armstg_stage_t *st, double fraction, const char *fmt,
 
 static int h_cancelled(armstg_stage_t *st)
 {
-	(void)st;
-	return rt_interrupted != 0;
+	const int *c = of(st)->cancel;
+	return rt_interrupted != 0 ||
+	       (c && __atomic_load_n(c, __ATOMIC_RELAXED));
 }
 
 static void note_dir(rt_stage_t *s, const char *d)
@@ -423,6 +426,11 @@ void stage_set_staging(rt_stage_t *s, const char *dir)
 void stage_set_threads(rt_stage_t *s, int n)
 {
 	__atomic_store_n(&s->threads, n > 0 ? n : 1, __ATOMIC_RELAXED);
+}
+
+void stage_set_cancel(rt_stage_t *s, const int *flag)
+{
+	s->cancel = flag;
 }
 
 int stage_threads(const rt_stage_t *s)

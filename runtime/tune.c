@@ -63,8 +63,9 @@
  * one after the other and the rows, the choice and the final outputs are
  * the same.  stop: the candidates after the one that stops the search
  * may have started; they are cancelled (no further stage; the running one
- * ends first), what they ran is dropped and tune.tsv lists them skipped
- * as before.  same_skip: a candidate whose tuned stage's outputs match
+ * is asked to stop through host->cancelled, which the growth and the
+ * registration poll), what they ran is dropped and tune.tsv lists them
+ * skipped as before.  same_skip: a candidate whose tuned stage's outputs match
  * an earlier one that still runs waits for it (same_wait), then takes its
  * score as before, or runs on if it was not scored.  Candidates run
  * beyond those the search one after the other would run (after a stop)

@@ -1826,6 +1826,40 @@ static void test_parallel_interrupt(void **state)
 	done(&r);
 }
 
+/* stop cancels the candidates started after the one that stops the
+ * search, in their running stage: five at once, 4 fails require (stop =
+ * require), 5's sim would sleep 20 s but polls host->cancelled and ends
+ * at once; the rows and files of the search one after the other (which
+ * never starts 5) */
+static void test_parallel_stop_cancels(void **state)
+{
+	(void)state;
+	const char *sets[] = { "tune.require=sq far > 100", "tune.stop=require",
+			       "sim.slow_at=5", "sim.slow_ms=20000" };
+	expect_parallel_same(sets, 4, 1, 5);
+	const char *par[] = { sets[0], sets[1], sets[2], sets[3],
+			      "tune.parallel=5" };
+	trun_t r;
+	double t0 = sched_now();
+	run_sets(&r, par, 5);
+	double wall = sched_now() - t0;
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	if (wall > 10)
+		fail_msg("the cancelled candidate ran on: %.1f s", wall);
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 5);
+	assert_string_equal(tt.status->str[3], "failed");
+	assert_string_equal(tt.status->str[4], "skipped");
+	assert_string_equal(tt.error->str[4], "stop = require: 4 failed it");
+	assert_float_equal(chosen_value(&tt), 3, 0);
+	ttab_free(&tt);
+	/* all five started, and the final run's */
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 6);
+	done(&r);
+}
+
 /* the running stages of every candidate share the threads: 8 threads,
  * parallel = 2, sim sleeping 300 ms: the chosen candidate's sim (3, with
  * 4's beside it), kept by reuse, ran with half of them (3 when a third
@@ -1903,6 +1937,7 @@ int main(void)
 		cmocka_unit_test(test_parallel_same_choice),
 		cmocka_unit_test(test_parallel_overlaps),
 		cmocka_unit_test(test_parallel_interrupt),
+		cmocka_unit_test(test_parallel_stop_cancels),
 		cmocka_unit_test(test_parallel_thread_share),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);

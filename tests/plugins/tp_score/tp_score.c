@@ -10,7 +10,9 @@
  *                   where the volume does not)
  * fail_at / nan_at: fail, or score NaN, when x equals them; path: write x to
  * this file ("{}" in it becomes x) through out_path; count_file: append one
- * line per process call, directly (the tests count runs); sleep_ms. */
+ * line per process call, directly (the tests count runs); sleep_ms;
+ * slow_at / slow_ms: sleep slow_ms more when x is slow_at, polling
+ * host->cancelled every 10 ms (a long loop that stops when asked). */
 #include <math.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -22,6 +24,8 @@ typedef struct {
 	double offset, cap, target, fail_at, nan_at;
 	const char *path, *count_file;
 	int sleep_ms;
+	double slow_at;
+	int slow_ms;
 } priv_t;
 
 static const armstg_port_t ins[] = {
@@ -50,6 +54,11 @@ static const armstg_param_t params[] = {
 	  offsetof(priv_t, count_file), 0 },
 	{ "sleep_ms", PT_INT, "0", 0, 10000, "ms", "sleep in process", NULL,
 	  offsetof(priv_t, sleep_ms), 0 },
+	{ "slow_at", PT_DOUBLE, "-1000", -1000, 1000, "",
+	  "sleep slow_ms more when x is this, until host->cancelled", NULL,
+	  offsetof(priv_t, slow_at), 0 },
+	{ "slow_ms", PT_INT, "0", 0, 100000, "ms", "see slow_at", NULL,
+	  offsetof(priv_t, slow_ms), 0 },
 };
 
 static int row(armstg_stage_t *st, tab_t *t, const char *m, const char *s,
@@ -94,6 +103,14 @@ static int process(armstg_stage_t *st)
 		d[i] += (float)add;
 	double x = d[0], q = (x - p->target) * (x - p->target);
 	double far = (x - p->target - 10) * (x - p->target - 10);
+	if (x == p->slow_at) /* 10 ms at a time, as long loops poll */
+		for (int ms = 0; ms < p->slow_ms; ms += 10) {
+			if (h->cancelled(st))
+				return h->fail(st, ARMSTG_ECANCELLED,
+					       "cancelled at %g", x);
+			struct timespec ts = { 0, 10000000L };
+			nanosleep(&ts, NULL);
+		}
 	if (x == p->fail_at)
 		return h->fail(st, ARMSTG_ENUMERIC, "asked to fail at %g", x);
 	if (x == p->nan_at)
