@@ -230,9 +230,30 @@ def method_T(args, c, d, m, x):
         sets = list(LNCC) if m == "direct_lncc" else []
         if m in ("armstg", "armstg_auto", "sphere") and os.environ.get("PUSH"):
             sets.append("tune.values=%s" % os.environ["PUSH"])
-        sets += [s for s in args.set if s.split(".")[0] in ("grow", "register", "affine", "tune")
+        sets += [s for s in args.set if s.split(".")[0] in ("grow", "register", "affine", "tune",
+                                                             "grown_tumour", "to_atlas")
                  and m in ("armstg", "armstg_auto", "sphere")]
-        t, cpu = run_armstg(args, GRAPH[m], o, env, sets)
+        graph = GRAPH[m]
+        if args.diag and m in ("armstg", "armstg_auto", "sphere"):
+            # dice_steps.py's sinks (the intermediate tumours and fields) and
+            # the growth's tumour points, so dice_steps.py --reuse and
+            # outline_steps.py score the run folder
+            import dice_steps
+            g = open(graph).read()
+            for name, port in dice_steps.SINKS:
+                g += ("\n[stage diag_%s]\nplugin = nifti_sink\npath = diag_%s.nii.gz\n"
+                      "volume = %s\n" % (name, name, port))
+            g += ("\n[stage diag_tumour_points]\nplugin = h5_sink\n"
+                  "path = diag_tumour_points.h5\npoints = grow.tumour\n")
+            # beside the original graph, so its relative paths mean the same
+            graph = os.path.join(os.path.dirname(graph), ".diag_%d.ini" % os.getpid())
+            with open(graph, "w") as f:
+                f.write(g)
+        try:
+            t, cpu = run_armstg(args, graph, o, env, sets)
+        finally:
+            if graph != GRAPH[m]:
+                os.remove(graph)
         T = x + peers.itk_field_ras(os.path.join(o, "atlas_to_patient_warp.nii.gz"))
         lab = os.path.join(o, "atlas_labels_in_patient.nii.gz")
         return T, t, cpu, lab if m in ("armstg", "armstg_auto", "sphere") else None
@@ -349,6 +370,9 @@ def main():
     ap.add_argument("--keep", action="store_true",
                     help="keep each tag's run folder (OUT/CASE/METHOD+TAG; default: "
                     "OUT/CASE/METHOD, the last tag's)")
+    ap.add_argument("--diag", action="store_true",
+                    help="growth graphs: also write dice_steps.py's intermediate tumours and "
+                    "fields and the growth's tumour points (diag_*) to the run folder")
     ap.add_argument("--log", action="store_true",
                     help="run the graphs with -v and keep their log (OUT/CASE/METHOD/armstg.log: "
                     "stage times, every iteration's metric)")
