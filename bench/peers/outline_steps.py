@@ -101,6 +101,13 @@ def main():
     masks = [(n, raster(args.armstg, args.run, s, p("atlas_tumour")) & (A if clip else True))
              for n, s, clip in variants]
     masks.append(("atlas_tumour", A))
+    # the atlas tumour carried by the growth's dense field (grown(x) =
+    # atlas(x + v(x)), as grown_t1): where the growth moved the atlas's
+    # tumour voxels, not the outline the growth drove the tumour onto
+    gf, gf_aff = ds.field_ras(p("growth"))
+    xa = ds.world(A.shape, aaff)
+    masks.append(("atlas_tumour through growth",
+                  ds.sample(A.astype(np.float32), aaff, xa + ds.sample_field(gf, gf_aff, xa), 0) > 0.5))
     print("\t".join(["case", "outline", "ml_atlas_tumour", "ml_mask", "mask/atlas", "dice_vs_atlas"]
                     + ["ml_core", "ml_registered", "registered/core", "dice_registered",
                        "ml_in_edema", "ml_on_tissue", "ml_core_missed", "centroid_shift_mm"]))
