@@ -546,8 +546,24 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	 * md_k: linear between layer k and its parent) and becomes the
 	 * innermost; deeper layers are dropped.  (Until 2026-11 the depth was
 	 * rounded to whole layers: push_mm 2-4 all gave 3 mm.) */
+	/* push_used: the push the growth used (mm), the stats' push_used_mm.
+	 * front = push: push_mm, or when every contour layer is kept as it
+	 * is (no layer dropped nor moved: the tumour is no deeper than
+	 * push_mm) the tumour's depth, the largest over the components of
+	 * the sum of their layers' mean travels.  The layers are the only
+	 * thing push_mm > 0 changes (push_mm 0 also takes the geometry-only
+	 * path above; it reports 0, no claim), and
+	 * a component's partial depths only grow (sums of travels >= 0), so
+	 * every deeper push keeps every layer too (fl(p TLED_MM) grows with
+	 * p) and grows the same, bit for bit; [tune] same_from skips those
+	 * candidates (runtime/tune.c).  Where rounding puts the depth at or
+	 * above push_mm, push_mm is reported (no claim).  front = expand:
+	 * push_mm (its core also reads push_mm through the layers, not
+	 * claimed); front = sweep does not read push_mm: NaN. */
+	double push_used = pv->front == 0 ? NAN : pv->push_mm;
 	if (pv->front >= 1) {
-		int w = 0;
+		int w = 0, moved = 0;
+		double dmax = 0; /* m: the deepest component's depth */
 		for (int j = 0; j < nl;) {
 			int c = L[j].comp, e = j;
 			while (e < nl && L[e].comp == c)
@@ -580,10 +596,13 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 					if (tled_layer_index(&L[k], m.h_mean))
 						goto oom;
 					keep = k + 1;
+					moved = 1;
 					break;
 				}
 				depth += md;
 			}
+			if (keep == e && !moved)
+				dmax = fmax(dmax, depth); /* every layer: D_c */
 			for (int k = j; k < e; k++) {
 				if (k < keep)
 					L[w++] = L[k];
@@ -596,6 +615,14 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 			H->log(st, LOG_INFO, "front=push, push_mm %g: %d of %d "
 			       "contour layers kept (deeper ones infiltrated)",
 			       pv->push_mm, w, nl);
+		if (pv->front == 1 && w == nl && !moved &&
+		    dmax / TLED_MM < pv->push_mm) {
+			push_used = dmax / TLED_MM;
+			H->log(st, LOG_INFO, "front=push, push_mm %g: all %d "
+			       "contour layers kept (the tumour is %.6g mm deep: "
+			       "a deeper push grows the same)", pv->push_mm, nl,
+			       push_used);
+		}
 		nl = w;
 	}
 	int lmax = 0;
@@ -706,6 +733,9 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 		goto oom;
 	if (rc)
 		goto out;
+	for (int64_t r = 0; r < tab->nrows; r++)
+		if (H->tab_set_num(tab, r, "push_used_mm", push_used))
+			goto oom;
 
 	/* ---- outputs ---- */
 	/* displacement at the nodes.  drive = collocated: u^h(X_a), which

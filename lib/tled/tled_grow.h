@@ -48,7 +48,13 @@
  *      stats     one row per growth step: step, layer, iterations,
  *                converged, dt_s, dt_crit_s, kinetic_energy_J,
  *                strain_energy_J, residual_N, err_est_mm, jmin, driven,
- *                swept, collocated, contacts, integration_points, wall_s
+ *                swept, collocated, contacts, integration_points, wall_s,
+ *                push_used_mm (the same on every row: the push the growth
+ *                used, mm: push_mm, or, front = push, when every contour
+ *                layer is kept as it is, the tumour's depth below push_mm,
+ *                from which on every deeper push grows the same, bit for
+ *                bit; [tune] same_from reads it; front = sweep: NaN, it
+ *                does not read push_mm; tled_grow.c)
  *                (front = expand: growth_stretch and core_volume_fraction,
  *                the core's deformed volume / the tumour's).  front = push
  *                at push_mm 0 takes no step (below): its one row has

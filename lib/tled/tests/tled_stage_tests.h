@@ -544,6 +544,10 @@ static void test_grow_expand(void **state)
 			assert_true(tab_num(g.tb, "converged", r) == 1);
 			assert_true(tab_num(g.tb, "jmin", r) > 0);
 		}
+		/* push_used_mm: push 3 mm in a 5.5 mm deep tumour (front =
+		 * expand claims nothing either way) */
+		for (int64_t r = 0; r < g.tb->nrows; r++)
+			assert_true(tab_num(g.tb, "push_used_mm", r) == 3);
 		if (k == 1) {
 			print_steps(&g);
 			int64_t last = g.tb->nrows - 1;
@@ -622,6 +626,117 @@ static void test_push_depth(void **state)
 	assert_true(r0[1] < r0[2] - 0.15 * span);
 }
 
+/* the tables a and b the same but for wall_s, to the bit (NaN = NaN) */
+static void same_table(const tab_t *a, const tab_t *b)
+{
+	assert_int_equal(a->nrows, b->nrows);
+	assert_int_equal(a->ncols, b->ncols);
+	for (int c = 0; c < a->ncols; c++) {
+		assert_string_equal(a->col[c].name, b->col[c].name);
+		assert_int_equal(a->col[c].type, TAB_NUM);
+		if (!strcmp(a->col[c].name, "wall_s"))
+			continue;
+		assert_memory_equal(a->col[c].num, b->col[c].num,
+				    (size_t)a->nrows * sizeof(double));
+	}
+}
+
+static void same_points(const ps_t *a, const ps_t *b);
+
+/* push_used_mm (tled_grow.c): a push at least the tumour's depth keeps
+ * every contour layer as it is; the stats report that depth (the sum of
+ * the layers' mean travels, computed here from the contours themselves)
+ * and every deeper push grows the same, bit for bit ([tune] same_from
+ * does not grow them).  The ball of test_push_depth, tumour 8 mm from
+ * 1.5 mm in 4 layers (1.625 mm apart): depth 6.5 mm.  At 9 mm, at 20 mm
+ * and just above the depth reported (x (1 + 1e-9)): that depth, every
+ * layer kept (5 steps), the same nodes, tumour points, iterations and
+ * stats but wall_s.  Just below it (x (1 - 1e-6)): the innermost layer is
+ * moved out by 1e-6 of its travel (still 5 steps), push_used_mm is push_mm
+ * (nothing claimed) and the nodes move otherwise. */
+static void test_push_saturated(void **state)
+{
+	TLED_TEST_REQUIRE();
+	(void)state;
+	const double Rb = tled_quick() ? 20 : 24, h = 3, Rt = 8;
+	const int L = 4;
+	memset(g_csf, 0, sizeof g_csf);
+	memset(g_cen, 0, sizeof g_cen);
+	/* the depth from the contours: per layer > 0 the mean of
+	 * |parent - point|, summed (mm) */
+	ps_t *co = sphere_contours(1.5, Rt, L, 1.5);
+	keep(&co->base);
+	const ps_attr_t *lay = attr(co, "layer"), *par = attr(co, "parent");
+	double depth = 0;
+	for (int l = 1; l <= L; l++) {
+		double sum = 0;
+		int64_t n = 0;
+		for (int64_t i = 0; i < co->n; i++) {
+			if (lround(lay->data[i]) != l)
+				continue;
+			double d2 = 0;
+			for (int c = 0; c < 3; c++) {
+				double t = par->data[3 * i + c] - co->xyz[3 * i + c];
+				d2 += t * t;
+			}
+			sum += sqrt(d2);
+			n++;
+		}
+		assert_true(n > 0);
+		depth += sum / (double)n;
+	}
+	print_message("tumour depth from the contours: %.9f mm\n", depth);
+	assert_true(fabs(depth - 6.5) < 0.05);
+	grow_out_t g[4];
+	char push[4][64];
+	snprintf(push[0], sizeof push[0], "push_mm=9");
+	snprintf(push[1], sizeof push[1], "push_mm=20");
+	double used = NAN;
+	for (int k = 0; k < 4; k++) {
+		if (k == 2) {
+			snprintf(push[2], sizeof push[2], "push_mm=%.17g",
+				 used * (1 + 1e-9));
+			snprintf(push[3], sizeof push[3], "push_mm=%.17g",
+				 used * (1 - 1e-6));
+		}
+		const char *params[] = { "tol=0.005", "front=push", push[k],
+					 "push_wall=1", NULL };
+		grow_ok(Rb, h, Rt, L, params, &g[k]);
+		double p = strtod(push[k] + strlen("push_mm="), NULL);
+		double u = tab_num(g[k].tb, "push_used_mm", 0);
+		for (int64_t r = 1; r < g[k].tb->nrows; r++) {
+			double ur = tab_num(g[k].tb, "push_used_mm", r);
+			assert_memory_equal(&ur, &u, sizeof u);
+		}
+		print_message("%s: push_used_mm %.17g, %lld steps\n", push[k],
+			      u, (long long)g[k].tb->nrows);
+		if (k == 0)
+			used = u;
+		if (k < 3) {
+			/* the depth, every layer kept, the outputs of 9 mm */
+			assert_memory_equal(&u, &used, sizeof u);
+			assert_true(u < p);
+			check_common(&g[k], Rb, L);
+			if (k > 0) {
+				same_points(g[k].on, g[0].on);
+				same_points(g[k].ot, g[0].ot);
+				same_table(g[k].tb, g[0].tb);
+				same_table(g[k].it, g[0].it);
+			}
+		} else {
+			/* below the depth: its own push, the nodes moved
+			 * otherwise (the innermost layer moved out) */
+			assert_true(u == p);
+			assert_int_equal(g[k].tb->nrows, L + 1);
+			assert_int_equal(g[k].on->n, g[0].on->n);
+			assert_true(memcmp(g[k].u->data, g[0].u->data,
+					   (size_t)(3 * g[0].on->n) *
+						   sizeof(double)) != 0);
+		}
+	}
+	assert_true(fabs(used - depth) < 1e-9);
+}
+
 /* drive = collocated (experimental): u^h at a well-separated subset of the
  * tumour nodes follows the layer map exactly (Lagrange multipliers).
  * 20 mm ball (quick: 16), h 3, tumour 8 mm from 4 seeds in 5 layers.  Asserted: the
@@ -644,6 +759,8 @@ static void test_grow_collocated(void **state)
 	grow_ok(Rb, h, Rt, L, params, &g);
 	check_common(&g, Rb, L);
 	for (int64_t r = 0; r < g.tb->nrows; r++) {
+		/* front = sweep does not read push_mm */
+		assert_true(isnan(tab_num(g.tb, "push_used_mm", r)));
 		assert_true(tab_num(g.tb, "converged", r) == 1);
 		assert_true(tab_num(g.tb, "collocated", r) >= 1);
 		assert_true(tab_num(g.tb, "collocated", r) <
@@ -1118,6 +1235,11 @@ static double push0_same(const grow_out_t g[2], const char *scene,
 			double x = a->col[c].num[r], y = b->col[c].num[r];
 			if (!strcmp(n, "wall_s"))
 				continue;
+			if (!strcmp(n, "push_used_mm")) {
+				/* each its own push: trimmed at 1e-6 */
+				assert_true(x == 0 && y == 1e-6);
+				continue;
+			}
 			if (still && !strcmp(n, "iterations")) {
 				assert_true(x == 0 && y > 0);
 			} else if (still && (!strcmp(n, "dt_s") ||
@@ -1320,6 +1442,7 @@ int main(void)
 		cmocka_unit_test_teardown(test_push_depth, teardown),
 		cmocka_unit_test_teardown(test_push_zero, teardown),
 		cmocka_unit_test_teardown(test_model_reuse, teardown),
+		cmocka_unit_test_teardown(test_push_saturated, teardown),
 		cmocka_unit_test_teardown(test_grow_expand, teardown),
 		cmocka_unit_test_teardown(test_ip_factor, teardown),
 		cmocka_unit_test_teardown(test_soft_ventricles, teardown),
