@@ -23,6 +23,10 @@
  *                       final run),
  *                       parallel = N (optional, 1..64: candidates
  *                       run at once; the same choice),
+ *                       same_skip = true (optional),
+ *                       same_from = STAGE.PORT: COLUMN (optional: the
+ *                       tuned stage's table column holding the value it
+ *                       used; a later value >= a clamped one's not run),
  *                       metric_column = C, structure_column = C,
  *                       value_column = C (optional: the score table's
  *                       columns; default metric, structure, value)

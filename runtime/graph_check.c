@@ -535,6 +535,7 @@ void graph_free(graph_t *g)
 	for (int k = 0; k < g->tune.nvalues; k++)
 		free(g->tune.values[k]);
 	free(g->tune.values);
+	free(g->tune.numval);
 	for (int k = 0; k < g->tune.nset; k++)
 		free(g->tune.set[k].val);
 	free(g->tune.set);

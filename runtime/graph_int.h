@@ -134,6 +134,14 @@ typedef struct g_tune {
 	 * and point sets (a hash of them) of an earlier scored one is not run
 	 * further: it takes that candidate's score and status (tune.c) */
 	int same_skip;
+	/* same_from = STAGE.PORT: COLUMN: the tuned stage's table and its
+	 * number column (first row) holding the value of the parameter the
+	 * stage used; below the candidate's value (the stage clamped it), a
+	 * later candidate of a value >= this one's gives the same outputs
+	 * and is not run (tune.c); sf_stage -1: no key */
+	int sf_stage, sf_port;
+	char sf_col[G_NAME];
+	double *numval;            /* same_from: the values as numbers */
 	/* search_set = STAGE.KEY=VALUE; ...: the candidates run with these
 	 * values; the final run with the graph's, the overridden stages and
 	 * those that read them run again (tune.c) */
@@ -290,6 +298,9 @@ typedef struct tune_row {
 				       whose outputs these are, 0: none */
 	uint64_t hash;              /* same_skip: of the tuned stage's
 				       volumes and point sets */
+	int clamped;                /* same_from: the stage used less than
+				       the value (used, below) */
+	double used;
 	char err[2048];
 } tune_row_t;
 

@@ -45,7 +45,23 @@
  * of the earlier candidates that were scored: when one matches, the
  * candidate runs no further and takes that candidate's score and status
  * (tune.tsv's error column: "same grow outputs as 6"); it is never chosen
- * over it (tune_same).  tune.tsv lists the candidates
+ * over it (tune_same).  same_from = STAGE.PORT: COLUMN (STAGE the tuned
+ * stage, e.g. grow.stats: push_used_mm): once a candidate's tuned stage
+ * has run (in the same pass), the number in COLUMN of that table's first
+ * row is the value of the parameter the stage used (tune_used); below the
+ * candidate's own value the stage clamped it (the growth cannot push
+ * deeper than the tumour is deep), and a stage that clamps a value v to
+ * c < v clamps every value >= v to the same c: a later candidate whose
+ * value is at least this one's would give the same outputs, so it is not
+ * run at all and takes this candidate's score and status, or those of the
+ * candidate this one copies (tune_clamp_src, cand_clamp; tune.tsv: "same
+ * grow outputs as 6, not run (same_from: push_used_mm 5.99997 at 6)"),
+ * never chosen over it.  Only a candidate whose status is known (scored,
+ * a copy, or dropped by require_early) is a source; the values need not
+ * ascend.  The stage's side of the contract (its outputs depend on the
+ * parameter only through the value it reports, and are the same bits for
+ * the same inputs) is the stage's to keep: the growth's is in
+ * lib/tled/tled_grow.c ("push_used").  tune.tsv lists the candidates
  * (tune_table_write), the skipped ones too, and the overrides in a column
  * search_set when there are some.
  *
@@ -65,7 +81,11 @@
  * may have started; they are cancelled (no further stage; the running one
  * is asked to stop through host->cancelled, which the growth and the
  * registration poll), what they ran is dropped and tune.tsv lists them
- * skipped as before.  same_skip: a candidate whose tuned stage's outputs match
+ * skipped as before.  same_from: a candidate is not started when a
+ * committed one covers it; one that started before its source was
+ * committed runs, and its row is replaced by the copy when it is
+ * committed (the rows of the search one after the other; its run only
+ * cost time).  same_skip: a candidate whose tuned stage's outputs match
  * an earlier one that still runs waits for it (same_wait), then takes its
  * score as before, or runs on if it was not scored.  Candidates run
  * beyond those the search one after the other would run (after a stop)
@@ -360,6 +380,88 @@ static int tune_same(const g_run_t *r, int k)
 	return -1;
 }
 
+/* same_from: the value the tuned stage says it used, the number column
+ * sf_col of the first row of its table sf_port (the candidate just run,
+ * on x's stages).  0, or a negative code with err (a table without it: a
+ * graph error). */
+static int tune_used(const g_run_t *x, double *used, char *err,
+		     size_t errsize)
+{
+	const g_tune_t *t = &x->g->tune;
+	const g_stage_t *s = &x->g->stages[t->sf_stage];
+	const char *port = s->plug.desc->outputs[t->sf_port].name;
+	const msg_t *m = stage_output(x->rs[t->sf_stage].st, t->sf_port);
+	if (!msg_valid(m, MSG_TABLE)) {
+		snprintf(err, errsize, "[tune] same_from: stage '%s' gave no "
+			 "table on its output '%s'", s->name, port);
+		return ARMSTG_EINVAL;
+	}
+	const tab_t *tab = (const tab_t *)m;
+	const tab_col_t *c = tab_col(tab, t->sf_col);
+	if (!c || c->type != TAB_NUM || tab->nrows < 1) {
+		char cols[1024] = "none";
+		size_t o = 0;
+		for (int j = 0; j < tab->ncols && o < sizeof cols; j++)
+			o += (size_t)snprintf(cols + o, sizeof cols - o, "%s%s",
+					      j ? ", " : "", tab->col[j].name);
+		snprintf(err, errsize, "[tune] same_from: the table of stage "
+			 "'%s' (output '%s') has %s '%s' (columns: %s; %lld "
+			 "rows)", s->name, port,
+			 c && c->type == TAB_NUM ? "no row in its column"
+						 : "no number column",
+			 t->sf_col, cols, (long long)tab->nrows);
+		return ARMSTG_EINVAL;
+	}
+	*used = c->num[0];
+	return 0;
+}
+
+/* same_from, for candidate k: the earliest candidate j before lim (the
+ * rows committed) whose tuned stage used less than its value (clamped)
+ * and whose value k's is at least, with its status known (scored, a copy,
+ * or dropped by require_early): k would be clamped to the same value and
+ * give j's outputs.  -1: none.  A candidate that failed in a stage is no
+ * source (the failure may not be the outputs'). */
+static int tune_clamp_src(const g_run_t *r, int k, int lim)
+{
+	const g_tune_t *t = &r->g->tune;
+	if (t->sf_stage < 0)
+		return -1;
+	for (int j = 0; j < lim && j < k; j++) {
+		const tune_row_t *x = &r->rows[j];
+		if (x->clamped && t->numval[k] >= t->numval[j] &&
+		    (x->scored || x->same_as || x->req_failed))
+			return j;
+	}
+	return -1;
+}
+
+/* same_from: candidate k's row, not run, as the copy of cl's outputs (of
+ * its own source, when cl is a copy) */
+static void cand_clamp(g_run_t *r, int k, int cl)
+{
+	const g_tune_t *t = &r->g->tune;
+	const g_stage_t *ts = &r->g->stages[t->stage];
+	tune_row_t *row = &r->rows[k];
+	int same = r->rows[cl].same_as ? r->rows[cl].same_as - 1 : cl;
+	const tune_row_t *e = &r->rows[same];
+	memset(row, 0, sizeof *row);
+	row->same_as = same + 1;
+	row->score = e->score;
+	row->ok = e->ok;
+	row->rc = e->rc;
+	row->req_failed = e->req_failed;
+	snprintf(row->err, sizeof row->err, "same %s outputs as %s, not run "
+		 "(same_from: %s %.6g at %s)%s%.1900s", ts->name,
+		 t->values[same], t->sf_col, r->rows[cl].used, t->values[cl],
+		 e->ok ? "" : ": ", e->ok ? "" : e->err);
+	rt_log(NULL, LOG_INFO, "tune %s.%s = %s: not run, the outputs of %s "
+	       "(same_from: %s used %s %.6g at %s, below it, and %s >= %s)",
+	       ts->name, t->key, t->values[k], t->values[same], ts->name,
+	       t->sf_col, r->rows[cl].used, t->values[cl], t->values[k],
+	       t->values[cl]);
+}
+
 /* search_set: the overrides on the run's instances of their stages
  * (before the search; those instances stay through it: keep_take never
  * takes an overridden stage).  0, or a negative code with err. */
@@ -522,6 +624,13 @@ static int cand_run(tctx_t *c, g_run_t *x, int k, int *counted, char *err,
 			efail = !req;
 		}
 	}
+	if (t->sf_stage >= 0 && !row->rc && !rt_interrupted) {
+		/* the value the tuned stage used (phase one ran it) */
+		rc = tune_used(x, &row->used, err, errsize);
+		if (rc)
+			return rc;
+		row->clamped = row->used < t->numval[k];
+	}
 	if (t->same_skip && !row->rc && !efail && !rt_interrupted) {
 		row->hash = tune_out_hash(x);
 		same = same_wait(c, x, k);
@@ -590,6 +699,7 @@ static int cand_run(tctx_t *c, g_run_t *x, int k, int *counted, char *err,
  * the candidates' order. */
 typedef struct tstate {
 	int best, nok, ncopy, nskip;
+	int nclamp;                 /* same_from: not run */
 	char why[512];              /* stop: the reason (nskip > 0) */
 } tstate_t;
 
@@ -644,8 +754,14 @@ static int search_serial(tctx_t *c, tune_keep_t *kp, const char *ksel,
 	g_run_t *r = c->r;
 	const g_tune_t *t = &r->g->tune;
 	for (int k = 0; k < t->nvalues && !rt_interrupted; k++) {
-		int counted = 0;
-		int rc = cand_run(c, r, k, &counted, err, errsize);
+		int counted = 0, rc = 0, cl = tune_clamp_src(r, k, k);
+		if (cl >= 0) {
+			cand_clamp(r, k, cl);
+			s->nclamp++;
+			counted = 1;
+		} else {
+			rc = cand_run(c, r, k, &counted, err, errsize);
+		}
 		if (counted)
 			r->nrows = k + 1;
 		if (rc)
@@ -670,6 +786,7 @@ typedef struct tlane {
 	tctx_t *c;
 	int k;                      /* the candidate it runs */
 	int active;                 /* a thread runs or ran k (not joined) */
+	int norun;                  /* same_from: k not started */
 	int cancel;                 /* atomic: end early (stop) */
 	int counted, rc;
 	pthread_t th;
@@ -805,6 +922,16 @@ static int search_parallel(tctx_t *c, tune_keep_t *kp, const char *ksel,
 			l->cancel = 0;
 			l->counted = l->rc = 0;
 			l->err[0] = 0;
+			/* same_from: covered by a committed candidate */
+			l->norun = tune_clamp_src(r, next, k) >= 0;
+			if (l->norun) {
+				pthread_mutex_lock(&c->mu);
+				c->phase[next] = 2;
+				pthread_cond_broadcast(&c->cv);
+				pthread_mutex_unlock(&c->mu);
+				next++;
+				continue;
+			}
 			if (pthread_create(&l->th, NULL, lane_main, l)) {
 				snprintf(err, errsize, "[tune] parallel: cannot "
 					 "start a thread for candidate %s",
@@ -822,8 +949,22 @@ static int search_parallel(tctx_t *c, tune_keep_t *kp, const char *ksel,
 		while (c->phase[k] != 2)
 			pthread_cond_wait(&c->cv, &c->mu);
 		pthread_mutex_unlock(&c->mu);
-		pthread_join(l->th, NULL);
-		l->active = 0;
+		if (l->active) {
+			pthread_join(l->th, NULL);
+			l->active = 0;
+		}
+		/* same_from: not started, or started before its source was
+		 * committed: the copy's row (as one after the other) */
+		int cl = tune_clamp_src(r, k, k);
+		if (cl >= 0) {
+			/* under the lock: a lane's same_wait reads the rows */
+			pthread_mutex_lock(&c->mu);
+			cand_clamp(r, k, cl);
+			pthread_mutex_unlock(&c->mu);
+			s->nclamp++;
+			l->counted = 1;
+			l->rc = 0;
+		}
 		if (l->counted)
 			r->nrows = k + 1;
 		if (l->rc) {
@@ -980,8 +1121,9 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 		}
 	}
 	/* same_skip: compared after the early stages, else after the tuned
-	 * stage alone (its outputs stay: nothing reads them in that pass) */
-	if (t->same_skip && !nearly) {
+	 * stage alone (its outputs stay: nothing reads them in that pass);
+	 * same_from reads the tuned stage's table there too */
+	if ((t->same_skip || t->sf_stage >= 0) && !nearly) {
 		pre = calloc(n, 1);
 		if (!pre) {
 			snprintf(err, errsize, "[tune] out of memory");
@@ -1104,10 +1246,15 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	if (rc)
 		goto out;
 	r->best = best;
-	char copies[64] = "";
+	char copies[96] = "";
 	if (ncopy)
 		snprintf(copies, sizeof copies, ", %d the same as an earlier one",
 			 ncopy);
+	if (ss.nclamp) {
+		size_t l = strlen(copies);
+		snprintf(copies + l, sizeof copies - l, ", %d not run "
+			 "(same_from)", ss.nclamp);
+	}
 	rt_log(NULL, LOG_INFO, "tune %s.%s = %s chosen (%s %s %.6g; %d of %d "
 	       "values scored%s, %d skipped)", ts->name, t->key, t->values[best],
 	       t->goal_max ? "max" : "min", sel, r->rows[best].score, nok,

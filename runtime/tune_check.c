@@ -9,7 +9,9 @@
  * output that depends on the tuned stage, each condition of require
  * ([STAGE.PORT:] METRIC [STRUCTURE] OP NUMBER, separated by commas) and
  * each override of search_set (STAGE.KEY=VALUE, separated by ';') names
- * what exists and is read by the search, the other keys are well formed.
+ * what exists and is read by the search, same_from (STAGE.PORT: COLUMN)
+ * names a table of the tuned stage itself and every candidate is a
+ * number, the other keys are well formed.
  * Errors go through g_err, naming the [tune] key.
  */
 #include <errno.h>
@@ -33,7 +35,7 @@ static const char *const tune_keys[] = { "param", "values", "score", "metric",
 					 "structure_column", "value_column",
 					 "stop", "reuse", "require_early",
 					 "search_set", "same_skip",
-					 "parallel" };
+					 "parallel", "same_from" };
 
 /* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
  * with an error reported when the list is empty or has an empty item. */
@@ -387,6 +389,60 @@ static void tune_set_split(graph_t *g, const g_kv_t *k)
 	}
 }
 
+static const char same_from_syntax[] =
+	"[tune] same_from must read STAGE.PORT: COLUMN, the tuned stage's "
+	"table and its number column that holds the value of the parameter "
+	"the stage used (e.g. 'grow.stats: push_used_mm')";
+
+/* same_from = STAGE.PORT: COLUMN (after param and values): a table output
+ * of the tuned stage itself (only it can tell which value it used), one
+ * column name, and every candidate a finite number (the rule compares
+ * them); the values as numbers into t->numval.  Errors name the key. */
+static void tune_same_from(graph_t *g, const g_kv_t *fk, const g_stage_t *ts)
+{
+	g_tune_t *t = &g->tune;
+	char tb[G_MAX_LINE];
+	const char *colon = strchr(fk->val, ':');
+	const char *a, *b;
+	if (colon)
+		(void)tune_item(colon + 1, 0, &a, &b);
+	if (!colon || a == b || strcspn(a, " \t") < (size_t)(b - a) ||
+	    (size_t)(b - a) >= sizeof t->sf_col) {
+		g_err(g, fk->line, NULL, "same_from", "%s, got '%s'",
+		      same_from_syntax, fk->val);
+		return;
+	}
+	snprintf(t->sf_col, sizeof t->sf_col, "%.*s", (int)(b - a), a);
+	(void)tune_item(fk->val, ':', &a, &b);
+	snprintf(tb, sizeof tb, "%.*s", (int)(b - a), a);
+	int si, port;
+	if (tune_table(g, fk->line, "same_from", tb, &si, &port))
+		return;
+	if (ts && si != t->stage) {
+		g_err(g, fk->line, NULL, "same_from", "[tune] same_from: stage "
+		      "'%s' is not the tuned stage '%s' (param = %s.%s): only "
+		      "the tuned stage can tell which value it used",
+		      g->stages[si].name, ts->name, ts->name, t->key);
+		return;
+	}
+	free(t->numval);
+	t->numval = calloc((size_t)(t->nvalues > 0 ? t->nvalues : 1),
+			   sizeof *t->numval);
+	if (!t->numval) {
+		g_err(g, fk->line, NULL, "same_from", "out of memory");
+		return;
+	}
+	for (int k = 0; k < t->nvalues; k++)
+		if (!finite_number(t->values[k], &t->numval[k])) {
+			g_err(g, fk->line, NULL, "same_from", "[tune] same_from: "
+			      "value '%s' is not a number (same_from compares "
+			      "the candidates' values)", t->values[k]);
+			return;
+		}
+	t->sf_stage = si;
+	t->sf_port = port;
+}
+
 /* an override of a stage that neither the score nor a table of require
  * reads changes nothing in the search: a mistake (only on an otherwise
  * sound graph, as for the score) */
@@ -442,7 +498,7 @@ void tune_check(graph_t *g)
 			     "structure, goal, require, tolerance, "
 			     "metric_column, structure_column, value_column, "
 			     "stop, reuse, require_early, search_set, "
-			     "same_skip, parallel)");
+			     "same_skip, parallel, same_from)");
 		else if (!kv->val[0] && strcmp(kv->key, "values"))
 			g_err(g, kv->line, NULL, kv->key, "empty value");
 	}
@@ -589,6 +645,10 @@ void tune_check(graph_t *g)
 			      "stage '%s' (plugin '%s') has no volume or point "
 			      "set output to compare", ts->name, d->name);
 	}
+	t->sf_stage = t->sf_port = -1;
+	const g_kv_t *fk = g_kv_find(t->kv, t->nkv, "same_from");
+	if (fk && fk->val[0])
+		tune_same_from(g, fk, ts);
 	/* a requirement on a table that does not depend on the tuned stage
 	 * is met alike by every value: a mistake (only on an otherwise
 	 * sound graph, as for the score) */

@@ -632,7 +632,7 @@ static void test_set_rules(void **state)
 		  "param, values, score, metric, structure, goal, require, "
 		  "tolerance, metric_column, structure_column, value_column, "
 		  "stop, reuse, require_early, search_set, same_skip, "
-		  "parallel)" },
+		  "parallel, same_from)" },
 		/* parallel: a whole number 1..64 */
 		{ "tune.parallel=0", "key 'parallel': [tune] parallel must be "
 		  "a whole number from 1 to 64 (the candidates run at once; "
@@ -1013,6 +1013,137 @@ static void test_same_skip(void **state)
 		ttab_free(&tt);
 		done(&r);
 	}
+}
+
+/* same_from = sim.table: offset_used.  tp_score adds min(offset, cap) and
+ * reports it in its table's column offset_used: with cap 2.5 the candidate
+ * 3 used 2.5 < 3, so every later candidate of a value >= 3 (4, 5) would
+ * add 2.5 too: not run at all (sim.count: the tuned stage's process calls,
+ * 3 + the final run; fit.count likewise), they take 3's score and status,
+ * and tune.tsv says why.  Without the key all five run and 4, 5 score 3's
+ * 0.49 ((2.5 - 3.2)^2): the same choice, 3 (the tie keeps the earlier).
+ * The values need not ascend: only later values >= the clamped one's are
+ * skipped (1, 3, 2, 4, 5: 2 runs).  A failed status is taken too (require
+ * sq far > 130: 2.5 gives 114.49); with same_skip the copies of a copy
+ * point at the first (cap 3: 4 is a same_skip copy of 3 that used 3 < 4,
+ * 5 is not run and takes 3's).  With parallel the same rows (a candidate
+ * that started before its source was committed runs, its row replaced).
+ * A table without the column fails the run naming [tune] same_from. */
+typedef struct fromcase {
+	const char *sets[8];
+	double chosen;           /* chosen.txt: x of the value chosen */
+	double chosen_value;     /* tune.tsv's */
+	int sim, fit;            /* process calls */
+	const char *status;      /* per candidate: o ok, f failed */
+	const char *run;         /* per candidate: r run, n not run */
+	int same[5];             /* 1 + the candidate whose score is taken */
+	const char *used[5];     /* not run: the used value and the value */
+} fromcase_t;
+
+static void expect_from(const fromcase_t *c)
+{
+	trun_t r;
+	int ns = 0;
+	while (ns < 8 && c->sets[ns])
+		ns++;
+	run_sets(&r, c->sets, ns);
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), c->chosen, 0);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), c->sim);
+	assert_int_equal(count_lines(in(r.cnt, "fit.count")), c->fit);
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 5);
+	assert_float_equal(chosen_value(&tt), c->chosen_value, 0);
+	for (int k = 0; k < 5; k++) {
+		const char *st = tt.status->str[k], *e = tt.error->str[k];
+		assert_string_equal(st, c->status[k] == 'o' ? "ok" : "failed");
+		if (c->run[k] == 'r') {
+			assert_true(!e || !strstr(e, "not run"));
+		} else {
+			assert_float_equal(tt.wall->num[k], 0, 0);
+		}
+		if (!c->same[k])
+			continue;
+		int j = c->same[k] - 1;
+		char want[1024];
+		const char *ej = tt.error->str[j];
+		if (c->run[k] == 'n')
+			snprintf(want, sizeof want, "same sim outputs as %g, not "
+				 "run (same_from: offset_used %s)%s%s",
+				 tt.value->num[j], c->used[k],
+				 c->status[k] == 'o' ? "" : ": ",
+				 c->status[k] == 'o' ? "" : ej);
+		else
+			snprintf(want, sizeof want, "same sim outputs as %g%s%s",
+				 tt.value->num[j], c->status[k] == 'o' ? "" : ": ",
+				 c->status[k] == 'o' ? "" : ej);
+		assert_non_null(e);
+		assert_string_equal(e, want);
+		assert_string_equal(st, tt.status->str[j]);
+		assert_memory_equal(&tt.score->num[k], &tt.score->num[j],
+				    sizeof(double));
+	}
+	ttab_free(&tt);
+	done(&r);
+}
+
+#define FROM "tune.same_from=sim.table: offset_used"
+#define FITC "fit.count_file=${TT_COUNT}/fit.count"
+static void test_same_from(void **state)
+{
+	(void)state;
+	static const fromcase_t cases[] = {
+		/* without the key: every candidate runs, 3 chosen */
+		{ { "sim.cap=2.5", FITC }, 2.5, 3, 6, 6, "ooooo", "rrrrr",
+		  { 0 }, { 0 } },
+		/* with it: 4 and 5 not run */
+		{ { "sim.cap=2.5", FITC, FROM }, 2.5, 3, 4, 4, "ooooo",
+		  "rrrnn", { 0, 0, 0, 3, 3 },
+		  { 0, 0, 0, "2.5 at 3", "2.5 at 3" } },
+		/* nothing clamped (no cap): as without the key */
+		{ { FITC, FROM }, 3, 3, 6, 6, "ooooo", "rrrrr", { 0 }, { 0 } },
+		/* not ascending: 2 (after 3) runs, 4 and 5 do not */
+		{ { "sim.cap=2.5", FITC, FROM, "tune.values=1, 3, 2, 4, 5" },
+		  2.5, 3, 4, 4, "ooooo", "rrrnn", { 0, 0, 0, 2, 2 },
+		  { 0, 0, 0, "2.5 at 3", "2.5 at 3" } },
+		/* a failed status taken: 3 fails require, 1 chosen */
+		{ { "sim.cap=2.5", FITC, FROM, "tune.require=sq far > 130" },
+		  1, 1, 4, 4, "offff", "rrrnn", { 0, 0, 0, 3, 3 },
+		  { 0, 0, 0, "2.5 at 3", "2.5 at 3" } },
+		/* with same_skip: 4 a hash copy of 3 (run), 5 not run */
+		{ { "sim.cap=3", FITC, FROM, "tune.same_skip=true" }, 3, 3, 5,
+		  4, "ooooo", "rrrrn", { 0, 0, 0, 3, 3 },
+		  { 0, 0, 0, 0, "3 at 4" } },
+		/* parallel = 2: 4 starts before 3 is committed (it runs,
+		 * its row is the copy's), 5 after (not started); 3: 4 and 5
+		 * both start early.  The rows and the choice as above */
+		{ { "sim.cap=2.5", FITC, FROM, "tune.parallel=2" }, 2.5, 3, 5,
+		  5, "ooooo", "rrrnn", { 0, 0, 0, 3, 3 },
+		  { 0, 0, 0, "2.5 at 3", "2.5 at 3" } },
+		{ { "sim.cap=2.5", FITC, FROM, "tune.parallel=3" }, 2.5, 3, 6,
+		  6, "ooooo", "rrrnn", { 0, 0, 0, 3, 3 },
+		  { 0, 0, 0, "2.5 at 3", "2.5 at 3" } },
+		/* reuse and require_early (alt before fit): the same */
+		{ { "sim.cap=2.5", FITC, FROM, "tune.reuse=true",
+		    "tune.require=alt.table: sq near < 5",
+		    "tune.require_early=true" },
+		  2.5, 3, 3, 2, "foooo", "rrrnn", { 0, 0, 0, 3, 3 },
+		  { 0, 0, 0, "2.5 at 3", "2.5 at 3" } },
+	};
+	for (int i = 0; i < ARMSTG_COUNT(cases); i++)
+		expect_from(&cases[i]);
+	/* a column the table lacks: the run fails, naming the key */
+	const char *bad[] = { "sim.cap=2.5", "tune.same_from=sim.table: used" };
+	trun_t r;
+	run_sets(&r, bad, 2);
+	assert_int_equal(r.rc, ARMSTG_EINVAL);
+	assert_string_equal(r.err, "[tune] same_from: the table of stage 'sim' "
+			    "(output 'table') has no number column 'used' "
+			    "(columns: metric, structure, value, unit, "
+			    "offset_used; 4 rows)");
+	done(&r);
 }
 
 /* reuse = true: the final run takes the chosen candidate's stages instead
@@ -1532,7 +1663,8 @@ static void test_score_columns(void **state)
 	assert_int_equal(r.rc, ARMSTG_EINVAL);
 	assert_string_equal(r.err, "[tune] score: the table of stage 'fit' "
 			    "(output 'table') has no number column 'score' "
-			    "(columns: metric, structure, value, unit)");
+			    "(columns: metric, structure, value, unit, "
+			    "offset_used)");
 	done(&r);
 	/* one column cannot select twice */
 	char err[4096], want[1024];
@@ -1927,6 +2059,7 @@ int main(void)
 		cmocka_unit_test(test_reuse),
 		cmocka_unit_test(test_require_early),
 		cmocka_unit_test(test_same_skip),
+		cmocka_unit_test(test_same_from),
 		cmocka_unit_test(test_all_candidates_fail),
 		cmocka_unit_test(test_shared_stage_failure_fails_the_run),
 		cmocka_unit_test(test_set_rules),

@@ -8,6 +8,8 @@
  *     neg  near  -(x - target)^2
  *     offset param  the offset parameter (not capped: a table that differs
  *                   where the volume does not)
+ * and on every row a number column offset_used, the offset added
+ * (min(offset, cap): [tune] same_from's column).
  * fail_at / nan_at: fail, or score NaN, when x equals them; path: write x to
  * this file ("{}" in it becomes x) through out_path; count_file: append one
  * line per process call, directly (the tests count runs); sleep_ms;
@@ -62,14 +64,15 @@ static const armstg_param_t params[] = {
 };
 
 static int row(armstg_stage_t *st, tab_t *t, const char *m, const char *s,
-	       double v)
+	       double v, double used)
 {
 	const armstg_host_t *h = st->host;
 	int64_t r = h->tab_add_row(t);
 	return r < 0 || h->tab_set_str(t, r, "metric", m) ||
 	       h->tab_set_str(t, r, "structure", s) ||
 	       h->tab_set_num(t, r, "value", v) ||
-	       h->tab_set_str(t, r, "unit", "");
+	       h->tab_set_str(t, r, "unit", "") ||
+	       h->tab_set_num(t, r, "offset_used", used);
 }
 
 static int process(armstg_stage_t *st)
@@ -91,7 +94,8 @@ static int process(armstg_stage_t *st)
 	const vol_t *ref = (const vol_t *)st->in[1];
 	if (ref && ref->dtype != DT_F32)
 		return h->fail(st, ARMSTG_EINVAL, "ref must be f32");
-	double add = (p->offset < p->cap ? p->offset : p->cap) + (ref ? ((const float *)ref->data)[0] : 0);
+	double used = p->offset < p->cap ? p->offset : p->cap;
+	double add = used + (ref ? ((const float *)ref->data)[0] : 0);
 	vol_t *v = h->vol_convert((const vol_t *)st->in[0], DT_F32);
 	tab_t *t = h->tab_new();
 	if (!v || !t)
@@ -115,10 +119,10 @@ static int process(armstg_stage_t *st)
 		return h->fail(st, ARMSTG_ENUMERIC, "asked to fail at %g", x);
 	if (x == p->nan_at)
 		q = NAN;
-	if (row(st, t, "sq", "near", q) ||
-	    row(st, t, "sq", "far", far) ||
-	    row(st, t, "neg", "near", -q) ||
-	    row(st, t, "offset", "param", p->offset))
+	if (row(st, t, "sq", "near", q, used) ||
+	    row(st, t, "sq", "far", far, used) ||
+	    row(st, t, "neg", "near", -q, used) ||
+	    row(st, t, "offset", "param", p->offset, used))
 		return h->fail(st, ARMSTG_ENOMEM, "out of memory");
 	if (p->path) {
 		char name[1024], tmp[4096];
