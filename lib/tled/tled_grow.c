@@ -261,10 +261,8 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	tab_t *tab = NULL, *itab = NULL;
 	tled_iter_log_t itl = { .every = 1 };
 	ps_t *on = NULL, *ot = NULL;
-	tled_model_snap_t snap; /* model_reuse: the model as built */
 	uint64_t mkey = 0;
-	int keepm = 0; /* 1: the model goes back to the cache at the end */
-	memset(&snap, 0, sizeof snap);
+	int publish = 0; /* model_reuse: this growth builds the key's model */
 	if (!Xin)
 		return H->fail(st, ARMSTG_ENOMEM, "out of memory (%lld nodes)",
 			       (long long)nin);
@@ -375,8 +373,11 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	 * and the build settings, not on push_mm or the contours */
 	int reused = 0;
 	if (pv->model_reuse) {
+		double ipf = mo.ip_factor;
 		mkey = grow_model_key(Xin, pn, lv, pv, &mo);
-		reused = tled_model_cache_take(mkey, &m, &snap);
+		reused = tled_model_cache_get(mkey, &m, &ipf, &publish);
+		if (reused)
+			mo.ip_factor = ipf; /* as the build left it */
 	}
 	if (!reused) {
 		H->progress(st, 0, "building the model: %lld nodes",
@@ -399,14 +400,11 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 				goto out;
 			}
 		}
-		/* without the snapshot the model is simply not kept */
-		if (pv->model_reuse && tled_model_snap(&snap, &m) == 0) {
-			snap.ip_factor = mo.ip_factor;
-			keepm = 1;
+		/* a copy as built, before this growth changes its own */
+		if (publish) {
+			tled_model_cache_put(mkey, &m, mo.ip_factor);
+			publish = 0;
 		}
-	} else {
-		mo.ip_factor = snap.ip_factor; /* as the build left it */
-		keepm = 1;
 	}
 	H->log(st, LOG_INFO, "model%s: %lld nodes (%lld merged), %lld "
 	       "integration points, %lld support entries, mean spacing %.2f "
@@ -638,8 +636,6 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 		still = 0;
 		mo.geometry_only = 0;
 		tled_model_free(&m);
-		tled_model_snap_free(&snap); /* not kept: built here */
-		keepm = 0;
 		if (tled_model_build(&m, Xin, pn->label, nin, NULL, NULL, &mo,
 				     err, sizeof err)) {
 			rc = H->fail(st, ARMSTG_EINVAL, "model: %s", err);
@@ -903,10 +899,9 @@ out:
 	tled_grid_free(&cg);
 	tled_grid_free(&ing);
 	tled_solver_free(&s);
-	if (keepm && rc == 0)
-		tled_model_cache_keep(mkey, &m, &snap);
+	if (publish) /* the build failed: a waiting growth builds it */
+		tled_model_cache_abandon(mkey);
 	tled_model_free(&m);
-	tled_model_snap_free(&snap);
 	free(Xin);
 	return rc;
 }

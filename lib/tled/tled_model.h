@@ -328,35 +328,32 @@ uint64_t tled_model_next_gen(void);
  * same nodes with the same parameters once per depth; the model does not
  * depend on the depth.  tled_model_hash: 64-bit FNV-1a of every array and
  * setting of a model (not its timings, build number or scratch), equal for
- * equal builds; tled_model_opts_hash folds a build's settings into h
- * (not the callbacks' contexts: the caller hashes what they read).  A
- * snapshot keeps what a growth changes in a model (labels, kinds, the
- * points' materials).  tled_model_cache_take: 1 when the last kept model
- * has this key (then *m and *s are it, owned by the caller, with a new
- * build number), else 0.  tled_model_cache_keep: the model back as it was
- * built (from s; no growth stretch) kept under key, replacing the previous
- * one; m and s are emptied (freed when s does not fit m).
- * tled_model_cache_clear: the kept model freed.
+ * equal builds; tled_model_opts_hash folds a build's settings into h (not
+ * the callbacks' contexts: the caller hashes what they read).
+ * tled_model_copy: a deep copy (0, or -1 out of memory, d empty); every
+ * array of tled_model_t must be listed in its TLED_MODEL_ARRAYS.
+ * The cache keeps a copy of one model, as built.  tled_model_cache_get: 1
+ * and *m a copy of it (with a new build number, and the ip_factor its
+ * build used) when the key matches; when another thread of this process
+ * is building the model of this key, it waits for it first; else 0, and
+ * *publish = 1 when the caller is to build it and then either
+ * tled_model_cache_put it (a copy is kept, waiters wake) or
+ * tled_model_cache_abandon the key (a waiter builds it instead).
+ * tled_model_cache_clear frees the kept model; tled_model_cache_hits
+ * counts the copies handed out in this process.
  */
 #define TLED_HASH_INIT UINT64_C(14695981039346656037)
-typedef struct tled_model_snap {
-	int valid;
-	int64_t n, nip;
-	int32_t *label;
-	uint8_t *kind;
-	int32_t *ipmat;
-	double ip_factor;   /* the caller's: the build's settings to go on with */
-} tled_model_snap_t;
 
 uint64_t tled_hash_bytes(uint64_t h, const void *p, size_t n);
 uint64_t tled_model_hash(const tled_model_t *m);
 uint64_t tled_model_opts_hash(uint64_t h, const tled_model_opts_t *o);
-int tled_model_snap(tled_model_snap_t *s, const tled_model_t *m);
-void tled_model_snap_free(tled_model_snap_t *s);
-int tled_model_cache_take(uint64_t key, tled_model_t *m, tled_model_snap_t *s);
-void tled_model_cache_keep(uint64_t key, tled_model_t *m, tled_model_snap_t *s);
+int tled_model_copy(tled_model_t *d, const tled_model_t *s);
+int tled_model_cache_get(uint64_t key, tled_model_t *m, double *ip_factor,
+			 int *publish);
+void tled_model_cache_put(uint64_t key, const tled_model_t *m,
+			  double ip_factor);
+void tled_model_cache_abandon(uint64_t key);
 void tled_model_cache_clear(void);
-/* how many models tled_model_cache_take handed out in this process */
 uint64_t tled_model_cache_hits(void);
 
 /* MLS shape functions (linear basis, cubic-spline weight) at x from the

@@ -1,16 +1,23 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * The last growth model kept for the next growth of the same inputs
+ * The growth model kept for the next growths of the same inputs
  * (tled_model.h, "Model reuse").  A [tune] search of the push depth grows
  * the same nodes with the same parameters once per depth; the model (the
  * supports, the MLS shape functions and their consistency correction)
- * does not depend on the depth, and its build was 2.9 s of a 9.1 s growth
- * at 3 mm nodes on the GPU host (bench/tled/results.md).  One entry, the
- * last model handed back; a mutex makes take/keep safe from concurrent
- * stages.  What a growth changes in the model (the nodes' labels and
- * kinds, the points' materials and growth stretches) is put back as it
- * was built before the model is kept, so a model taken from here hashes
- * as the fresh build (tled_model_hash; lib/tled/tests/test_core.c).
+ * does not depend on the depth, and its build was 2.3-3.3 s of each
+ * growth at 3 mm nodes on the GPU host (bench/pipeline/results.md, "The
+ * growth's model built once per search").
+ *
+ * One entry: a copy of the last model published, as it was built (the
+ * growths change their own copies: labels, kinds, materials).  A growth
+ * asks for it (tled_model_cache_get): a copy when the key matches; when
+ * another growth of this process is building the model of that key (the
+ * [tune] candidates run in parallel, runtime/tune.c), it waits for it;
+ * otherwise it builds the model itself and publishes it
+ * (tled_model_cache_put), or gives the build up (tled_model_cache_abandon)
+ * so that a waiting one builds it.  A mutex and a condition variable;
+ * the copies are made under the mutex (about 0.1 s for 3.6 M support
+ * entries).
  */
 #include <pthread.h>
 #include <stdlib.h>
@@ -22,12 +29,15 @@ typedef struct {
 	int valid;
 	uint64_t key;
 	tled_model_t m;
-	tled_model_snap_t snap;
+	double ip_factor;
+	int pending;          /* a growth is building pending_key's model */
+	uint64_t pending_key;
+	uint64_t hits;        /* copies handed out (tled_model_cache_hits) */
 } cache_t;
 
 static cache_t g_cache;
 static pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
-static uint64_t g_hits; /* models taken (tled_model_cache_hits) */
+static pthread_cond_t g_cv = PTHREAD_COND_INITIALIZER;
 
 /* ---------------------------------------------------------------- hashing */
 
@@ -49,50 +59,59 @@ uint64_t tled_hash_bytes(uint64_t h, const void *p, size_t n)
 	return h;
 }
 
+/* every array of a model with its length (the order of tled_model.h),
+ * for the hash and the copy; the fused forces' blocks and the boundary
+ * grid are derived (rebuilt by the copy), their scratch is not state */
+#define TLED_MODEL_ARRAYS(X_)                                                \
+	X_(X, 3 * n)                                                         \
+	X_(label, n)                                                         \
+	X_(kind, n)                                                          \
+	X_(mass, n)                                                          \
+	X_(nn_dist, n)                                                       \
+	X_(rep, m->n_in)                                                     \
+	X_(ipX, 3 * nip)                                                     \
+	X_(ipV, nip)                                                         \
+	X_(ipmat, nip)                                                       \
+	X_(ipg, nip)                                                         \
+	X_(ipptr, nip + 1)                                                   \
+	X_(ipnode, ne)                                                       \
+	X_(entip, ne)                                                        \
+	X_(N, ne)                                                            \
+	X_(dN, 3 * ne)                                                       \
+	X_(nptr, n + 1)                                                      \
+	X_(nent, ne)                                                         \
+	X_(gdN, 3 * ne)                                                      \
+	X_(gip, ne)                                                          \
+	X_(ipn32, ne)                                                        \
+	X_(gip32, ne)                                                        \
+	X_(bnode, m->nb)                                                     \
+	X_(bX, 3 * m->nb)                                                    \
+	X_(bn, 3 * m->nb)                                                    \
+	X_(rid, nr)                                                          \
+	X_(rN, nr)                                                           \
+	X_(bt, 3 * m->nb)                                                    \
+	X_(Ra, n)
+
 uint64_t tled_model_hash(const tled_model_t *m)
 {
 	uint64_t h = TLED_HASH_INIT;
 	int64_t n = m->n, nip = m->nip;
 	int64_t ne = m->ipptr ? m->ipptr[nip] : 0;
 	int64_t nr = m->rk > 0 ? n * m->rk : 0;
-#define HA(p, cnt) h = tled_hash_bytes(h, (p), (p) ? (size_t)(cnt) * sizeof *(p) : 0)
-	HA(m->X, 3 * n);
-	HA(m->label, n);
-	HA(m->kind, n);
-	HA(m->mass, n);
-	HA(m->nn_dist, n);
-	HA(m->rep, m->n_in);
-	HA(m->ipX, 3 * nip);
-	HA(m->ipV, nip);
-	HA(m->ipmat, nip);
-	HA(m->ipg, nip);
-	HA(m->ipptr, nip + 1);
-	HA(m->ipnode, ne);
-	HA(m->entip, ne);
-	HA(m->N, ne);
-	HA(m->dN, 3 * ne);
-	HA(m->nptr, n + 1);
-	HA(m->nent, ne);
-	HA(m->gdN, 3 * ne);
-	HA(m->gip, ne);
-	HA(m->ipn32, ne);
-	HA(m->gip32, ne);
-	HA(m->fb_loc, ne);
-	HA(m->fb_ptr, m->fb_ptr ? m->fb_n + 1 : 0);
-	HA(m->fs_ptr, n + 1);
-	HA(m->fs_slot, m->fs_ptr ? m->fs_ptr[n] : 0);
-	HA(m->bnode, m->nb);
-	HA(m->bX, 3 * m->nb);
-	HA(m->bn, 3 * m->nb);
-	HA(m->rid, nr);
-	HA(m->rN, nr);
-	HA(m->bt, 3 * m->nb);
-	HA(m->Ra, n);
+#define HA(f, cnt)                                                           \
+	h = tled_hash_bytes(h, m->f, m->f ? (size_t)(cnt) * sizeof *m->f : 0);
+	TLED_MODEL_ARRAYS(HA)
 #undef HA
+	h = tled_hash_bytes(h, m->fb_loc, m->fb_loc ? (size_t)ne * sizeof *m->fb_loc : 0);
+	h = tled_hash_bytes(h, m->fb_ptr, m->fb_ptr ? (size_t)(m->fb_n + 1) * sizeof *m->fb_ptr : 0);
+	h = tled_hash_bytes(h, m->fs_ptr, m->fs_ptr ? (size_t)(n + 1) * sizeof *m->fs_ptr : 0);
+	h = tled_hash_bytes(h, m->fs_slot, m->fs_ptr && m->fs_slot ?
+			    (size_t)m->fs_ptr[n] * sizeof *m->fs_slot : 0);
 	double sc[] = { m->h_min, m->h_mean, m->ip_h, m->dt_wave, m->Ra_max,
 			(double)m->n_merged, (double)m->Kn, (double)m->ebc,
 			(double)m->ebc_fixed, (double)m->support_nodal,
-			(double)m->rk, (double)m->fb_n, (double)m->fb_size };
+			(double)m->rk, (double)m->fb_n, (double)m->fb_size,
+			(double)m->nb, (double)m->n_in };
 	h = tled_hash_bytes(h, sc, sizeof sc);
 	for (int i = 0; i < MAT_N; i++) {
 		const tled_material_t *t = &m->mat[i];
@@ -122,109 +141,129 @@ uint64_t tled_model_opts_hash(uint64_t h, const tled_model_opts_t *o)
 	return h;
 }
 
-/* ------------------------------------------------------------ snapshots */
+/* ------------------------------------------------------------------ copy */
 
-int tled_model_snap(tled_model_snap_t *s, const tled_model_t *m)
+int tled_model_copy(tled_model_t *d, const tled_model_t *s)
 {
-	memset(s, 0, sizeof *s);
-	s->n = m->n;
-	s->nip = m->nip;
-	s->label = malloc((size_t)(m->n > 0 ? m->n : 1) * sizeof *s->label);
-	s->kind = malloc((size_t)(m->n > 0 ? m->n : 1) * sizeof *s->kind);
-	s->ipmat = malloc((size_t)(m->nip > 0 ? m->nip : 1) * sizeof *s->ipmat);
-	if (!s->label || !s->kind || !s->ipmat) {
-		tled_model_snap_free(s);
-		return -1;
+	const tled_model_t *m = s;
+	int64_t n = m->n, nip = m->nip;
+	int64_t ne = m->ipptr ? m->ipptr[nip] : 0;
+	int64_t nr = m->rk > 0 ? n * m->rk : 0;
+	*d = *s;
+	/* every pointer of the copy its own (none of s's) */
+#define NUL(f, cnt) d->f = NULL;
+	TLED_MODEL_ARRAYS(NUL)
+#undef NUL
+	d->fb_loc = NULL;
+	d->fb_ptr = d->fs_ptr = d->fs_slot = d->fb_i = NULL;
+	d->fb_buf = d->fb_w = NULL;
+	d->fb_n = d->fb_size = 0;
+	memset(&d->bgrid, 0, sizeof d->bgrid);
+#define DUP(f, cnt)                                                          \
+	if (s->f) {                                                          \
+		size_t b_ = (size_t)((cnt) > 0 ? (cnt) : 1) * sizeof *s->f;  \
+		if (!(d->f = malloc(b_)))                                    \
+			goto oom;                                            \
+		memcpy(d->f, s->f, (size_t)(cnt) * sizeof *s->f);            \
 	}
-	memcpy(s->label, m->label, (size_t)m->n * sizeof *s->label);
-	memcpy(s->kind, m->kind, (size_t)m->n * sizeof *s->kind);
-	memcpy(s->ipmat, m->ipmat, (size_t)m->nip * sizeof *s->ipmat);
-	s->valid = 1;
+	TLED_MODEL_ARRAYS(DUP)
+#undef DUP
+	/* derived: the boundary grid over bX (as tled_model_build makes it)
+	 * and the fused forces' blocks (when s has them) */
+	if (s->bX && tled_grid_build(&d->bgrid, d->bX, d->nb, d->h_mean))
+		goto oom;
+	if (s->fb_loc && (tled_model_fb_build(d) || !d->fb_loc))
+		goto oom;
 	return 0;
-}
-
-void tled_model_snap_free(tled_model_snap_t *s)
-{
-	free(s->label);
-	free(s->kind);
-	free(s->ipmat);
-	memset(s, 0, sizeof *s);
-}
-
-/* the model as it was built: the snapshot's arrays back, no growth
- * stretch (NULL at build), a new build number (a backend holding a copy of
- * the changed model uploads again) */
-static void snap_restore(tled_model_t *m, const tled_model_snap_t *s)
-{
-	memcpy(m->label, s->label, (size_t)m->n * sizeof *m->label);
-	memcpy(m->kind, s->kind, (size_t)m->n * sizeof *m->kind);
-	memcpy(m->ipmat, s->ipmat, (size_t)m->nip * sizeof *m->ipmat);
-	free(m->ipg);
-	m->ipg = NULL;
-	m->gen = tled_model_next_gen();
+oom:
+	tled_model_free(d);
+	return -1;
 }
 
 /* ---------------------------------------------------------------- cache */
 
-int tled_model_cache_take(uint64_t key, tled_model_t *m, tled_model_snap_t *s)
+int tled_model_cache_get(uint64_t key, tled_model_t *m, double *ip_factor,
+			 int *publish)
 {
 	int hit = 0;
+	*publish = 0;
 	pthread_mutex_lock(&g_lock);
-	if (g_cache.valid && g_cache.key == key) {
-		*m = g_cache.m;
-		*s = g_cache.snap;
-		memset(&g_cache, 0, sizeof g_cache);
-		m->gen = tled_model_next_gen();
-		g_hits++;
-		hit = 1;
+	for (;;) {
+		if (g_cache.valid && g_cache.key == key) {
+			if (tled_model_copy(m, &g_cache.m) == 0) {
+				m->gen = tled_model_next_gen();
+				*ip_factor = g_cache.ip_factor;
+				g_cache.hits++;
+				hit = 1;
+			}
+			break;
+		}
+		if (g_cache.pending && g_cache.pending_key == key) {
+			pthread_cond_wait(&g_cv, &g_lock);
+			continue;
+		}
+		if (!g_cache.pending) {
+			g_cache.pending = 1;
+			g_cache.pending_key = key;
+			*publish = 1;
+		}
+		break;
 	}
 	pthread_mutex_unlock(&g_lock);
 	return hit;
 }
 
-void tled_model_cache_keep(uint64_t key, tled_model_t *m, tled_model_snap_t *s)
+void tled_model_cache_put(uint64_t key, const tled_model_t *m,
+			  double ip_factor)
 {
-	if (!s->valid || s->n != m->n || s->nip != m->nip) {
-		tled_model_free(m);
-		tled_model_snap_free(s);
-		return;
-	}
-	snap_restore(m, s);
-	cache_t old;
+	tled_model_t c, old;
+	memset(&old, 0, sizeof old);
+	int ok = tled_model_copy(&c, m) == 0;
 	pthread_mutex_lock(&g_lock);
-	old = g_cache;
-	g_cache.valid = 1;
-	g_cache.key = key;
-	g_cache.m = *m;
-	g_cache.snap = *s;
-	pthread_mutex_unlock(&g_lock);
-	memset(m, 0, sizeof *m);
-	memset(s, 0, sizeof *s);
-	if (old.valid) {
-		tled_model_free(&old.m);
-		tled_model_snap_free(&old.snap);
+	if (ok) {
+		if (g_cache.valid)
+			old = g_cache.m;
+		g_cache.m = c;
+		g_cache.key = key;
+		g_cache.ip_factor = ip_factor;
+		g_cache.valid = 1;
 	}
+	if (g_cache.pending && g_cache.pending_key == key)
+		g_cache.pending = 0;
+	pthread_cond_broadcast(&g_cv);
+	pthread_mutex_unlock(&g_lock);
+	tled_model_free(&old);
+}
+
+void tled_model_cache_abandon(uint64_t key)
+{
+	pthread_mutex_lock(&g_lock);
+	if (g_cache.pending && g_cache.pending_key == key) {
+		g_cache.pending = 0;
+		pthread_cond_broadcast(&g_cv);
+	}
+	pthread_mutex_unlock(&g_lock);
 }
 
 uint64_t tled_model_cache_hits(void)
 {
 	pthread_mutex_lock(&g_lock);
-	uint64_t n = g_hits;
+	uint64_t n = g_cache.hits;
 	pthread_mutex_unlock(&g_lock);
 	return n;
 }
 
 void tled_model_cache_clear(void)
 {
-	cache_t old;
+	tled_model_t old;
+	memset(&old, 0, sizeof old);
 	pthread_mutex_lock(&g_lock);
-	old = g_cache;
-	memset(&g_cache, 0, sizeof g_cache);
+	if (g_cache.valid)
+		old = g_cache.m;
+	memset(&g_cache.m, 0, sizeof g_cache.m);
+	g_cache.valid = 0;
 	pthread_mutex_unlock(&g_lock);
-	if (old.valid) {
-		tled_model_free(&old.m);
-		tled_model_snap_free(&old.snap);
-	}
+	tled_model_free(&old);
 }
 
 /* the plugin's shared object unloaded (dlclose) or the process ends */

@@ -6,6 +6,8 @@
 #include "testutil.h"
 
 #include <math.h>
+#include <pthread.h>
+#include <time.h>
 #include <omp.h>
 
 #include "tled/tled_solve.h"
@@ -389,9 +391,29 @@ static void test_corr_coarse(void **state)
 }
 
 /* The model build is the same bits on 1, 2 and 3 threads (model_reuse's
- * key leaves the thread count out: tled_model_cache.c), and a model kept
- * in the cache after a growth changed it comes back as it was built: its
- * hash is the fresh build's, under its key only, with a new build number. */
+ * key leaves the thread count out: tled_model_cache.c); a copy hashes as
+ * its original and shares none of its arrays; the cache hands out copies
+ * of the model as it was put, under its key only, and a growth that asks
+ * while another builds the model of that key waits for it. */
+typedef struct {
+	uint64_t key;
+	int hit, publish;
+	uint64_t hash;
+} getter_t;
+
+static void *getter(void *arg)
+{
+	getter_t *g = arg;
+	tled_model_t c;
+	double f = 0;
+	g->hit = tled_model_cache_get(g->key, &c, &f, &g->publish);
+	if (g->hit) {
+		g->hash = tled_model_hash(&c);
+		tled_model_free(&c);
+	}
+	return NULL;
+}
+
 static void test_model_reuse(void **state)
 {
 	TLED_TEST_REQUIRE();
@@ -409,10 +431,10 @@ static void test_model_reuse(void **state)
 		h[k] = tled_model_hash(&m[k]);
 	}
 	print_message("model hash on 1, 2, 3 threads: %016llx %016llx "
-		      "%016llx (%lld nodes, %lld entries)\n",
+		      "%016llx (%lld nodes, %lld entries, fused blocks %lld)\n",
 		      (unsigned long long)h[0], (unsigned long long)h[1],
 		      (unsigned long long)h[2], (long long)m[0].n,
-		      (long long)m[0].ipptr[m[0].nip]);
+		      (long long)m[0].ipptr[m[0].nip], (long long)m[0].fb_n);
 	assert_true(h[0] == h[1] && h[1] == h[2]);
 	/* the hash sees a change of one entry */
 	m[2].dN[7] = nextafter(m[2].dN[7], INFINITY);
@@ -420,34 +442,74 @@ static void test_model_reuse(void **state)
 	tled_model_free(&m[1]);
 	tled_model_free(&m[2]);
 
-	/* what a growth changes, then kept */
-	tled_model_snap_t s;
-	assert_int_equal(tled_model_snap(&s, &m[0]), 0);
-	uint64_t gen0 = m[0].gen;
-	for (int64_t a = 0; a < m[0].n; a += 3) {
-		m[0].label[a] = TL_TUMOUR;
-		m[0].kind[a] = TLED_DRIVEN;
-	}
-	m[0].ipmat[0] = MAT_TUMOUR + 7;
-	m[0].ipg = calloc((size_t)m[0].nip, sizeof *m[0].ipg);
-	assert_true(tled_model_hash(&m[0]) != h[0]);
+	/* a deep copy */
+	tled_model_t cp;
+	assert_int_equal(tled_model_copy(&cp, &m[0]), 0);
+	assert_true(tled_model_hash(&cp) == h[0]);
+	assert_true(cp.X != m[0].X && cp.dN != m[0].dN && cp.rid != m[0].rid &&
+		    cp.bgrid.start != m[0].bgrid.start);
+	assert_true(m[0].fb_loc == NULL || cp.fb_loc != m[0].fb_loc);
+	for (int64_t a = 0; a < cp.n; a++) /* what a growth changes */
+		cp.label[a] = TL_TUMOUR;
+	assert_true(tled_model_hash(&m[0]) == h[0]);
+	tled_model_free(&cp);
+
+	/* the cache: a miss makes the caller the builder; put keeps a copy
+	 * as it was then */
 	const uint64_t key = 0x1234;
-	tled_model_cache_keep(key, &m[0], &s);
-	assert_null(m[0].X); /* emptied: owned by the cache */
 	tled_model_t r;
-	tled_model_snap_t rs;
-	assert_int_equal(tled_model_cache_take(key + 1, &r, &rs), 0);
-	assert_int_equal(tled_model_cache_take(key, &r, &rs), 1);
-	assert_true(tled_model_hash(&r) == h[0]);
-	assert_true(r.gen != gen0);
-	assert_int_equal(rs.valid, 1);
-	/* taken: the cache is empty until a model is kept again */
-	tled_model_t r2;
-	tled_model_snap_t rs2;
-	assert_int_equal(tled_model_cache_take(key, &r2, &rs2), 0);
-	tled_model_cache_keep(key, &r, &rs);
+	double f = 0;
+	int publish = 0;
 	tled_model_cache_clear();
-	assert_int_equal(tled_model_cache_take(key, &r2, &rs2), 0);
+	uint64_t hits = tled_model_cache_hits();
+	assert_int_equal(tled_model_cache_get(key, &r, &f, &publish), 0);
+	assert_int_equal(publish, 1);
+	tled_model_cache_put(key, &m[0], 0.75);
+	m[0].kind[0] = TLED_DRIVEN; /* the builder's own copy changes */
+	assert_int_equal(tled_model_cache_get(key + 1, &r, &f, &publish), 0);
+	assert_int_equal(publish, 1);
+	tled_model_cache_abandon(key + 1);
+	for (int k = 0; k < 2; k++) {
+		assert_int_equal(tled_model_cache_get(key, &r, &f, &publish), 1);
+		assert_int_equal(publish, 0);
+		assert_true(tled_model_hash(&r) == h[0]);
+		assert_true(f == 0.75);
+		assert_true(r.gen != m[0].gen);
+		r.ipmat[0] = MAT_TUMOUR + 7;
+		tled_model_free(&r);
+	}
+	assert_int_equal(tled_model_cache_hits() - hits, 2);
+
+	/* another thread asks while this one builds key2's model: it waits
+	 * and gets the copy; after an abandon a waiter becomes the builder */
+	const uint64_t key2 = 0x5678;
+	assert_int_equal(tled_model_cache_get(key2, &r, &f, &publish), 0);
+	assert_int_equal(publish, 1);
+	getter_t gw = { .key = key2 };
+	pthread_t th;
+	assert_int_equal(pthread_create(&th, NULL, getter, &gw), 0);
+	struct timespec ts = { 0, 100000000L };
+	nanosleep(&ts, NULL);
+	tled_model_cache_put(key2, &m[0], 1.0);
+	pthread_join(th, NULL);
+	assert_int_equal(gw.hit, 1);
+	assert_int_equal(gw.publish, 0);
+	assert_true(gw.hash == tled_model_hash(&m[0])); /* as put */
+	uint64_t key3 = 0x9abc;
+	assert_int_equal(tled_model_cache_get(key3, &r, &f, &publish), 0);
+	assert_int_equal(publish, 1);
+	getter_t gw3 = { .key = key3 };
+	assert_int_equal(pthread_create(&th, NULL, getter, &gw3), 0);
+	nanosleep(&ts, NULL);
+	tled_model_cache_abandon(key3);
+	pthread_join(th, NULL);
+	assert_int_equal(gw3.hit, 0);
+	assert_int_equal(gw3.publish, 1); /* it builds key3's now */
+	tled_model_cache_abandon(key3);
+	tled_model_cache_clear();
+	assert_int_equal(tled_model_cache_get(key, &r, &f, &publish), 0);
+	tled_model_cache_abandon(key);
+	tled_model_free(&m[0]);
 	synth_free(&c);
 }
 
