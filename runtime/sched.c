@@ -224,6 +224,26 @@ static void release_inputs(g_run_t *r, int v)
 	}
 }
 
+/* one running stage's share (resplit, resplit_shared): its `threads` key,
+ * else each (+1 while *extra lasts), at least 1; its start and least
+ * shares recorded for the run table */
+static void share_set(r_stage_t *x, int key, int each, int *extra)
+{
+	int n = key;
+	if (n <= 0) {
+		n = each + (*extra > 0);
+		if (*extra > 0)
+			(*extra)--;
+		if (n < 1)
+			n = 1;
+	}
+	stage_set_threads(x->st, n);
+	if (x->threads_start == 0)
+		x->threads_start = n;
+	if (x->threads_min == 0 || n < x->threads_min)
+		x->threads_min = n;
+}
+
 /* the same split over the running stages of every run that shares the
  * threads (r->share), the remainder to the earliest started */
 static void resplit_shared(sched_share_t *sh)
@@ -238,20 +258,7 @@ static void resplit_shared(sched_share_t *sh)
 	const int each = ndyn ? avail / ndyn : 0;
 	int extra = ndyn && avail > 0 ? avail % ndyn : 0;
 	for (int k = 0; ndyn && k < sh->n; k++) {
-		r_stage_t *x = sh->e[k].x;
-		int n = sh->e[k].key;
-		if (n <= 0) {
-			n = each + (extra > 0);
-			if (extra > 0)
-				extra--;
-			if (n < 1)
-				n = 1;
-		}
-		stage_set_threads(x->st, n);
-		if (x->threads_start == 0)
-			x->threads_start = n;
-		if (x->threads_min == 0 || n < x->threads_min)
-			x->threads_min = n;
+		share_set(sh->e[k].x, sh->e[k].key, each, &extra);
 	}
 	pthread_mutex_unlock(&sh->mu);
 }
@@ -294,19 +301,7 @@ static void resplit(runner_t *rn)
 		r_stage_t *x = &r->rs[i];
 		if (x->state != ST_RUNNING)
 			continue;
-		int n = g->stages[i].threads;
-		if (n <= 0) {
-			n = each + (extra > 0);
-			if (extra > 0)
-				extra--;
-			if (n < 1)
-				n = 1;
-		}
-		stage_set_threads(x->st, n);
-		if (x->threads_start == 0)
-			x->threads_start = n;
-		if (x->threads_min == 0 || n < x->threads_min)
-			x->threads_min = n;
+		share_set(x, g->stages[i].threads, each, &extra);
 	}
 }
 
