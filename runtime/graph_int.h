@@ -9,6 +9,7 @@
  *                   targets, declared outputs; graph_load   -> graph_t
  *   tune_check.c    [tune]: its keys checked              -> g_tune_t
  *   tune.c          [tune]: the search during a run, tune.tsv
+ *   tune_par.c      [tune] parallel: candidates at once (tune_int.h)
  *   sched.c         the scheduler: which stages, in what order, threads
  *   runtab.c        the run table (run.tsv)
  *   run_graph.c     the run's graph as a table for plugins (run_graph)
@@ -149,7 +150,7 @@ typedef struct g_tune {
 	int nset;
 	/* parallel = N (default 1): up to N candidates run at once, each on
 	 * its own instances of the stages that depend on the tuned one, with
-	 * the same choice as one after the other (tune.c) */
+	 * the same choice as one after the other (tune_par.c) */
 	int parallel;
 	int search;                /* 1: try the candidates when running */
 	int one_value;             /* no search: the single value is used */
@@ -314,7 +315,7 @@ typedef struct g_run {
 				       chosen candidate ([tune] reuse) */
 	const char *staging;        /* the output folder's staging folder
 				       (outdir.h), for stages made anew */
-	/* a [tune] parallel candidate's run (tune.c), NULL otherwise:
+	/* a [tune] parallel candidate's run (tune_par.c), NULL otherwise:
 	 * shared[i]: rs[i].st is another run's instance (done, read only:
 	 * sched_pass leaves it alone); share: the threads split with the
 	 * other candidates' running stages; cancel: set (atomically) to end

@@ -11,7 +11,7 @@
  * size of its outputs, for the run table.
  *
  * A [tune] parallel search runs one pass per candidate at once, each on
- * its own g_run_t (tune.c): such a run leaves the instances it shares
+ * its own g_run_t (tune_par.c): such a run leaves the instances it shares
  * with the others (r->shared) alone, splits the threads with their
  * running stages (r->share, a sched_share_t), and ends early when
  * r->cancel is set (its running stages see host->cancelled).  A run

@@ -54,7 +54,7 @@
  * c < v clamps every value >= v to the same c: a later candidate whose
  * value is at least this one's would give the same outputs, so it is not
  * run at all and takes this candidate's score and status, or those of the
- * candidate this one copies (tune_clamp_src, cand_clamp; tune.tsv: "same
+ * candidate this one copies (tune_clamp_src, tune_cand_clamp; tune.tsv: "same
  * grow outputs as 6, not run (same_from: push_used_mm 5.99997 at 6)"),
  * never chosen over it.  Only a candidate whose status is known (scored,
  * a copy, or dropped by require_early) is a source; the values need not
@@ -65,41 +65,17 @@
  * (tune_table_write), the skipped ones too, and the overrides in a column
  * search_set when there are some.
  *
- * parallel = N (search_parallel): up to N candidates run at once, each on
- * its own thread with its own instances of the stages that depend on the
- * tuned one (a g_run_t per lane: fresh instances with the graph's values,
- * search_set's overrides and the candidate's value), reading the shared
- * stages' outputs (run once, before) by reference: those instances are
- * the run's, done and only read (msg_t refcounts are atomic, outputs
- * frozen); sched_pass leaves them alone (g_run_t.shared).  The running
- * stages of every lane split the threads as one run's do
- * (sched_share_t).  The candidates start in order and are committed in
- * order (cand_commit: the best so far, reuse's kept stages, stop) once
- * they and the earlier ones have ended, so every rule reads what it reads
- * one after the other and the rows, the choice and the final outputs are
- * the same.  stop: the candidates after the one that stops the search
- * may have started; they are cancelled (no further stage; the running one
- * is asked to stop through host->cancelled, which the growth and the
- * registration poll), what they ran is dropped and tune.tsv lists them
- * skipped as before.  same_from: a candidate is not started when a
- * committed one covers it; one that started before its source was
- * committed runs, and its row is replaced by the copy when it is
- * committed (the rows of the search one after the other; its run only
- * cost time).  same_skip: a candidate whose tuned stage's outputs match
- * an earlier one that still runs waits for it (same_wait), then takes its
- * score as before, or runs on if it was not scored.  Candidates run
- * beyond those the search one after the other would run (after a stop)
- * only cost time.  Memory: each lane holds one candidate's outputs
- * (and reuse one more).  The times in tune.tsv are each candidate's own
- * (their sum, run.tsv's row tune, exceeds the search's wall time).
+ * parallel = N: up to N candidates run at once, each on its own thread
+ * and instances of the stages that depend on the tuned one, with the rows
+ * and the choice of the search one after the other (tune_par.c;
+ * tune_int.h has what the two files share).
  */
 #include <math.h>
 #include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
-#include "graph_int.h"
+#include "tune_int.h"
 
 /* Back to "not run" for the stages that depend on the tuned one: outputs
  * dropped, pending files discarded, fini called so the next init starts
@@ -228,7 +204,7 @@ static int tune_require(const g_run_t *r, const char *only, char *why,
 
 /* the candidates after k skipped by [tune] stop (why), r->nrows covering
  * them; what a parallel search ran of them is dropped */
-static void stop_mark(g_run_t *r, int k, const char *why)
+void tune_stop_mark(g_run_t *r, int k, const char *why)
 {
 	const g_tune_t *t = &r->g->tune;
 	for (int j = k + 1; j < t->nvalues; j++) {
@@ -247,7 +223,7 @@ static void stop_mark(g_run_t *r, int k, const char *why)
  * so far (-1: none).  require: k failed a condition of require.
  * past_peak: k scored worse than the best so far by more than the
  * tolerance.  Then the count of the candidates after k is returned, the
- * reason in why (stop_mark marks them skipped); else 0.
+ * reason in why (tune_stop_mark marks them skipped); else 0.
  *
  * Why the choice is that of the whole list.  require: when a value fails
  * it, so does every later one (the deeper pushes fold more), so none of
@@ -294,11 +270,11 @@ static int tune_stop(g_run_t *r, int k, int best, const char *sel,
  * else they are freed and the final run computes the choice as without
  * reuse.
  */
-typedef struct tune_keep {
+struct tune_keep {
 	rt_stage_t **st;            /* [nstages], NULL: nothing kept */
 	r_stage_t *meta;            /* the stage's row (times) */
 	int k;                      /* the candidate kept, -1: none */
-} tune_keep_t;
+};
 
 static void keep_drop(const g_run_t *r, tune_keep_t *kp)
 {
@@ -371,7 +347,7 @@ static uint64_t tune_out_hash(const g_run_t *r)
 
 /* same_skip: the earliest candidate before k that was scored and whose
  * tuned stage gave the outputs of k's (rows[k].hash); -1: none */
-static int tune_same(const g_run_t *r, int k)
+int tune_same(const g_run_t *r, int k)
 {
 	for (int j = 0; j < k; j++)
 		if (r->rows[j].scored && !r->rows[j].same_as &&
@@ -422,7 +398,7 @@ static int tune_used(const g_run_t *x, double *used, char *err,
  * or dropped by require_early): k would be clamped to the same value and
  * give j's outputs.  -1: none.  A candidate that failed in a stage is no
  * source (the failure may not be the outputs'). */
-static int tune_clamp_src(const g_run_t *r, int k, int lim)
+int tune_clamp_src(const g_run_t *r, int k, int lim)
 {
 	const g_tune_t *t = &r->g->tune;
 	if (t->sf_stage < 0)
@@ -438,7 +414,7 @@ static int tune_clamp_src(const g_run_t *r, int k, int lim)
 
 /* same_from: candidate k's row, not run, as the copy of cl's outputs (of
  * its own source, when cl is a copy) */
-static void cand_clamp(g_run_t *r, int k, int cl)
+void tune_cand_clamp(g_run_t *r, int k, int cl)
 {
 	const g_tune_t *t = &r->g->tune;
 	const g_stage_t *ts = &r->g->stages[t->stage];
@@ -522,64 +498,6 @@ static int tune_set_restore(g_run_t *r, const char *aff, const char *down,
 	return n;
 }
 
-/* What every candidate of one search shares (tune_search): the stage sets
- * and, in a parallel search, the candidates' progress. */
-typedef struct tctx {
-	g_run_t *r;                 /* the run: rows, shared stages */
-	const char *down, *cand;    /* stage sets (tune_search) */
-	const char *early, *ereq, *pre;
-	int nearly;
-	const char *sel;            /* "METRIC [STRUCTURE]" */
-	/* parallel = N > 1, else 0 and none of these */
-	int par;
-	pthread_mutex_t mu;
-	pthread_cond_t cv;
-	signed char *phase;         /* per candidate: 0 running, 1 its tuned
-				       stage's hash known (same_skip), 2
-				       ended */
-} tctx_t;
-
-/* same_skip: tune_same for candidate k once it is final.  In a parallel
- * search an earlier candidate may still run: wait until each earlier one
- * has ended or is known to have other outputs (its hash), so that the
- * rule reads what the search one after the other reads (the earliest
- * scored one with these outputs).  -1 when x is cancelled (stop). */
-static int same_wait(tctx_t *c, g_run_t *x, int k)
-{
-	g_run_t *r = c->r;
-	if (!c->par)
-		return tune_same(r, k);
-	int same = -1;
-	pthread_mutex_lock(&c->mu);
-	c->phase[k] = 1;
-	pthread_cond_broadcast(&c->cv);
-	for (;;) {
-		if (rt_interrupted || __atomic_load_n(x->cancel,
-						      __ATOMIC_RELAXED))
-			break;
-		int ready = 1;
-		for (int j = 0; j < k && ready; j++)
-			ready = c->phase[j] == 2 ||
-				(c->phase[j] == 1 &&
-				 r->rows[j].hash != r->rows[k].hash);
-		if (ready) {
-			same = tune_same(r, k);
-			break;
-		}
-		/* timed: rt_interrupted comes from a signal handler */
-		struct timespec ts;
-		clock_gettime(CLOCK_REALTIME, &ts);
-		ts.tv_nsec += 50000000L;
-		if (ts.tv_nsec >= 1000000000L) {
-			ts.tv_sec++;
-			ts.tv_nsec -= 1000000000L;
-		}
-		pthread_cond_timedwait(&c->cv, &c->mu, &ts);
-	}
-	pthread_mutex_unlock(&c->mu);
-	return same;
-}
-
 /*
  * Candidate k on the stages of x (the run itself, or a parallel
  * candidate's run, whose instances of the stages that depend on the tuned
@@ -588,8 +506,8 @@ static int same_wait(tctx_t *c, g_run_t *x, int k)
  * (it ran to its end, not interrupted).  0, or a negative code with err
  * (a graph error: the run fails).
  */
-static int cand_run(tctx_t *c, g_run_t *x, int k, int *counted, char *err,
-		    size_t errsize)
+int tune_cand_run(tctx_t *c, g_run_t *x, int k, int *counted, char *err,
+		  size_t errsize)
 {
 	g_run_t *r = c->r;
 	const graph_t *g = r->g;
@@ -633,7 +551,7 @@ static int cand_run(tctx_t *c, g_run_t *x, int k, int *counted, char *err,
 	}
 	if (t->same_skip && !row->rc && !efail && !rt_interrupted) {
 		row->hash = tune_out_hash(x);
-		same = same_wait(c, x, k);
+		same = tune_same_wait(c, x, k);
 	}
 	if (!row->rc && !efail && same < 0 && !rt_interrupted) {
 		for (int i = 0; i < g->nstages; i++)
@@ -695,21 +613,13 @@ static int cand_run(tctx_t *c, g_run_t *x, int k, int *counted, char *err,
 	return 0;
 }
 
-/* The search's state between candidates, which tune_commit advances in
- * the candidates' order. */
-typedef struct tstate {
-	int best, nok, ncopy, nskip;
-	int nclamp;                 /* same_from: not run */
-	char why[512];              /* stop: the reason (nskip > 0) */
-} tstate_t;
-
 /* Candidate k has run (on x's stages) and r->rows[k] is its row: logged,
  * the best so far, [tune] reuse's kept stages, [tune] stop.  The same for
  * a parallel search, in the candidates' order.  0, or a negative code
  * with err. */
-static int cand_commit(tctx_t *c, g_run_t *x, tune_keep_t *kp,
-		       const char *ksel, int k, tstate_t *s, char *err,
-		       size_t errsize)
+int tune_cand_commit(tctx_t *c, g_run_t *x, tune_keep_t *kp,
+		     const char *ksel, int k, tstate_t *s, char *err,
+		     size_t errsize)
 {
 	g_run_t *r = c->r;
 	const g_tune_t *t = &r->g->tune;
@@ -756,11 +666,11 @@ static int search_serial(tctx_t *c, tune_keep_t *kp, const char *ksel,
 	for (int k = 0; k < t->nvalues && !rt_interrupted; k++) {
 		int counted = 0, rc = 0, cl = tune_clamp_src(r, k, k);
 		if (cl >= 0) {
-			cand_clamp(r, k, cl);
+			tune_cand_clamp(r, k, cl);
 			s->nclamp++;
 			counted = 1;
 		} else {
-			rc = cand_run(c, r, k, &counted, err, errsize);
+			rc = tune_cand_run(c, r, k, &counted, err, errsize);
 		}
 		if (counted)
 			r->nrows = k + 1;
@@ -768,249 +678,15 @@ static int search_serial(tctx_t *c, tune_keep_t *kp, const char *ksel,
 			return rc;
 		if (!counted)
 			break; /* interrupted */
-		rc = cand_commit(c, r, kp, ksel, k, s, err, errsize);
+		rc = tune_cand_commit(c, r, kp, ksel, k, s, err, errsize);
 		if (rc)
 			return rc;
 		if (s->nskip) {
-			stop_mark(r, k, s->why);
+			tune_stop_mark(r, k, s->why);
 			break;
 		}
 	}
 	return 0;
-}
-
-/* [tune] parallel: one candidate's run, on its own instances of the stages
- * that depend on the tuned one (the others: the run's, done, shared) */
-typedef struct tlane {
-	g_run_t run;
-	tctx_t *c;
-	int k;                      /* the candidate it runs */
-	int active;                 /* a thread runs or ran k (not joined) */
-	int norun;                  /* same_from: k not started */
-	int cancel;                 /* atomic: end early (stop) */
-	int counted, rc;
-	pthread_t th;
-	char err[2048];
-} tlane_t;
-
-static void *lane_main(void *arg)
-{
-	tlane_t *l = arg;
-	tctx_t *c = l->c;
-	l->rc = cand_run(c, &l->run, l->k, &l->counted, l->err,
-			 sizeof l->err);
-	pthread_mutex_lock(&c->mu);
-	c->phase[l->k] = 2;
-	pthread_cond_broadcast(&c->cv);
-	pthread_mutex_unlock(&c->mu);
-	return NULL;
-}
-
-/* the lane's run: fresh instances (with the search_set overrides) of the
- * stages that depend on the tuned one, the run's for the others.  0, or a
- * negative code with err. */
-static int lane_init(tctx_t *c, tlane_t *l, const char *shared,
-		     sched_share_t *share, char *err, size_t errsize)
-{
-	g_run_t *r = c->r;
-	const graph_t *g = r->g;
-	const g_tune_t *t = &g->tune;
-	l->c = c;
-	l->run.g = g;
-	l->run.o = r->o;
-	l->run.best = -1;
-	l->run.staging = r->staging;
-	l->run.shared = shared;
-	l->run.share = share;
-	l->run.cancel = &l->cancel;
-	l->run.rs = calloc((size_t)g->nstages, sizeof *l->run.rs);
-	if (!l->run.rs) {
-		snprintf(err, errsize, "[tune] out of memory");
-		return ARMSTG_ENOMEM;
-	}
-	for (int i = 0; i < g->nstages; i++) {
-		r_stage_t *x = &l->run.rs[i];
-		if (shared[i]) {
-			*x = r->rs[i];
-			continue;
-		}
-		x->keep = r->rs[i].keep;
-		x->st = run_stage_new(g, i, err, errsize);
-		if (!x->st)
-			return ARMSTG_ENOMEM;
-		stage_set_outdir(x->st, r->o.outdir);
-		if (r->staging)
-			stage_set_staging(x->st, r->staging);
-		for (int j = 0; j < t->nset; j++) {
-			if (t->set[j].stage != i)
-				continue;
-			char e[1024];
-			int rc = stage_set_param(x->st, t->set[j].key,
-						 t->set[j].val, e, sizeof e);
-			if (rc) { /* checked at load: cannot happen */
-				snprintf(err, errsize, "[tune] search_set: "
-					 "stage '%s': %s", g->stages[i].name,
-					 e);
-				return rc;
-			}
-		}
-	}
-	return 0;
-}
-
-/* the lane's own instances, with their outputs and pending files */
-static void lane_free(tctx_t *c, tlane_t *l)
-{
-	const graph_t *g = c->r->g;
-	for (int i = 0; l->run.rs && i < g->nstages; i++) {
-		rt_stage_t *st = l->run.rs[i].st;
-		if (!c->down[i] || !st)
-			continue;
-		stage_fini(st);
-		for (int o = 0; o < g->stages[i].plug.desc->n_outputs; o++)
-			msg_unref(stage_take_output(st, o));
-		stage_discard_files(st);
-		stage_free(st);
-	}
-	free(l->run.rs);
-	l->run.rs = NULL;
-}
-
-/*
- * [tune] parallel = N: up to N candidates run at once, each on its own
- * thread and instances, in the candidates' order; each is committed
- * (cand_commit: the best so far, reuse, stop) in that order once it and
- * every earlier one have ended, so the rows and the choice are those of
- * the search one after the other.  The candidates after one that stops
- * the search may have started: they are cancelled (their running stages
- * end first), what they ran is dropped and tune.tsv lists them skipped;
- * same_skip waits (same_wait) where an earlier candidate with the same
- * outputs still runs.  0, or a negative code with err.
- */
-static int search_parallel(tctx_t *c, tune_keep_t *kp, const char *ksel,
-			   tstate_t *s, char *err, size_t errsize)
-{
-	g_run_t *r = c->r;
-	const graph_t *g = r->g;
-	const g_tune_t *t = &g->tune;
-	int par = t->parallel < t->nvalues ? t->parallel : t->nvalues;
-	int rc = 0, next = 0, stop_k = -1;
-	tlane_t *lanes = calloc((size_t)par, sizeof *lanes);
-	char *shared = calloc((size_t)g->nstages, 1);
-	sched_share_t *share = sched_share_new(sched_threads_total(),
-					       par * g->nstages);
-	c->phase = calloc((size_t)t->nvalues, 1);
-	if (!lanes || !shared || !share || !c->phase) {
-		snprintf(err, errsize, "[tune] out of memory");
-		rc = ARMSTG_ENOMEM;
-		goto out;
-	}
-	for (int i = 0; i < g->nstages; i++)
-		shared[i] = (char)!c->down[i];
-	for (int l = 0; l < par && !rc; l++)
-		rc = lane_init(c, &lanes[l], shared, share, err, errsize);
-	if (rc)
-		goto out;
-	rt_log(NULL, LOG_INFO, "tune: up to %d candidates at once "
-	       "(parallel = %d), sharing %d threads", par, t->parallel,
-	       sched_threads_total());
-	for (int k = 0; k < t->nvalues; k++) {
-		/* the next candidates into the free lanes, in order */
-		while (next < t->nvalues && next < k + par && !rt_interrupted) {
-			tlane_t *l = &lanes[next % par];
-			l->k = next;
-			l->cancel = 0;
-			l->counted = l->rc = 0;
-			l->err[0] = 0;
-			/* same_from: covered by a committed candidate */
-			l->norun = tune_clamp_src(r, next, k) >= 0;
-			if (l->norun) {
-				pthread_mutex_lock(&c->mu);
-				c->phase[next] = 2;
-				pthread_cond_broadcast(&c->cv);
-				pthread_mutex_unlock(&c->mu);
-				next++;
-				continue;
-			}
-			if (pthread_create(&l->th, NULL, lane_main, l)) {
-				snprintf(err, errsize, "[tune] parallel: cannot "
-					 "start a thread for candidate %s",
-					 t->values[next]);
-				rc = ARMSTG_ENOMEM;
-				goto out;
-			}
-			l->active = 1;
-			next++;
-		}
-		if (next <= k)
-			break; /* interrupted */
-		tlane_t *l = &lanes[k % par];
-		pthread_mutex_lock(&c->mu);
-		while (c->phase[k] != 2)
-			pthread_cond_wait(&c->cv, &c->mu);
-		pthread_mutex_unlock(&c->mu);
-		if (l->active) {
-			pthread_join(l->th, NULL);
-			l->active = 0;
-		}
-		/* same_from: not started, or started before its source was
-		 * committed: the copy's row (as one after the other) */
-		int cl = tune_clamp_src(r, k, k);
-		if (cl >= 0) {
-			/* under the lock: a lane's same_wait reads the rows */
-			pthread_mutex_lock(&c->mu);
-			cand_clamp(r, k, cl);
-			pthread_mutex_unlock(&c->mu);
-			s->nclamp++;
-			l->counted = 1;
-			l->rc = 0;
-		}
-		if (l->counted)
-			r->nrows = k + 1;
-		if (l->rc) {
-			rc = l->rc;
-			snprintf(err, errsize, "%s", l->err);
-			goto out;
-		}
-		if (!l->counted)
-			break; /* interrupted */
-		rc = cand_commit(c, &l->run, kp, ksel, k, s, err, errsize);
-		if (rc)
-			goto out;
-		if (s->nskip) {
-			stop_k = k;
-			break;
-		}
-	}
-out:
-	/* the candidates still running (after a stop, a failure or an
-	 * interruption): cancelled, waited for, dropped */
-	for (int l = 0; lanes && l < par; l++)
-		if (lanes[l].active)
-			__atomic_store_n(&lanes[l].cancel, 1, __ATOMIC_RELAXED);
-	if (c->phase) {
-		pthread_mutex_lock(&c->mu);
-		pthread_cond_broadcast(&c->cv);
-		pthread_mutex_unlock(&c->mu);
-	}
-	for (int l = 0; lanes && l < par; l++)
-		if (lanes[l].active) {
-			pthread_join(lanes[l].th, NULL);
-			lanes[l].active = 0;
-		}
-	if (stop_k >= 0)
-		stop_mark(r, stop_k, s->why);
-	else /* rows the search does not count (the table stops before) */
-		for (int j = r->nrows; j < t->nvalues; j++)
-			memset(&r->rows[j], 0, sizeof r->rows[j]);
-	for (int l = 0; lanes && l < par; l++)
-		lane_free(c, &lanes[l]);
-	free(lanes);
-	free(shared);
-	sched_share_free(share);
-	free(c->phase);
-	c->phase = NULL;
-	return rc;
 }
 
 /*
@@ -1170,7 +846,7 @@ int tune_search(g_run_t *r, char *err, size_t errsize)
 	if (c.par) {
 		pthread_mutex_init(&c.mu, NULL);
 		pthread_cond_init(&c.cv, NULL);
-		rc = search_parallel(&c, &kp, ksel, &ss, err, errsize);
+		rc = tune_search_parallel(&c, &kp, ksel, &ss, err, errsize);
 		pthread_mutex_destroy(&c.mu);
 		pthread_cond_destroy(&c.cv);
 	} else {

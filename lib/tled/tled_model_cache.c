@@ -12,7 +12,7 @@
  * growths change their own copies: labels, kinds, materials).  A growth
  * asks for it (tled_model_cache_get): a copy when the key matches; when
  * another growth of this process is building the model of that key (the
- * [tune] candidates run in parallel, runtime/tune.c), it waits for it;
+ * [tune] candidates run in parallel, runtime/tune_par.c), it waits for it;
  * otherwise it builds the model itself and publishes it
  * (tled_model_cache_put), or gives the build up (tled_model_cache_abandon)
  * so that a waiting one builds it.  A mutex and a condition variable;
