@@ -7,6 +7,7 @@
  * (`plugin = tled_cuda`).  On a machine without a usable GPU the stage
  * fails at init with a message naming the fallback (plugin = tled_cpu).
  */
+#include <pthread.h>
 #include <stddef.h>
 
 #include "armstg/plugin.h"
@@ -46,12 +47,28 @@ static int tled_cuda_init(armstg_stage_t *st)
 	return 0;
 }
 
+static pthread_mutex_t bw_mu = PTHREAD_MUTEX_INITIALIZER;
+static double bw_gbps; /* 0: not measured yet */
+
+static double copy_gbps_once(tled_cuda_t *cu)
+{
+	pthread_mutex_lock(&bw_mu);
+	if (bw_gbps == 0)
+		bw_gbps = tled_cuda_copy_gbps(cu);
+	double bw = bw_gbps;
+	pthread_mutex_unlock(&bw_mu);
+	return bw;
+}
+
 static int tled_cuda_process(armstg_stage_t *st)
 {
 	priv_t *pv = st->priv;
 	tled_ops_t ops;
 	tled_cuda_ops(pv->cu, &ops);
 	int rc = tled_grow_process(st, &pv->g, &ops);
+	if (tled_cuda_finish(pv->cu) && rc == 0)
+		return st->host->fail(st, ARMSTG_EINTERNAL, "%s",
+				      ops.strerror(ops.ctx));
 	tled_cuda_stats_t cs;
 	tled_cuda_get_stats(pv->cu, &cs);
 	if (cs.steps > 0)
@@ -68,8 +85,10 @@ static int tled_cuda_process(armstg_stage_t *st)
 			      cs.bytes_per_step / (cs.step_ms / cs.steps) / 1e6,
 			      cs.upload_ms);
 	if (cs.steps > 0) {
-		/* the roofline of those steps, measured in the same run */
-		double bw = tled_cuda_copy_gbps(pv->cu);
+		/* the roofline of those steps, measured once per process (a
+		 * 2 x 512 MiB copy; its cudaFree waits for the whole device,
+		 * the other [tune] candidates' growths included) */
+		double bw = copy_gbps_once(pv->cu);
 		if (bw > 0)
 			st->host->log(st, LOG_INFO, "device: copy bandwidth "
 				      "%.0f GB/s (cudaMemcpy device to device, "

@@ -81,6 +81,12 @@ typedef struct tled_cuda_stats {
 	double upload_ms;     /* model upload, ms */
 } tled_cuda_stats_t;
 void tled_cuda_get_stats(const tled_cuda_t *c, tled_cuda_stats_t *st);
+/* Wait for this host thread's device work (the plugin is built with
+ * --default-stream per-thread: launches and copies go to the calling
+ * thread's stream).  Called at the end of each growth, so that the next
+ * growth of the same instance, perhaps on another host thread, starts
+ * after it.  0, or -1 with the CUDA error in the instance's message. */
+int tled_cuda_finish(tled_cuda_t *c);
 /* device-to-device copy bandwidth, GB/s (read + write), measured now;
  * < 0 when it could not be measured */
 double tled_cuda_copy_gbps(tled_cuda_t *c);

@@ -789,6 +789,12 @@ out:
 	return best;
 }
 
+int tled_cuda_finish(tled_cuda_t *c)
+{
+	CK(c, cudaStreamSynchronize(cudaStreamPerThread), "the end of the growth");
+	return 0;
+}
+
 void tled_cuda_get_stats(const tled_cuda_t *c, tled_cuda_stats_t *st)
 {
 	*st = c->st;

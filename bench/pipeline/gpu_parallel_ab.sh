@@ -1,0 +1,58 @@
+#!/bin/sh
+# [tune] parallel on the GPU host: the shipped graphs/armstg.ini search
+# (tled_cuda) run with the candidates one after the other and N at once, a
+# new build (build/) against a reference (buildm/), in one device call.
+# Run from a folder carried to the GPU host that holds the tree, build/,
+# buildm/, libs.tar.xz and data/ (bench/pipeline/carry_prep.sh), e.g.
+#     RUNS="m:1 n:1 n:3" CASES="pat0001 pat0002" sh carry/tled/bench/pipeline/gpu_parallel_ab.sh
+# First the CUDA tests (tled_cuda_test_*, a GPU required), then for each
+# case each run of RUNS in order: B:N, B = n (build/) or m (buildm/), N =
+# TUNE_PARALLEL.  Every run's metrics.tsv and the chosen depth are compared
+# with the case's first run's.  STOP_S (default 540): no run starts after
+# that many seconds, so the summaries come back inside one 600 s call.
+# Summaries in $OUT/r (summary.txt: one line per run; w-*.txt: the [tune]
+# lines and the growths' times), the logs in $OUT/logs.tgz.
+cd "$(dirname "$0")/../.."
+T0=$(date +%s)
+tar -xJf libs.tar.xz
+export LD_LIBRARY_PATH=$PWD/libs
+R=$OUT/r; mkdir -p $R
+CASES=${CASES:-"pat0001 pat0002"} JOBS=${JOBS:-4} RUNS=${RUNS:-"m:1 n:1 n:3"}
+STOP_S=${STOP_S:-540}
+{ cat .commit; date -u; nproc; nvidia-smi --query-gpu=name --format=csv,noheader; } > $R/machine.txt
+ARMSTG_REQUIRE_GPU=1 BUILD=build sh scripts/run-tests.sh build/tests/tled_cuda_test_* > $R/cuda-tests.txt 2>&1
+echo "cuda tests rc $?" >> $R/cuda-tests.txt
+grep -h "^two threads\|^parity" build/test-logs/tled_cuda_test_parity.log >> $R/cuda-tests.txt 2>/dev/null
+run() { # case build parallel
+  p=$1 b=$2 n=$3 tag=$1-$2$3
+  d=/tmp/v-$tag; rm -rf $d
+  D=$PWD/data/brats2013/brats_2013_${p}_1
+  bin=build; [ "$b" = m ] && bin=buildm
+  t0=$(date +%s.%N)
+  env ATLAS_T1=$PWD/data/sri24/spgr.nii.gz ATLAS_LABELS=$PWD/data/sri24/tzo116plus.nii.gz \
+    ATLAS_TISSUES=$PWD/data/sri24/tissues.nii.gz PATIENT_T1=$D/T1c_subtrMeanDivStd.nii.gz \
+    PATIENT_FLAIR=$D/Flair_subtrMeanDivStd.nii.gz PATIENT_LABELS=$D/OTMultiClass.nii.gz \
+    PATIENT_MASK=$D/brainmask.nii.gz ARMSTG_PLUGIN_PATH=$PWD/$bin/plugins TLED=tled_cuda \
+    TUNE_PARALLEL=$n $bin/armstg run graphs/armstg.ini --jobs $JOBS --out $d -v > $R/v-$tag.log 2>&1
+  rc=$?
+  w=$(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{printf "%.1f", b-a}')
+  ch=$(awk -F'\t' 'NR > 1 && $5 == 1 {print $1}' $d/tune.tsv 2>/dev/null)
+  tr=$(awk -F'\t' '$1 == "tune" {print $4}' $d/run.tsv 2>/dev/null)
+  same=first
+  if [ -n "${first:-}" ]; then
+    cmp -s $first/metrics.tsv $d/metrics.tsv && same="metrics.tsv = $(basename $first)'s" || same="metrics.tsv DIFFERS from $(basename $first)'s"
+  else first=$d; fi
+  echo "$tag: rc $rc wall $w s, chosen $ch, tune row $tr s, $same" | tee -a $R/summary.txt
+  { echo "== $tag rc $rc wall $w"; grep -E "tune" $R/v-$tag.log | grep -v debug | sed 's/^.*\] //' | cut -c1-200
+    grep -E "grow.*(growth time|device:)" $R/v-$tag.log | sed 's/^.*\] //' | cut -c1-200; } > $R/w-$tag.txt
+  cp $d/tune.tsv $R/tune-$tag.tsv 2>/dev/null
+}
+for p in $CASES; do
+  first=
+  for r in $RUNS; do
+    [ $(( $(date +%s) - T0 )) -lt $STOP_S ] || { echo "$p ${r}: not started (STOP_S)" >> $R/summary.txt; continue; }
+    run $p ${r%%:*} ${r##*:}
+  done
+done
+cat $R/machine.txt; tail -3 $R/cuda-tests.txt; cat $R/summary.txt
+cd $R && tar -czf $OUT/logs.tgz *.log && rm -f *.log
