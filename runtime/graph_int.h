@@ -9,6 +9,7 @@
  *                   targets, declared outputs; graph_load   -> graph_t
  *   tune_check.c    [tune]: its keys checked              -> g_tune_t
  *   tune.c          [tune]: the search during a run, tune.tsv
+ *   tune_same.c     [tune] same_skip, same_from (tune_int.h)
  *   tune_par.c      [tune] parallel: candidates at once (tune_int.h)
  *   sched.c         the scheduler: which stages, in what order, threads
  *   runtab.c        the run table (run.tsv)

@@ -1,11 +1,13 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Inside the [tune] search: what its two files share.
+ * Inside the [tune] search: what its files share.
  *
  *   tune.c       the search (tune_search): the stage sets, one candidate's
  *                run and its commit, the candidates one after the other,
- *                the choice, reuse, search_set, same_skip, same_from,
+ *                the score, require, stop, the choice, reuse, search_set,
  *                tune.tsv
+ *   tune_same.c  same_skip and same_from: a candidate that takes an
+ *                earlier one's outputs, score and status
  *   tune_par.c   [tune] parallel = N: the candidates on their own threads
  *                and instances (tune_search_parallel), same_skip's wait
  *                for an earlier candidate still running (tune_same_wait)
@@ -18,6 +20,7 @@
 #define ARMSTG_TUNE_INT_H
 
 #include <pthread.h>
+#include <stdint.h>
 
 #include "graph_int.h"
 
@@ -62,9 +65,17 @@ int tune_cand_commit(tctx_t *c, g_run_t *x, tune_keep_t *kp,
 		     size_t errsize);
 /* stop: the candidates after k skipped (why), r->nrows covering them */
 void tune_stop_mark(g_run_t *r, int k, const char *why);
+
+/* ---- tune_same.c ---- */
+/* same_skip: the hash of the tuned stage's volumes and point sets (the
+ * candidate just run on r's stages) */
+uint64_t tune_out_hash(const g_run_t *r);
 /* same_skip: the earliest scored candidate before k with k's outputs
  * (rows[k].hash); -1: none */
 int tune_same(const g_run_t *r, int k);
+/* same_from: the value the tuned stage used (the candidate just run on
+ * x's stages).  0, or a negative code with err. */
+int tune_used(const g_run_t *x, double *used, char *err, size_t errsize);
 /* same_from: the committed candidate (before lim) that covers k; -1: none */
 int tune_clamp_src(const g_run_t *r, int k, int lim);
 /* same_from: k's row as the copy of cl's (not run) */
