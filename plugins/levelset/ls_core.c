@@ -8,17 +8,11 @@
 
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
+#include "ls_box.h"
 #include "ls_incl.h"
 #include "img/kdtree.h"
 #include "img/sample.h"
 #include "ls_weno.h"
-
-static inline void vol_to_world_A(const double A[16], double i, double j,
-				  double k, double w[3])
-{
-	double p[3] = { i, j, k };
-	aff_apply(A, p, w);
-}
 
 /* ---------------------------------------------------------------- lists */
 
@@ -77,464 +71,6 @@ static int fail(ls_result_t *r, int code, const char *msg)
 {
 	snprintf(r->err, sizeof r->err, "%s", msg);
 	return code;
-}
-
-/* ---------------------------------------------------------- components */
-
-typedef struct comp {
-	int64_t size;
-	int lo[3], hi[3];
-	double cw[3];        /* world centroid, for a world-defined order */
-	int32_t raw;         /* raw label */
-} comp_t;
-
-static int cmp_comp(const void *a, const void *b)
-{
-	const comp_t *x = a, *y = b;
-	if (x->size != y->size)
-		return x->size > y->size ? -1 : 1;
-	for (int c = 0; c < 3; c++)
-		if (x->cw[c] != y->cw[c])
-			return x->cw[c] < y->cw[c] ? -1 : 1;
-	return 0;
-}
-
-/* 26-connected components of m; lab[v] = 1..nc, 0 background. */
-static int label_components(const ls_mask_t *mk, int32_t *lab, comp_t **out,
-			    int *ncomp)
-{
-	int nx = mk->nx, ny = mk->ny, nz = mk->nz;
-	int64_t nv = (int64_t)nx * ny * nz;
-	int64_t *q = malloc((size_t)nv * sizeof *q);
-	int cap = 16, nc = 0;
-	comp_t *cs = malloc((size_t)cap * sizeof *cs);
-	if (!q || !cs) {
-		free(q);
-		free(cs);
-		return -1;
-	}
-	memset(lab, 0, (size_t)nv * sizeof *lab);
-	for (int64_t s = 0; s < nv; s++) {
-		if (!mk->m[s] || lab[s])
-			continue;
-		if (nc == cap) {
-			cap *= 2;
-			comp_t *t = realloc(cs, (size_t)cap * sizeof *cs);
-			if (!t) {
-				free(q);
-				free(cs);
-				return -1;
-			}
-			cs = t;
-		}
-		comp_t *c = &cs[nc++];
-		memset(c, 0, sizeof *c);
-		c->raw = nc;
-		for (int a = 0; a < 3; a++) {
-			c->lo[a] = 1 << 30;
-			c->hi[a] = -1;
-		}
-		double si = 0, sj = 0, sk = 0;
-		int64_t qh = 0, qt = 0;
-		q[qt++] = s;
-		lab[s] = nc;
-		while (qh < qt) {
-			int64_t v = q[qh++];
-			int i = (int)(v % nx), j = (int)((v / nx) % ny),
-			    k = (int)(v / ((int64_t)nx * ny));
-			int ijk[3] = { i, j, k };
-			for (int a = 0; a < 3; a++) {
-				if (ijk[a] < c->lo[a])
-					c->lo[a] = ijk[a];
-				if (ijk[a] > c->hi[a])
-					c->hi[a] = ijk[a];
-			}
-			si += i;
-			sj += j;
-			sk += k;
-			for (int dk = -1; dk <= 1; dk++) {
-				int kk = k + dk;
-				if (kk < 0 || kk >= nz)
-					continue;
-				for (int dj = -1; dj <= 1; dj++) {
-					int jj = j + dj;
-					if (jj < 0 || jj >= ny)
-						continue;
-					for (int di = -1; di <= 1; di++) {
-						int ii = i + di;
-						if (ii < 0 || ii >= nx)
-							continue;
-						int64_t w = ((int64_t)kk * ny +
-							     jj) * nx + ii;
-						if (mk->m[w] && !lab[w]) {
-							lab[w] = nc;
-							q[qt++] = w;
-						}
-					}
-				}
-			}
-		}
-		c->size = qt;
-		vol_to_world_A(mk->A, si / qt, sj / qt, sk / qt, c->cw);
-	}
-	free(q);
-	*out = cs;
-	*ncomp = nc;
-	return 0;
-}
-
-/* ------------------------------------------------------------ the box */
-
-typedef struct box {
-	int lo[3], n[3];
-	int64_t nv;
-	double A[16];        /* voxel -> world of the full grid */
-	double G[9];         /* (A3^-1)^T: index gradient -> world gradient */
-	double h[3];         /* axis spacings, mm */
-	uint8_t *in;         /* inside this component */
-	double *d;           /* signed exact distance, + inside (mm) */
-	double *surf;        /* surface points (world), ns*3 */
-	int64_t *surf_vox;   /* inside box voxel of each surface point */
-	int8_t *surf_dir;    /* NB6 direction to the outside voxel */
-	int64_t ns;
-	kdtree_t kd;
-} box_t;
-
-static void box_free(box_t *b)
-{
-	free(b->in);
-	free(b->d);
-	free(b->surf);
-	free(b->surf_vox);
-	free(b->surf_dir);
-	kd_free(&b->kd);
-	memset(b, 0, sizeof *b);
-}
-
-static inline int64_t bidx(const box_t *b, int a, int c, int e)
-{
-	return ((int64_t)e * b->n[1] + c) * b->n[0] + a;
-}
-
-static inline void box_world(const box_t *b, double a, double c, double e,
-			     double w[3])
-{
-	vol_to_world_A(b->A, b->lo[0] + a, b->lo[1] + c, b->lo[2] + e, w);
-}
-
-static inline void box_ijk(const box_t *b, int64_t v, int ijk[3])
-{
-	ijk[0] = (int)(v % b->n[0]);
-	ijk[1] = (int)((v / b->n[0]) % b->n[1]);
-	ijk[2] = (int)(v / ((int64_t)b->n[0] * b->n[1]));
-}
-
-static const int NB6[6][3] = { { 1, 0, 0 }, { -1, 0, 0 }, { 0, 1, 0 },
-			       { 0, -1, 0 }, { 0, 0, 1 }, { 0, 0, -1 } };
-
-/* exact unsigned distance (mm) from world point p to the boundary points;
- * *foot receives the nearest point's index.  hint: a known point index
- * (or -1) whose distance bounds the search. */
-static double surf_dist(const box_t *b, const double p[3], int64_t hint,
-			int64_t *foot)
-{
-	double best = INFINITY;
-	if (hint >= 0) {
-		const double *s = b->surf + 3 * hint;
-		double dx = s[0] - p[0], dy = s[1] - p[1], dz = s[2] - p[2];
-		best = (dx * dx + dy * dy + dz * dz) * (1 + 1e-12) + 1e-18;
-	}
-	int64_t f = kd_nearest(&b->kd, p, &best);
-	if (f < 0) {
-		f = hint;
-		const double *s = b->surf + 3 * hint;
-		double dx = s[0] - p[0], dy = s[1] - p[1], dz = s[2] - p[2];
-		best = dx * dx + dy * dy + dz * dz;
-	}
-	if (foot)
-		*foot = f;
-	return sqrt(best);
-}
-
-/*
- * Constrained smoothing of the boundary points, after Gibson's constrained
- * elastic surface nets (MERL TR 99-24, 1998) and Whitaker (2000): the face
- * centres of a voxelised surface form a staircase, whose closest-point
- * directions zig-zag.  Each point moves along its face normal only (so it
- * stays on the segment between its tumour and non-tumour voxel centres:
- * still on the mask boundary, within 0.45 voxel of the face) towards the
- * mean of its neighbours within 1.5 voxel; LS_SMOOTH_ITERS Jacobi sweeps.
- */
-#define LS_SMOOTH_ITERS 10
-static int smooth_surface(box_t *b)
-{
-	int64_t ns = b->ns;
-	if (ns < 2)
-		return 0;
-	int rc = -1;
-	int32_t *fid = malloc((size_t)b->nv * 6 * sizeof *fid);
-	int64_t *off = malloc((size_t)(ns + 1) * sizeof *off);
-	int32_t *nb = NULL;
-	double *orig = malloc((size_t)ns * 3 * sizeof *orig);
-	double *nxt = malloc((size_t)ns * 3 * sizeof *nxt);
-	if (!fid || !off || !orig || !nxt)
-		goto out;
-	for (int64_t e = 0; e < b->nv * 6; e++)
-		fid[e] = -1;
-	for (int64_t q = 0; q < ns; q++)
-		fid[b->surf_vox[q] * 6 + b->surf_dir[q]] = (int32_t)q;
-	memcpy(orig, b->surf, (size_t)ns * 3 * sizeof *orig);
-	double hmax = fmax(b->h[0], fmax(b->h[1], b->h[2]));
-	double r2 = 2.25 * hmax * hmax;
-	/* neighbour lists: faces of the 27 voxels around, within 1.5 h */
-	for (int pass = 0; pass < 2; pass++) {
-		int64_t cnt = 0;
-		for (int64_t q = 0; q < ns; q++) {
-			if (pass == 0)
-				off[q] = cnt;
-			int ijk[3];
-			box_ijk(b, b->surf_vox[q], ijk);
-			for (int dk = -1; dk <= 1; dk++)
-				for (int dj = -1; dj <= 1; dj++)
-					for (int di = -1; di <= 1; di++) {
-						int a = ijk[0] + di,
-						    c = ijk[1] + dj,
-						    e = ijk[2] + dk;
-						if (a < 0 || c < 0 || e < 0 ||
-						    a >= b->n[0] ||
-						    c >= b->n[1] ||
-						    e >= b->n[2])
-							continue;
-						int64_t u = bidx(b, a, c, e);
-						for (int f = 0; f < 6; f++) {
-							int32_t o = fid[u * 6 +
-									f];
-							if (o < 0)
-								continue;
-							double dx = orig[3 * o] -
-								    orig[3 * q],
-							       dy = orig[3 * o + 1] -
-								    orig[3 * q + 1],
-							       dz = orig[3 * o + 2] -
-								    orig[3 * q + 2];
-							if (dx * dx + dy * dy +
-								    dz * dz >
-							    r2)
-								continue;
-							if (pass == 1)
-								nb[cnt] = o;
-							cnt++;
-						}
-					}
-		}
-		if (pass == 0) {
-			off[ns] = cnt;
-			nb = malloc((size_t)(cnt ? cnt : 1) * sizeof *nb);
-			if (!nb)
-				goto out;
-		}
-	}
-	for (int it = 0; it < LS_SMOOTH_ITERS; it++) {
-		/* Taubin (SIGGRAPH 1995) lambda|mu steps: no shrinkage */
-		double lam = it % 2 == 0 ? 0.6307 : -0.6732;
-		for (int64_t q = 0; q < ns; q++) {
-			double m[3] = { 0, 0, 0 };
-			int64_t k = off[q + 1] - off[q];
-			for (int64_t j = off[q]; j < off[q + 1]; j++)
-				for (int c = 0; c < 3; c++)
-					m[c] += b->surf[3 * nb[j] + c];
-			int ax = NB6[b->surf_dir[q]][0] ? 0
-				 : NB6[b->surf_dir[q]][1] ? 1 : 2;
-			/* world unit vector of the face axis */
-			double e[3] = { b->A[ax], b->A[4 + ax], b->A[8 + ax] };
-			double el = b->h[ax];
-			double t = 0, t_now = 0;
-			for (int c = 0; c < 3; c++) {
-				t += (m[c] / (double)k - b->surf[3 * q + c]) *
-				     e[c] / el;
-				t_now += (b->surf[3 * q + c] - orig[3 * q + c]) *
-					 e[c] / el;
-			}
-			t = t_now + lam * t;
-			double lim = 0.45 * el;
-			t = fmax(-lim, fmin(lim, t));
-			for (int c = 0; c < 3; c++)
-				nxt[3 * q + c] = orig[3 * q + c] + t * e[c] / el;
-		}
-		memcpy(b->surf, nxt, (size_t)ns * 3 * sizeof *nxt);
-	}
-	rc = 0;
-out:
-	free(fid);
-	free(off);
-	free(nb);
-	free(orig);
-	free(nxt);
-	return rc;
-}
-
-static int box_setup(box_t *b, const ls_mask_t *mk, const int32_t *lab,
-		     int32_t raw, const comp_t *c, int margin, int threads)
-{
-	memcpy(b->A, mk->A, sizeof b->A);
-	for (int a = 0; a < 3; a++) {
-		b->lo[a] = c->lo[a] - margin;
-		b->n[a] = c->hi[a] - c->lo[a] + 1 + 2 * margin;
-		b->h[a] = sqrt(mk->A[a] * mk->A[a] + mk->A[4 + a] * mk->A[4 + a] +
-			       mk->A[8 + a] * mk->A[8 + a]);
-	}
-	double inv[16];
-	aff_invert(mk->A, inv);
-	/* world gradient g_w[r] = sum_c inv[c][r] g_idx[c] */
-	for (int r = 0; r < 3; r++)
-		for (int cc = 0; cc < 3; cc++)
-			b->G[r * 3 + cc] = inv[cc * 4 + r];
-	b->nv = (int64_t)b->n[0] * b->n[1] * b->n[2];
-	b->in = calloc((size_t)b->nv, 1);
-	b->d = malloc((size_t)b->nv * sizeof *b->d);
-	if (!b->in || !b->d)
-		return -1;
-	for (int e = 0; e < b->n[2]; e++)
-		for (int cc = 0; cc < b->n[1]; cc++)
-			for (int a = 0; a < b->n[0]; a++) {
-				int gi = b->lo[0] + a, gj = b->lo[1] + cc,
-				    gk = b->lo[2] + e;
-				if (gi < 0 || gj < 0 || gk < 0 || gi >= mk->nx ||
-				    gj >= mk->ny || gk >= mk->nz)
-					continue;
-				int64_t g = ((int64_t)gk * mk->ny + gj) *
-						    mk->nx + gi;
-				if (lab[g] == raw)
-					b->in[bidx(b, a, cc, e)] = 1;
-			}
-	/* boundary points: centres of faces between inside and outside
-	 * voxels (outside the volume counts as outside) */
-	int64_t ns = 0;
-	for (int64_t v = 0; v < b->nv; v++) {
-		if (!b->in[v])
-			continue;
-		int ijk[3];
-		box_ijk(b, v, ijk);
-		for (int f = 0; f < 6; f++) {
-			int64_t w = bidx(b, ijk[0] + NB6[f][0],
-					 ijk[1] + NB6[f][1], ijk[2] + NB6[f][2]);
-			if (!b->in[w])
-				ns++;
-		}
-	}
-	b->ns = ns;
-	b->surf = malloc((size_t)(ns ? ns : 1) * 3 * sizeof(double));
-	b->surf_vox = malloc((size_t)(ns ? ns : 1) * sizeof(int64_t));
-	b->surf_dir = malloc((size_t)(ns ? ns : 1));
-	if (!b->surf || !b->surf_vox || !b->surf_dir)
-		return -1;
-	ns = 0;
-	for (int64_t v = 0; v < b->nv; v++) {
-		if (!b->in[v])
-			continue;
-		int ijk[3];
-		box_ijk(b, v, ijk);
-		for (int f = 0; f < 6; f++) {
-			int64_t w = bidx(b, ijk[0] + NB6[f][0],
-					 ijk[1] + NB6[f][1], ijk[2] + NB6[f][2]);
-			if (b->in[w])
-				continue;
-			box_world(b, ijk[0] + 0.5 * NB6[f][0],
-				  ijk[1] + 0.5 * NB6[f][1],
-				  ijk[2] + 0.5 * NB6[f][2], b->surf + 3 * ns);
-			b->surf_dir[ns] = (int8_t)f;
-			b->surf_vox[ns++] = v;
-		}
-	}
-	if (smooth_surface(b))
-		return -1;
-	if (kd_build(&b->kd, b->surf, ns))
-		return -1;
-	/* exact signed distance at the voxels within `margin` 6-steps of
-	 * the component (those the layers, the normals and the WENO band
-	 * need; farther ones get -margin*hmax); raster order with the
-	 * previous voxel's nearest point as the search bound */
-	uint8_t *near = malloc((size_t)b->nv);
-	uint8_t *nn2 = malloc((size_t)b->nv);
-	if (!near || !nn2) {
-		free(near);
-		free(nn2);
-		return -1;
-	}
-	memcpy(near, b->in, (size_t)b->nv);
-	for (int it = 0; it < margin; it++) {
-		memcpy(nn2, near, (size_t)b->nv);
-		for (int64_t v = 0; v < b->nv; v++) {
-			if (nn2[v])
-				continue;
-			int ijk[3];
-			box_ijk(b, v, ijk);
-			for (int f = 0; f < 6 && !near[v]; f++) {
-				int q[3] = { ijk[0] + NB6[f][0],
-					     ijk[1] + NB6[f][1],
-					     ijk[2] + NB6[f][2] };
-				if (q[0] < 0 || q[1] < 0 || q[2] < 0 ||
-				    q[0] >= b->n[0] || q[1] >= b->n[1] ||
-				    q[2] >= b->n[2])
-					continue;
-				if (nn2[bidx(b, q[0], q[1], q[2])])
-					near[v] = 1;
-			}
-		}
-	}
-	free(nn2);
-	double far = -margin * fmax(b->h[0], fmax(b->h[1], b->h[2]));
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
-	for (int e = 0; e < b->n[2]; e++) {
-		int64_t hint = -1;
-		for (int cc = 0; cc < b->n[1]; cc++)
-			for (int a = 0; a < b->n[0]; a++) {
-				int64_t v = bidx(b, a, cc, e), f;
-				if (!near[v]) {
-					b->d[v] = far;
-					continue;
-				}
-				double p[3];
-				box_world(b, a, cc, e, p);
-				double dd = surf_dist(b, p, hint, &f);
-				hint = f;
-				b->d[v] = b->in[v] ? dd : -dd;
-			}
-	}
-	free(near);
-	return 0;
-}
-
-/* central-difference gradient of f at box voxel (one-sided at the box
- * edges), in world coordinates */
-static void box_grad(const box_t *b, const double *f, const int ijk[3],
-		     double gw[3])
-{
-	double gi[3];
-	int64_t v = bidx(b, ijk[0], ijk[1], ijk[2]);
-	for (int a = 0; a < 3; a++) {
-		int p[3] = { ijk[0], ijk[1], ijk[2] }, m[3] = { ijk[0], ijk[1],
-								 ijk[2] };
-		p[a]++;
-		m[a]--;
-		double fp, fm, den = 2;
-		if (p[a] >= b->n[a]) {
-			fp = f[v];
-			den = 1;
-		} else {
-			fp = f[bidx(b, p[0], p[1], p[2])];
-		}
-		if (m[a] < 0) {
-			fm = f[v];
-			den = den == 1 ? 1e300 : 1;
-		} else {
-			fm = f[bidx(b, m[0], m[1], m[2])];
-		}
-		gi[a] = (fp - fm) / den;
-	}
-	for (int r = 0; r < 3; r++)
-		gw[r] = b->G[r * 3] * gi[0] + b->G[r * 3 + 1] * gi[1] +
-			b->G[r * 3 + 2] * gi[2];
 }
 
 static int normalise(double v[3])
@@ -796,13 +332,13 @@ static int emit_layer0(comp_ctx_t *cx)
 		int ijk[3];
 		box_ijk(b, b->surf_vox[s], ijk);
 		double g[3], n[3], iw[3];
-		box_grad(b, b->d, ijk, g);
+		ls_box_grad(b, b->d, ijk, g);
 		box_world(b, ijk[0], ijk[1], ijk[2], iw);
 		int jk[3];
 		for (int c = 0; c < 3; c++)
-			jk[c] = ijk[c] + NB6[b->surf_dir[s]][c];
+			jk[c] = ijk[c] + ls_nb6[b->surf_dir[s]][c];
 		double g2[3];
-		box_grad(b, b->d, jk, g2);
+		ls_box_grad(b, b->d, jk, g2);
 		for (int c = 0; c < 3; c++)
 			n[c] = -(g[c] + g2[c]);
 		if (normalise(n))
@@ -854,7 +390,7 @@ static int exact_layer(comp_ctx_t *cx, int k, double *f)
 		for (int it = 0; it < 100; it++) {
 			for (int c = 0; c < 3; c++)
 				p[c] = pv[c] + t * (pw[c] - pv[c]);
-			double dd = surf_dist(b, p, foot, &foot);
+			double dd = ls_surf_dist(b, p, foot, &foot);
 			if (!b->in[x[i].w] && t > 0.5)
 				dd = -dd;
 			double F = dd - L;
@@ -885,7 +421,7 @@ static int exact_layer(comp_ctx_t *cx, int k, double *f)
 		t = bestt;
 		for (int c = 0; c < 3; c++)
 			p[c] = pv[c] + t * (pw[c] - pv[c]);
-		surf_dist(b, p, foot, &foot);
+		ls_surf_dist(b, p, foot, &foot);
 		/*
 		 * Parent: the point's position on the previous front d = Lp.
 		 * The closest-point direction u_cp (towards the nearest
@@ -907,9 +443,9 @@ static int exact_layer(comp_ctx_t *cx, int k, double *f)
 		for (int c = 0; c < 3; c++) {
 			double q[3] = { p[0], p[1], p[2] };
 			q[c] = p[c] + delta;
-			double dp = surf_dist(b, q, foot, NULL);
+			double dp = ls_surf_dist(b, q, foot, NULL);
 			q[c] = p[c] - delta;
-			double dm = surf_dist(b, q, foot, NULL);
+			double dm = ls_surf_dist(b, q, foot, NULL);
 			u[c] = -(dp - dm) / (2 * delta);
 		}
 		if (normalise(u) ||
@@ -923,7 +459,7 @@ static int exact_layer(comp_ctx_t *cx, int k, double *f)
 		for (int c = 0; c < 3; c++)
 			xq[c] = p[c] + step * u[c];
 		int64_t fx;
-		double dx = surf_dist(b, xq, foot, &fx);
+		double dx = ls_surf_dist(b, xq, foot, &fx);
 		if (dx > Lp) {
 			const double *sx = b->surf + 3 * fx;
 			double v[3] = { sx[0] - xq[0], sx[1] - xq[1],
@@ -968,7 +504,7 @@ static void grad_at(const box_t *b, const double *f, const double pi[3],
 		int ijk[3];
 		double g[3];
 		img_lin_corner(&s, q, ijk);
-		box_grad(b, f, ijk, g);
+		ls_box_grad(b, f, ijk, g);
 		for (int c = 0; c < 3; c++)
 			gw[c] += s.w[q] * g[c];
 	}
@@ -1156,7 +692,7 @@ static int run_component(const ls_mask_t *mk, const int32_t *lab,
 	int margin = p->scheme == LS_WENO ? 5 : 2;
 	double *f = NULL;
 	int rc = ARMSTG_ENOMEM;
-	if (box_setup(&b, mk, lab, c->raw, c, margin, p->threads))
+	if (ls_box_setup(&b, mk, lab, c->raw, c, margin, p->threads))
 		goto out;
 	double dmax = 0;
 	for (int64_t v = 0; v < b.nv; v++)
@@ -1247,7 +783,7 @@ static int run_component(const ls_mask_t *mk, const int32_t *lab,
 	rc = 0;
 out:
 	free(f);
-	box_free(&b);
+	ls_box_free(&b);
 	if (rc == ARMSTG_ENOMEM)
 		fail(r, rc, "out of memory in the level-set computation");
 	return rc;
@@ -1273,7 +809,7 @@ int ls_run(const ls_mask_t *mk, const ls_params_t *p, ls_result_t *r)
 	int32_t *lab = malloc((size_t)nv * sizeof *lab);
 	comp_t *cs = NULL;
 	int nc = 0, rc;
-	if (!lab || label_components(mk, lab, &cs, &nc)) {
+	if (!lab || ls_label_components(mk, lab, &cs, &nc)) {
 		free(lab);
 		return fail(r, ARMSTG_ENOMEM, "out of memory labelling the "
 					      "tumour components");
@@ -1294,7 +830,7 @@ int ls_run(const ls_mask_t *mk, const ls_params_t *p, ls_result_t *r)
 		free(cs);
 		return ARMSTG_EINVAL;
 	}
-	qsort(cs, (size_t)kept, sizeof *cs, cmp_comp);
+	qsort(cs, (size_t)kept, sizeof *cs, ls_comp_cmp);
 	r->ncomp = kept;
 	r->comp_spacing = calloc((size_t)kept, sizeof(double));
 	r->comp_depth = calloc((size_t)kept, sizeof(double));

@@ -22,6 +22,10 @@
  * Every layer point's parent is its closest point on the previous layer
  * (for the exact scheme: along the segment to its nearest boundary point,
  * at distance exactly one layer spacing since d is 1-Lipschitz).
+ *
+ * Files: ls_core.c the layers, the seeds and ls_run; ls_box.c (ls_box.h)
+ * the components and each one's box, boundary points and d; ls_weno.c the
+ * WENO scheme; ls_incl.c the inclusion scheme.
  */
 #ifndef LS_CORE_H
 #define LS_CORE_H
