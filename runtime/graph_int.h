@@ -153,6 +153,15 @@ typedef struct g_tune {
 	 * its own instances of the stages that depend on the tuned one, with
 	 * the same choice as one after the other (tune_par.c) */
 	int parallel;
+	/* stagger = true: with parallel > 1, a candidate starts once the one
+	 * before it has passed its phase one (require_early's stages, or the
+	 * tuned stage for same_skip / same_from) and no earlier candidate
+	 * still to be committed says, from its phase one, that the search
+	 * one after the other would not run it (require_early failed under
+	 * stop = require; same_from covers it): the tuned stages run one
+	 * after the other, each beside the earlier candidates' later stages
+	 * (tune_par.c) */
+	int stagger;
 	int search;                /* 1: try the candidates when running */
 	int one_value;             /* no search: the single value is used */
 	char why[512];             /* when present but no search: why */

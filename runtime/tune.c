@@ -416,6 +416,7 @@ int tune_cand_run(tctx_t *c, g_run_t *x, int k, int *counted, char *err,
 			return rc;
 		row->clamped = row->used < t->numval[k];
 	}
+	tune_ph1_done(c, k, efail);
 	if (t->same_skip && !row->rc && !efail && !rt_interrupted) {
 		row->hash = tune_out_hash(x);
 		same = tune_same_wait(c, x, k);

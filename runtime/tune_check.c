@@ -35,7 +35,7 @@ static const char *const tune_keys[] = { "param", "values", "score", "metric",
 					 "structure_column", "value_column",
 					 "stop", "reuse", "require_early",
 					 "search_set", "same_skip",
-					 "parallel", "same_from" };
+					 "parallel", "same_from", "stagger" };
 
 /* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
  * with an error reported when the list is empty or has an empty item. */
@@ -498,7 +498,7 @@ void tune_check(graph_t *g)
 			     "structure, goal, require, tolerance, "
 			     "metric_column, structure_column, value_column, "
 			     "stop, reuse, require_early, search_set, "
-			     "same_skip, parallel, same_from)");
+			     "same_skip, parallel, same_from, stagger)");
 		else if (!kv->val[0] && strcmp(kv->key, "values"))
 			g_err(g, kv->line, NULL, kv->key, "empty value");
 	}
@@ -627,6 +627,12 @@ void tune_check(graph_t *g)
 	    strcmp(ek->val, "false"))
 		g_err(g, ek->line, NULL, "require_early", "[tune] require_early "
 		      "must be true or false, got '%s'", ek->val);
+	const g_kv_t *gk2 = g_kv_find(t->kv, t->nkv, "stagger");
+	t->stagger = gk2 && !strcmp(gk2->val, "true");
+	if (gk2 && gk2->val[0] && strcmp(gk2->val, "true") &&
+	    strcmp(gk2->val, "false"))
+		g_err(g, gk2->line, NULL, "stagger", "[tune] stagger must be "
+		      "true or false, got '%s'", gk2->val);
 	const g_kv_t *dk = g_kv_find(t->kv, t->nkv, "same_skip");
 	t->same_skip = dk && !strcmp(dk->val, "true");
 	if (dk && dk->val[0] && strcmp(dk->val, "true") &&

@@ -42,6 +42,9 @@ typedef struct tctx {
 	signed char *phase;         /* per candidate: 0 running, 1 its tuned
 				       stage's hash known (same_skip), 2
 				       ended */
+	signed char *ph1;           /* per candidate: its phase one over (1),
+				       failed require_early (2), 0 not yet
+				       (stagger) */
 } tctx_t;
 
 /* The search's state between candidates, which tune_cand_commit advances
@@ -82,6 +85,9 @@ int tune_clamp_src(const g_run_t *r, int k, int lim);
 void tune_cand_clamp(g_run_t *r, int k, int cl);
 
 /* ---- tune_par.c ---- */
+/* stagger: candidate k's phase one is over (efail: require_early failed);
+ * nothing outside a parallel search */
+void tune_ph1_done(tctx_t *c, int k, int efail);
 /* [tune] parallel = N: the candidates, up to N at once.  0, or a
  * negative code with err. */
 int tune_search_parallel(tctx_t *c, tune_keep_t *kp, const char *ksel,

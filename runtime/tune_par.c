@@ -27,7 +27,14 @@
  * an earlier one that still runs waits for it (tune_same_wait), then
  * takes its score as before, or runs on if it was not scored.  Candidates
  * run beyond those the search one after the other would run (after a
- * stop) only cost time.  Memory: each lane holds one candidate's outputs
+ * stop) only cost time.  stagger = true keeps such runs out where a
+ * candidate's phase one tells (may_start): the next candidate starts once
+ * this one's phase one (require_early's stages, or the tuned stage for
+ * same_skip / same_from) is over, and not while an earlier candidate, yet
+ * to be committed, failed require_early under stop = require or, by
+ * same_from, covers it; it waits for that commit, which decides.  The
+ * tuned stages then run one after the other (on one GPU they would share
+ * it), each beside the earlier candidates' later stages.  Memory: each lane holds one candidate's outputs
  * (and reuse one more).  The times in tune.tsv are each candidate's own
  * (their sum, run.tsv's row tune, exceeds the search's wall time).
  */
@@ -77,6 +84,40 @@ int tune_same_wait(tctx_t *c, g_run_t *x, int k)
 	}
 	pthread_mutex_unlock(&c->mu);
 	return same;
+}
+
+void tune_ph1_done(tctx_t *c, int k, int efail)
+{
+	if (!c->par || !c->ph1)
+		return;
+	pthread_mutex_lock(&c->mu);
+	c->ph1[k] = efail ? 2 : 1;
+	pthread_cond_broadcast(&c->cv);
+	pthread_mutex_unlock(&c->mu);
+}
+
+/* stagger (under c->mu): may candidate n start, k being the earliest not
+ * committed?  Without stagger, always.  With it: once n - 1 has passed
+ * its phase one (or ended, or was not run), and unless a candidate j in
+ * k..n-1 failed require_early under stop = require (the search may stop
+ * there) or ran its tuned stage below its value (same_from: n >= its
+ * value would be its copy); those wait for j's commit. */
+static int may_start(const tctx_t *c, int n, int k)
+{
+	const g_run_t *r = c->r;
+	const g_tune_t *t = &r->g->tune;
+	if (!t->stagger || n == 0)
+		return 1;
+	if (c->phase[n - 1] != 2 && !c->ph1[n - 1])
+		return 0;
+	for (int j = k; j < n; j++) {
+		if (c->ph1[j] == 2 && t->stop_require)
+			return 0;
+		if (t->sf_stage >= 0 && c->ph1[j] && r->rows[j].clamped &&
+		    t->numval[n] >= t->numval[j])
+			return 0;
+	}
+	return 1;
 }
 
 /* [tune] parallel: one candidate's run, on its own instances of the stages
@@ -200,7 +241,8 @@ int tune_search_parallel(tctx_t *c, tune_keep_t *kp, const char *ksel,
 	sched_share_t *share = sched_share_new(sched_threads_total(),
 					       par * g->nstages);
 	c->phase = calloc((size_t)t->nvalues, 1);
-	if (!lanes || !shared || !share || !c->phase) {
+	c->ph1 = calloc((size_t)t->nvalues, 1);
+	if (!lanes || !shared || !share || !c->phase || !c->ph1) {
 		snprintf(err, errsize, "[tune] out of memory");
 		rc = ARMSTG_ENOMEM;
 		goto out;
@@ -212,43 +254,50 @@ int tune_search_parallel(tctx_t *c, tune_keep_t *kp, const char *ksel,
 	if (rc)
 		goto out;
 	rt_log(NULL, LOG_INFO, "tune: up to %d candidates at once "
-	       "(parallel = %d), sharing %d threads", par, t->parallel,
+	       "(parallel = %d%s), sharing %d threads", par, t->parallel,
+	       t->stagger ? ", stagger: each starts once the one before it "
+			    "has passed its phase one" : "",
 	       sched_threads_total());
 	for (int k = 0; k < t->nvalues; k++) {
-		/* the next candidates into the free lanes, in order */
-		while (next < t->nvalues && next < k + par && !rt_interrupted) {
-			tlane_t *l = &lanes[next % par];
-			l->k = next;
-			l->cancel = 0;
-			l->counted = l->rc = 0;
-			l->err[0] = 0;
-			/* same_from: covered by a committed candidate */
-			l->norun = tune_clamp_src(r, next, k) >= 0;
-			if (l->norun) {
-				pthread_mutex_lock(&c->mu);
-				c->phase[next] = 2;
-				pthread_cond_broadcast(&c->cv);
-				pthread_mutex_unlock(&c->mu);
+		/* the next candidates into the free lanes, in order (stagger:
+		 * as may_start allows, again at each lane's news), until k
+		 * has ended */
+		pthread_mutex_lock(&c->mu);
+		for (;;) {
+			while (next < t->nvalues && next < k + par &&
+			       !rt_interrupted && may_start(c, next, k)) {
+				tlane_t *l = &lanes[next % par];
+				l->k = next;
+				l->cancel = 0;
+				l->counted = l->rc = 0;
+				l->err[0] = 0;
+				/* same_from: covered by a committed candidate */
+				l->norun = tune_clamp_src(r, next, k) >= 0;
+				if (l->norun) {
+					c->phase[next] = 2;
+					pthread_cond_broadcast(&c->cv);
+					next++;
+					continue;
+				}
+				if (pthread_create(&l->th, NULL, lane_main, l)) {
+					pthread_mutex_unlock(&c->mu);
+					snprintf(err, errsize, "[tune] parallel: "
+						 "cannot start a thread for "
+						 "candidate %s", t->values[next]);
+					rc = ARMSTG_ENOMEM;
+					goto out;
+				}
+				l->active = 1;
 				next++;
-				continue;
 			}
-			if (pthread_create(&l->th, NULL, lane_main, l)) {
-				snprintf(err, errsize, "[tune] parallel: cannot "
-					 "start a thread for candidate %s",
-					 t->values[next]);
-				rc = ARMSTG_ENOMEM;
-				goto out;
-			}
-			l->active = 1;
-			next++;
+			if (next <= k || c->phase[k] == 2)
+				break;
+			pthread_cond_wait(&c->cv, &c->mu);
 		}
+		pthread_mutex_unlock(&c->mu);
 		if (next <= k)
 			break; /* interrupted */
 		tlane_t *l = &lanes[k % par];
-		pthread_mutex_lock(&c->mu);
-		while (c->phase[k] != 2)
-			pthread_cond_wait(&c->cv, &c->mu);
-		pthread_mutex_unlock(&c->mu);
 		if (l->active) {
 			pthread_join(l->th, NULL);
 			l->active = 0;
@@ -311,5 +360,7 @@ out:
 	sched_share_free(share);
 	free(c->phase);
 	c->phase = NULL;
+	free(c->ph1);
+	c->ph1 = NULL;
 	return rc;
 }

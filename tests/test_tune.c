@@ -632,7 +632,7 @@ static void test_set_rules(void **state)
 		  "param, values, score, metric, structure, goal, require, "
 		  "tolerance, metric_column, structure_column, value_column, "
 		  "stop, reuse, require_early, search_set, same_skip, "
-		  "parallel, same_from)" },
+		  "parallel, same_from, stagger)" },
 		/* parallel: a whole number 1..64 */
 		{ "tune.parallel=0", "key 'parallel': [tune] parallel must be "
 		  "a whole number from 1 to 64 (the candidates run at once; "
@@ -1125,6 +1125,16 @@ static void test_same_from(void **state)
 		{ { "sim.cap=2.5", FITC, FROM, "tune.parallel=3" }, 2.5, 3, 6,
 		  6, "ooooo", "rrrnn", { 0, 0, 0, 3, 3 },
 		  { 0, 0, 0, "2.5 at 3", "2.5 at 3" } },
+		/* stagger: a candidate starts once the one before it has
+		 * run its tuned stage (same_from's phase one), and 4 and 5
+		 * wait for 3's commit: none runs in vain (sim 3 + 1, as one
+		 * after the other) */
+		{ { "sim.cap=2.5", FITC, FROM, "tune.parallel=2",
+		    "tune.stagger=true" }, 2.5, 3, 4, 4, "ooooo", "rrrnn",
+		  { 0, 0, 0, 3, 3 }, { 0, 0, 0, "2.5 at 3", "2.5 at 3" } },
+		{ { "sim.cap=2.5", FITC, FROM, "tune.parallel=3",
+		    "tune.stagger=true" }, 2.5, 3, 4, 4, "ooooo", "rrrnn",
+		  { 0, 0, 0, 3, 3 }, { 0, 0, 0, "2.5 at 3", "2.5 at 3" } },
 		/* reuse and require_early (alt before fit): the same */
 		{ { "sim.cap=2.5", FITC, FROM, "tune.reuse=true",
 		    "tune.require=alt.table: sq near < 5",
@@ -1892,6 +1902,73 @@ static void test_parallel_same_choice(void **state)
 	expect_parallel_same(shipped, ARMSTG_COUNT(shipped), 2, 3);
 	expect_parallel_same(shipped, ARMSTG_COUNT(shipped), 1, 5);
 	expect_parallel_same(shipped, ARMSTG_COUNT(shipped), 1, 2);
+	/* and staggered (the graphs' stagger = true) */
+	const char *stag[] = { sl, "sim.cap=4",
+			       "tune.require=sq far <= 150, alt.table: sq "
+			       "near < 5", "tune.tolerance=0.5",
+			       "tune.stop=require", "tune.reuse=true",
+			       "tune.require_early=true",
+			       "tune.search_set=fit.offset=1",
+			       "tune.same_skip=true", "tune.stagger=true",
+			       "tune.same_from=sim.table: offset_used" };
+	expect_parallel_same(stag, ARMSTG_COUNT(stag), 1, 3);
+	expect_parallel_same(stag, ARMSTG_COUNT(stag), 2, 2);
+	const char *stag2[] = { sl, "tune.require=alt.table: sq near > 1",
+				"tune.require_early=true", "tune.stop=require",
+				"tune.stagger=true" };
+	expect_parallel_same(stag2, ARMSTG_COUNT(stag2), 1, 3);
+}
+
+static double runtab_num(const char *out, const char *row);
+
+/* stagger = true: the tuned stage of a candidate starts once the one
+ * before it has passed its phase one, and not where an earlier candidate's
+ * phase one decides that the search one after the other would not run it.
+ * (a) require_early under stop = require: alt's sq near > 1 fails at 4, so
+ * one after the other sim runs for 1-4 and once in the final run (5); with
+ * parallel = 3 and stagger, 5 waits for 4's commit and is skipped: 5 runs
+ * again, the same rows.  (b) the stages after the phase one overlap: sim
+ * (phase one, same_skip) sleeps 300 ms and fit 300 ms; five candidates one
+ * after the other take >= 3 s (run.tsv's tune row, their sum); staggered
+ * the five sims cannot overlap (the run >= 1.5 s) but each fit runs beside
+ * the next sim (the run well under the sum: about 1.8 s; reuse: the final
+ * run does not run sim and fit again).  Without stagger the five would end
+ * in about 1.2 s (two waves of three) */
+static void test_parallel_stagger(void **state)
+{
+	(void)state;
+	const char *a[] = { "sim.sleep_ms=40", "tune.require=alt.table: sq near > 1",
+			    "tune.require_early=true", "tune.stop=require" };
+	const char *b[] = { "sim.sleep_ms=40", "tune.require=alt.table: sq near > 1",
+			    "tune.require_early=true", "tune.stop=require",
+			    "tune.parallel=3", "tune.stagger=true" };
+	trun_t r;
+	run_sets(&r, a, ARMSTG_COUNT(a));
+	assert_int_equal(r.rc, 0);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 5);
+	done(&r);
+	run_sets(&r, b, ARMSTG_COUNT(b));
+	assert_int_equal(r.rc, 0);
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 5);
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 5);
+	assert_string_equal(tt.status->str[4], "skipped");
+	ttab_free(&tt);
+	done(&r);
+	const char *c[] = { "sim.sleep_ms=300", "fit.sleep_ms=300",
+			    "tune.same_skip=true", "tune.parallel=3",
+			    "tune.stagger=true", "tune.reuse=true" };
+	run_sets(&r, c, ARMSTG_COUNT(c));
+	assert_int_equal(r.rc, 0);
+	double sum = runtab_num(r.out, "tune"), tot = runtab_num(r.out, "total");
+	assert_true(sum >= 3.0);
+	if (!(tot >= 1.5 && tot < 0.8 * sum))
+		fail_msg("stagger: total %.3f s, candidates %.3f s: the sims "
+			 "overlapped (< 1.5 s) or nothing did (>= 0.8 x)", tot,
+			 sum);
+	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), 3.0, 0);
+	done(&r);
 }
 
 /* the candidates overlap: with sim sleeping 300 ms per candidate, five
@@ -2078,6 +2155,7 @@ int main(void)
 		cmocka_unit_test(test_run_graph_after_tune),
 		cmocka_unit_test(test_parallel_same_choice),
 		cmocka_unit_test(test_parallel_overlaps),
+		cmocka_unit_test(test_parallel_stagger),
 		cmocka_unit_test(test_parallel_interrupt),
 		cmocka_unit_test(test_parallel_stop_cancels),
 		cmocka_unit_test(test_parallel_thread_share),
