@@ -32,27 +32,7 @@
  *     negated in x and y into RAS.  NIFTI_INTENT_DISPVECT (1006) vectors are
  *     RAS already (NIfTI standard; ITK >= 5.3 reads them so) and kept.
  *
- * Writing
- *   - 3-D (nc == 1) or 5-D (nx,ny,nz,1,nc); data type kept; voxel units mm;
- *     scl_slope 1, scl_inter 0; native byte order; .nii.gz when the path ends
- *     in .gz: gzip level 6 in members of 1 MiB compressed in parallel
- *     (vol_write_nifti_nt; one stream to every gzip reader, the same file
- *     on any thread count; write_gz_members).  3-component volumes (fields) get intent NIFTI_INTENT_VECTOR and
- *     LPS vectors (x, y negated): the convention antsApplyTransforms, ITK and
- *     Slicer read.  Other volumes keep vol_t.intent.
- *   - sform = the affine, sform_code NIFTI_XFORM_SCANNER_ANAT (1).  The qform
- *     holds the same matrix (qform_code 1) when its 3x3 part is a rotation
- *     times a scaling (columns orthogonal to 1e-6); otherwise qform_code 0.
- *   - NIfTI-1 stores the sform as float32, so a general double affine would
- *     come back rounded to float.  To keep it EXACT the writer also stores
- *     the 12 doubles as text in a comment extension (NIFTI_ECODE_COMMENT,
- *     "armstg_affine_f64 ..."); the reader uses them only when the sform is
- *     the chosen transform and every double rounds to the stored float
- *     (so a file whose sform another tool changed falls back to the sform).
- *     Other tools ignore the extension and see the float-rounded sform.
- *   - the file is written at exactly the given path and removed again on any
- *     write error (callers wanting atomicity pass a temporary name, which
- *     must keep the .nii / .nii.gz ending).
+ * Writing: nifti_write.c (nifti_int.h has what the two files share).
  */
 #include <errno.h>
 #include <float.h>
@@ -69,9 +49,7 @@
 #include <nifti1_io.h>
 #include <zlib.h>
 
-#include "rt.h"
-
-#define AFFINE_EXT_TAG "armstg_affine_f64"
+#include "nifti_int.h"
 
 static pthread_once_t nifti_once = PTHREAD_ONCE_INIT;
 
@@ -83,22 +61,9 @@ static void nifti_quiet(void)
 	nifti_set_allow_upper_fext(1);
 }
 
-ARMSTG_PRINTF(4, 5)
-static int ferr(char *err, size_t errsize, int code, const char *fmt, ...)
+void nii_init(void)
 {
-	if (err && errsize) {
-		va_list ap;
-		va_start(ap, fmt);
-		vsnprintf(err, errsize, fmt, ap);
-		va_end(ap);
-	}
-	return code;
-}
-
-static int ends_with(const char *s, const char *suf)
-{
-	size_t n = strlen(s), m = strlen(suf);
-	return n >= m && !strcasecmp(s + n - m, suf);
+	pthread_once(&nifti_once, nifti_quiet);
 }
 
 static int nifti_name_ok(const char *path)
@@ -319,7 +284,7 @@ static int ext_affine(const nifti_image *nim, double A[16])
 	return 0;
 }
 
-static int affine_ok(const double A[16])
+int nii_affine_ok(const double A[16])
 {
 	for (int i = 0; i < 12; i++)
 		if (!isfinite(A[i]))
@@ -334,7 +299,7 @@ static int affine_ok(const double A[16])
  * float32 column norms (pixdim[1..3]): 0 when an element or a column norm
  * overflows float (a METER file's pixdim of 1e36 is 1e39 mm), which would
  * be written as an infinity that no reader accepts */
-static int affine_fits_float(const double A[16])
+int nii_affine_fits_float(const double A[16])
 {
 	for (int i = 0; i < 12; i++)
 		if (!isfinite((float)A[i]))
@@ -378,11 +343,11 @@ static int nifti_affine(const char *path, const nifti_image *nim,
 	if (scale != 1.0)
 		for (int i = 0; i < 12; i++)
 			A[i] *= scale;
-	if (!affine_ok(A))
+	if (!nii_affine_ok(A))
 		return ferr(err, errsize, ARMSTG_EINVAL,
 			    "'%s': the %s affine is singular or not finite",
 			    path, which);
-	if (!affine_fits_float(A))
+	if (!nii_affine_fits_float(A))
 		return ferr(err, errsize, ARMSTG_EINVAL,
 			    "'%s': the %s affine in mm is beyond float32 "
 			    "range (voxel sizes or offsets above %g mm): no "
@@ -563,7 +528,7 @@ int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize)
 	if (!path || !*path)
 		return ferr(err, errsize, ARMSTG_EINVAL,
 			    "no NIfTI file name given");
-	pthread_once(&nifti_once, nifti_quiet);
+	nii_init();
 
 	struct stat sb;
 	if (stat(path, &sb))
@@ -751,387 +716,3 @@ out:
 	return rc;
 }
 
-/* ------------------------------------------------------------------ */
-/* writing                                                            */
-
-static int nifti_dtype_of(int dtype)
-{
-	switch (dtype) {
-	case DT_U8: return NIFTI_TYPE_UINT8;
-	case DT_I16: return NIFTI_TYPE_INT16;
-	case DT_I32: return NIFTI_TYPE_INT32;
-	case DT_F32: return NIFTI_TYPE_FLOAT32;
-	case DT_F64: return NIFTI_TYPE_FLOAT64;
-	default: return 0;
-	}
-}
-
-/* columns of the 3x3 part pairwise orthogonal (rotation times scaling,
- * reflections allowed): then a qform can hold the matrix */
-static int affine_orthogonal(const double A[16])
-{
-	double col[3][3];
-	for (int c = 0; c < 3; c++)
-		for (int r = 0; r < 3; r++)
-			col[c][r] = A[r * 4 + c];
-	for (int i = 0; i < 3; i++)
-		for (int j = i + 1; j < 3; j++) {
-			double dot = 0, ni = 0, nj = 0;
-			for (int r = 0; r < 3; r++) {
-				dot += col[i][r] * col[j][r];
-				ni += col[i][r] * col[i][r];
-				nj += col[j][r] * col[j][r];
-			}
-			if (fabs(dot) > 1e-6 * sqrt(ni * nj))
-				return 0;
-		}
-	return 1;
-}
-
-static int zwrite(znzFile f, const void *p, size_t n)
-{
-	const char *c = p;
-	while (n) {
-		/* gzwrite takes an unsigned int length */
-		size_t k = n > (1u << 30) ? (1u << 30) : n;
-		if (znzwrite(c, 1, k, f) != k)
-			return -1;
-		c += k;
-		n -= k;
-	}
-	return 0;
-}
-
-/*
- * .nii.gz in parallel: the file's bytes (header, extension, data with the
- * vectors' x and y negated) cut into pieces of GZ_PIECE bytes, each
- * compressed by one thread into a complete gzip member (deflate level 6,
- * zlib's default, as nibabel and ITK write), the members written in order.
- * A gzip file may hold several members, read as one stream (RFC 1952 2.2;
- * gzip, zlib's gzread, hence niftilib and ITK, Python's gzip hence
- * nibabel; pigz writes files so): the same bytes come back.  The pieces
- * and the compression do not depend on the thread count, so neither does
- * the file.  A piece of 1 MiB costs under 0.1 % of compression against one
- * stream (a member forgets the 32 KiB window of the previous one).
- */
-#define GZ_PIECE ((size_t)1 << 20)
-
-typedef struct nii_bytes {
-	const unsigned char *head; /* header, extender, extension */
-	size_t nhead;
-	const vol_t *v;
-	size_t es;                 /* bytes per element */
-	int64_t nneg;              /* elements negated (x, y of vectors) */
-	size_t total;
-} nii_bytes_t;
-
-/* bytes [off, off + len) of the file into out */
-static void nii_fill(const nii_bytes_t *b, size_t off, size_t len,
-		     unsigned char *out)
-{
-	size_t o = 0;
-	if (off < b->nhead) {
-		size_t k = b->nhead - off < len ? b->nhead - off : len;
-		memcpy(out, b->head + off, k);
-		o = k;
-	}
-	if (o == len)
-		return;
-	/* data bytes [d0, d0 + n); pieces and the header keep elements whole
-	 * (nhead and GZ_PIECE are multiples of 16) */
-	const size_t d0 = off + o - b->nhead, n = len - o;
-	memcpy(out + o, (const unsigned char *)b->v->data + d0, n);
-	const int64_t e0 = (int64_t)(d0 / b->es), ne = (int64_t)(n / b->es);
-	for (int64_t e = 0; e < ne && e0 + e < b->nneg; e++) {
-		if (b->es == sizeof(float)) {
-			float x;
-			memcpy(&x, out + o + (size_t)e * b->es, sizeof x);
-			x = -x;
-			memcpy(out + o + (size_t)e * b->es, &x, sizeof x);
-		} else {
-			double x;
-			memcpy(&x, out + o + (size_t)e * b->es, sizeof x);
-			x = -x;
-			memcpy(out + o + (size_t)e * b->es, &x, sizeof x);
-		}
-	}
-}
-
-/* one piece as a gzip member into *out (malloc'd), *nout bytes; 0 or -1 */
-static int gz_member(const unsigned char *in, size_t n, unsigned char **out,
-		     size_t *nout)
-{
-	z_stream z;
-	memset(&z, 0, sizeof z);
-	*out = NULL;
-	if (deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) !=
-	    Z_OK)
-		return -1;
-	size_t cap = deflateBound(&z, (uLong)n);
-	unsigned char *o = malloc(cap);
-	if (!o) {
-		deflateEnd(&z);
-		return -1;
-	}
-	z.next_in = (Bytef *)in;
-	z.avail_in = (uInt)n;
-	z.next_out = o;
-	z.avail_out = (uInt)cap;
-	int rc = deflate(&z, Z_FINISH);
-	*nout = z.total_out;
-	deflateEnd(&z);
-	if (rc != Z_STREAM_END) {
-		free(o);
-		return -1;
-	}
-	*out = o;
-	return 0;
-}
-
-/* write the file's bytes to f as gzip members, nthreads at a time */
-static int write_gz_members(FILE *f, const nii_bytes_t *b, int nthreads)
-{
-	const size_t npiece = (b->total + GZ_PIECE - 1) / GZ_PIECE;
-	const int nt = nthreads > 0 ? nthreads : 1;
-	/* a batch of pieces at a time: memory 2 MiB a piece in flight */
-	const size_t batch = 4 * (size_t)nt;
-	unsigned char **zo = calloc(batch, sizeof *zo);
-	size_t *zn = calloc(batch, sizeof *zn);
-	int bad = !zo || !zn;
-	for (size_t p0 = 0; !bad && p0 < npiece; p0 += batch) {
-		const size_t np = npiece - p0 < batch ? npiece - p0 : batch;
-		int fail = 0;
-#pragma omp parallel num_threads(nt)
-		{
-			unsigned char *in = malloc(GZ_PIECE);
-			if (!in) {
-#pragma omp atomic write
-				fail = 1;
-			}
-#pragma omp for schedule(static, 1)
-			for (size_t q = 0; q < np; q++) {
-				if (!in)
-					continue;
-				const size_t off = (p0 + q) * GZ_PIECE;
-				const size_t len = b->total - off < GZ_PIECE
-							   ? b->total - off
-							   : GZ_PIECE;
-				nii_fill(b, off, len, in);
-				if (gz_member(in, len, &zo[q], &zn[q])) {
-#pragma omp atomic write
-					fail = 1;
-				}
-			}
-			free(in);
-		}
-		for (size_t q = 0; q < np; q++) {
-			if (!fail && !bad && fwrite(zo[q], 1, zn[q], f) != zn[q])
-				bad = 1;
-			free(zo[q]);
-			zo[q] = NULL;
-		}
-		if (fail)
-			bad = 1;
-	}
-	free(zo);
-	free(zn);
-	return bad ? -1 : 0;
-}
-
-int vol_write_nifti(const char *path, const vol_t *v, char *err,
-		    size_t errsize)
-{
-	return vol_write_nifti_nt(path, v, 1, err, errsize);
-}
-
-int vol_write_nifti_nt(const char *path, const vol_t *v, int nthreads,
-		       char *err, size_t errsize)
-{
-	if (err && errsize)
-		err[0] = 0;
-	if (!path || !*path)
-		return ferr(err, errsize, ARMSTG_EINVAL,
-			    "no NIfTI file name given");
-	if (!v || !msg_valid(&v->base, MSG_VOLUME))
-		return ferr(err, errsize, ARMSTG_EINVAL,
-			    "'%s': not a volume message", path);
-	if (!ends_with(path, ".nii") && !ends_with(path, ".nii.gz"))
-		return ferr(err, errsize, ARMSTG_EINVAL,
-			    "'%s': a NIfTI file name must end in .nii or "
-			    ".nii.gz", path);
-	int ndt = nifti_dtype_of(v->dtype);
-	if (!ndt)
-		return ferr(err, errsize, ARMSTG_EINVAL,
-			    "'%s': volume has an unknown dtype %d", path,
-			    v->dtype);
-	if (v->nx < 1 || v->ny < 1 || v->nz < 1 || v->nc < 1 ||
-	    v->nx > 32767 || v->ny > 32767 || v->nz > 32767 || v->nc > 32767)
-		return ferr(err, errsize, ARMSTG_EUNSUPPORTED,
-			    "'%s': grid %d x %d x %d x %d does not fit a "
-			    "NIfTI-1 header (each size 1..32767)", path, v->nx,
-			    v->ny, v->nz, v->nc);
-	int is_vec = v->nc == 3;
-	if (is_vec && v->dtype != DT_F32 && v->dtype != DT_F64)
-		return ferr(err, errsize, ARMSTG_EUNSUPPORTED,
-			    "'%s': a 3-component volume (vector field) must be "
-			    "f32 or f64 to be written, not %s", path,
-			    vol_dtype_name(v->dtype));
-	if (!affine_ok(v->affine))
-		return ferr(err, errsize, ARMSTG_EINVAL,
-			    "'%s': the volume's affine is singular or not "
-			    "finite", path);
-	if (!affine_fits_float(v->affine))
-		return ferr(err, errsize, ARMSTG_EINVAL,
-			    "'%s': the volume's affine is beyond float32 range "
-			    "(voxel sizes or offsets above %g mm): NIfTI-1 "
-			    "cannot hold it", path, (double)FLT_MAX);
-	pthread_once(&nifti_once, nifti_quiet);
-
-	nifti_1_header h;
-	memset(&h, 0, sizeof h);
-	h.sizeof_hdr = 348;
-	h.regular = 'r';
-	if (v->nc == 1) {
-		h.dim[0] = 3;
-	} else {
-		h.dim[0] = 5;
-		h.dim[5] = (short)v->nc;
-	}
-	h.dim[1] = (short)v->nx;
-	h.dim[2] = (short)v->ny;
-	h.dim[3] = (short)v->nz;
-	for (int i = 4; i < 8; i++)
-		if (!h.dim[i])
-			h.dim[i] = 1;
-	h.datatype = (short)ndt;
-	h.bitpix = (short)(8 * vol_dtype_size(v->dtype));
-	int intent = is_vec ? NIFTI_INTENT_VECTOR : v->intent;
-	h.intent_code = (short)(intent >= -32768 && intent <= 32767 ? intent : 0);
-	h.scl_slope = 1;
-	h.scl_inter = 0;
-	h.xyzt_units = NIFTI_UNITS_MM;
-	snprintf(h.descrip, sizeof h.descrip, "ARMSTG %s", ARMSTG_VERSION);
-	memcpy(h.magic, "n+1", 4);
-	for (int i = 0; i < 8; i++)
-		h.pixdim[i] = 1;
-
-	const double *A = v->affine;
-	mat44 R;
-	memset(&R, 0, sizeof R);
-	for (int r = 0; r < 3; r++) {
-		float *srow = r == 0 ? h.srow_x : r == 1 ? h.srow_y : h.srow_z;
-		for (int c = 0; c < 4; c++) {
-			srow[c] = (float)A[r * 4 + c];
-			R.m[r][c] = srow[c];
-		}
-	}
-	R.m[3][3] = 1;
-	h.sform_code = NIFTI_XFORM_SCANNER_ANAT;
-	for (int c = 0; c < 3; c++)
-		h.pixdim[c + 1] = (float)sqrt(A[c] * A[c] + A[4 + c] * A[4 + c] +
-					      A[8 + c] * A[8 + c]);
-	if (affine_orthogonal(A)) {
-		float qb, qc, qd, qx, qy, qz, dx, dy, dz, qfac;
-		nifti_mat44_to_quatern(R, &qb, &qc, &qd, &qx, &qy, &qz, &dx, &dy,
-				       &dz, &qfac);
-		h.quatern_b = qb;
-		h.quatern_c = qc;
-		h.quatern_d = qd;
-		h.qoffset_x = qx;
-		h.qoffset_y = qy;
-		h.qoffset_z = qz;
-		h.pixdim[0] = qfac;
-		h.qform_code = NIFTI_XFORM_SCANNER_ANAT;
-	}
-
-	/* exact double affine, as a comment extension (see the top) */
-	char ext[640];
-	memset(ext, 0, sizeof ext);
-	int tl = snprintf(ext + 8, sizeof ext - 8, "%s", AFFINE_EXT_TAG);
-	for (int i = 0; i < 12; i++)
-		tl += snprintf(ext + 8 + tl, sizeof ext - 8 - (size_t)tl,
-			       " %.17g", A[i]);
-	int esize = (8 + tl + 1 + 15) / 16 * 16;
-	int32_t ehead[2] = { esize, NIFTI_ECODE_COMMENT };
-	memcpy(ext, ehead, sizeof ehead);
-	char extender[4] = { 1, 0, 0, 0 };
-	h.vox_offset = (float)(348 + 4 + esize);
-
-	int gz = ends_with(path, ".gz");
-	errno = 0;
-	if (gz) {
-		/* gzip members compressed in parallel (write_gz_members) */
-		unsigned char head[348 + 4 + sizeof ext];
-		memcpy(head, &h, 348);
-		memcpy(head + 348, extender, 4);
-		memcpy(head + 352, ext, (size_t)esize);
-		const size_t es = vol_dtype_size(v->dtype);
-		const nii_bytes_t b = {
-			.head = head, .nhead = 352 + (size_t)esize, .v = v,
-			.es = es, .nneg = is_vec ? 2 * vol_nvox(v) : 0,
-			.total = 352 + (size_t)esize +
-				 (size_t)vol_nvox(v) * v->nc * es };
-		FILE *fp = fopen(path, "wb");
-		if (!fp)
-			return ferr(err, errsize, ARMSTG_EIO,
-				    "cannot create '%s': %s", path,
-				    strerror(errno ? errno : EIO));
-		int bad = write_gz_members(fp, &b, nthreads);
-		int saved = errno;
-		if (fclose(fp) != 0)
-			bad = 1;
-		if (bad) {
-			unlink(path);
-			return ferr(err, errsize, ARMSTG_EIO,
-				    "cannot write '%s': %s", path,
-				    strerror(saved ? saved : EIO));
-		}
-		return 0;
-	}
-	znzFile f = znzopen(path, "wb", 0);
-	if (znz_isnull(f))
-		return ferr(err, errsize, ARMSTG_EIO, "cannot create '%s': %s",
-			    path, strerror(errno ? errno : EIO));
-	int bad = zwrite(f, &h, sizeof h) || zwrite(f, extender, 4) ||
-		  zwrite(f, ext, (size_t)esize);
-	size_t es = vol_dtype_size(v->dtype);
-	int64_t nv = vol_nvox(v);
-	if (!bad && is_vec) {
-		/* RAS -> LPS for x and y, in chunks (fields can be large) */
-		enum { CH = 1 << 16 };
-		char *buf = malloc(CH * es);
-		if (!buf) {
-			znzclose(f);
-			unlink(path);
-			return ferr(err, errsize, ARMSTG_ENOMEM,
-				    "'%s': out of memory", path);
-		}
-		for (int64_t e0 = 0; !bad && e0 < 3 * nv; e0 += CH) {
-			int64_t k = 3 * nv - e0 < CH ? 3 * nv - e0 : CH;
-			memcpy(buf, (const char *)v->data + e0 * (int64_t)es,
-			       (size_t)k * es);
-			for (int64_t e = 0; e < k; e++) {
-				if (e0 + e >= 2 * nv)
-					break;
-				if (v->dtype == DT_F32)
-					((float *)buf)[e] = -((float *)buf)[e];
-				else
-					((double *)buf)[e] = -((double *)buf)[e];
-			}
-			bad = zwrite(f, buf, (size_t)k * es);
-		}
-		free(buf);
-	} else if (!bad) {
-		bad = zwrite(f, v->data, (size_t)nv * v->nc * es);
-	}
-	int saved = errno;
-	if (znzclose(f) != 0)
-		bad = 1;
-	if (bad) {
-		unlink(path);
-		return ferr(err, errsize, ARMSTG_EIO,
-			    "cannot write '%s': %s", path,
-			    strerror(saved ? saved : EIO));
-	}
-	return 0;
-}

@@ -50,7 +50,7 @@ int msg_pack(const msg_t *m, char **buf, size_t *len);
 int msg_unpack(const char *buf, size_t len, uint64_t max_bytes, msg_t **out,
 	       char *err, size_t errsize);
 
-/* ---- nifti.c / h5.c: file forms; err gets a message on failure ---- */
+/* ---- nifti*.c / h5.c: file forms; err gets a message on failure ---- */
 int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize);
 /* writes exactly path (callers wanting atomicity write a temp name) */
 int vol_write_nifti(const char *path, const vol_t *v, char *err,

@@ -1,10 +1,11 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * NIfTI-1 reading and writing (runtime/nifti.c) on synthetic files in a
- * temporary folder: every data type, affines kept exactly, the standard's
- * qform/sform precedence, trailing singleton dimensions, ITK/ANTs vector
- * fields (5-D, intent vector, LPS on disk), scaling, and refusals with
- * their messages (missing, truncated, corrupt, unsupported).
+ * NIfTI-1 reading and writing (runtime/nifti.c, nifti_write.c) on
+ * synthetic files in a temporary folder: every data type, affines kept
+ * exactly, the standard's qform/sform precedence, trailing singleton
+ * dimensions, ITK/ANTs vector fields (5-D, intent vector, LPS on disk),
+ * scaling, and refusals with their messages (missing, truncated, corrupt,
+ * unsupported).
  */
 #include <math.h>
 
