@@ -17,14 +17,8 @@
 #include <stdint.h>
 #include <time.h>
 
-#include "remote.h"
+#include "remote_int.h"
 #include "wire.h"
-
-/* after rt.h: czmq brings <syslog.h>, whose LOG_INFO and LOG_DEBUG would
- * shadow the runtime's log levels */
-#include <czmq.h>
-#undef LOG_INFO
-#undef LOG_DEBUG
 
 #define MAX_DIRS 16
 #define MAX_QUEUE 256
