@@ -913,11 +913,29 @@ typedef struct samecase {
 	int same[5];             /* 1 + the candidate whose score is taken */
 } samecase_t;
 
-static void expect_same(const samecase_t *c)
+/* A case of candidates that take an earlier one's score (same_skip,
+ * same_from), run with sets (NULL-ended): rc 0, chosen.txt (x of the
+ * value chosen), tune.tsv's chosen value, the process calls of sim and
+ * fit; for each of the five candidates its status, whether it ran (one
+ * not run took no time), an empty error when it is ok and no copy, and
+ * for a copy tune.tsv's error and the earlier candidate's status and
+ * score, bit for bit. */
+typedef struct copycase {
+	const char *sets[8];
+	double chosen;           /* chosen.txt: x of the value chosen */
+	double chosen_value;     /* tune.tsv's */
+	int sim, fit;            /* process calls */
+	const char *status;      /* per candidate: o ok, f failed */
+	const char *run;         /* per candidate: r run, n not run */
+	int same[5];             /* 1 + the candidate whose score is taken */
+	const char *used[5];     /* not run: the used value and the value */
+} copycase_t;
+
+static void expect_copies(const copycase_t *c)
 {
 	trun_t r;
 	int ns = 0;
-	while (ns < 7 && c->sets[ns])
+	while (ns < 8 && c->sets[ns])
 		ns++;
 	run_sets(&r, c->sets, ns);
 	if (r.rc)
@@ -928,22 +946,33 @@ static void expect_same(const samecase_t *c)
 	ttab_t tt;
 	tune_tsv(r.out, &tt);
 	assert_int_equal(tt.t->nrows, 5);
-	assert_float_equal(chosen_value(&tt), c->chosen, 0);
+	assert_float_equal(chosen_value(&tt), c->chosen_value, 0);
 	for (int k = 0; k < 5; k++) {
 		const char *st = tt.status->str[k], *e = tt.error->str[k];
 		assert_string_equal(st, c->status[k] == 'o' ? "ok" : "failed");
+		if (c->run[k] == 'r') {
+			assert_true(!e || !strstr(e, "not run"));
+		} else {
+			assert_float_equal(tt.wall->num[k], 0, 0);
+		}
 		if (!c->same[k]) {
 			if (c->status[k] == 'o')
 				assert_true(!e || !e[0]);
 			continue;
 		}
-		/* the earlier candidate's score, bit for bit, and its error */
 		int j = c->same[k] - 1;
 		char want[1024];
 		const char *ej = tt.error->str[j];
-		snprintf(want, sizeof want, "same sim outputs as %g%s%s",
-			 tt.value->num[j], c->status[k] == 'o' ? "" : ": ",
-			 c->status[k] == 'o' ? "" : ej);
+		if (c->run[k] == 'n')
+			snprintf(want, sizeof want, "same sim outputs as %g, not "
+				 "run (same_from: offset_used %s)%s%s",
+				 tt.value->num[j], c->used[k],
+				 c->status[k] == 'o' ? "" : ": ",
+				 c->status[k] == 'o' ? "" : ej);
+		else
+			snprintf(want, sizeof want, "same sim outputs as %g%s%s",
+				 tt.value->num[j], c->status[k] == 'o' ? "" : ": ",
+				 c->status[k] == 'o' ? "" : ej);
 		assert_non_null(e);
 		assert_string_equal(e, want);
 		assert_string_equal(st, tt.status->str[j]);
@@ -952,6 +981,17 @@ static void expect_same(const samecase_t *c)
 	}
 	ttab_free(&tt);
 	done(&r);
+}
+
+/* a same_skip case: every candidate runs (a copy only runs no further) */
+static void expect_same(const samecase_t *c)
+{
+	copycase_t x = { .chosen = c->chosen, .chosen_value = c->chosen,
+			 .sim = c->sim, .fit = c->fit, .status = c->status,
+			 .run = "rrrrr" };
+	memcpy(x.sets, c->sets, sizeof c->sets);
+	memcpy(x.same, c->same, sizeof x.same);
+	expect_copies(&x);
 }
 
 static void test_same_skip(void **state)
@@ -1029,72 +1069,12 @@ static void test_same_skip(void **state)
  * 5 is not run and takes 3's).  With parallel the same rows (a candidate
  * that started before its source was committed runs, its row replaced).
  * A table without the column fails the run naming [tune] same_from. */
-typedef struct fromcase {
-	const char *sets[8];
-	double chosen;           /* chosen.txt: x of the value chosen */
-	double chosen_value;     /* tune.tsv's */
-	int sim, fit;            /* process calls */
-	const char *status;      /* per candidate: o ok, f failed */
-	const char *run;         /* per candidate: r run, n not run */
-	int same[5];             /* 1 + the candidate whose score is taken */
-	const char *used[5];     /* not run: the used value and the value */
-} fromcase_t;
-
-static void expect_from(const fromcase_t *c)
-{
-	trun_t r;
-	int ns = 0;
-	while (ns < 8 && c->sets[ns])
-		ns++;
-	run_sets(&r, c->sets, ns);
-	if (r.rc)
-		fail_msg("rc %d: %s", r.rc, r.err);
-	assert_float_equal(tu_read_num(in(r.out, "chosen.txt")), c->chosen, 0);
-	assert_int_equal(count_lines(in(r.cnt, "sim.count")), c->sim);
-	assert_int_equal(count_lines(in(r.cnt, "fit.count")), c->fit);
-	ttab_t tt;
-	tune_tsv(r.out, &tt);
-	assert_int_equal(tt.t->nrows, 5);
-	assert_float_equal(chosen_value(&tt), c->chosen_value, 0);
-	for (int k = 0; k < 5; k++) {
-		const char *st = tt.status->str[k], *e = tt.error->str[k];
-		assert_string_equal(st, c->status[k] == 'o' ? "ok" : "failed");
-		if (c->run[k] == 'r') {
-			assert_true(!e || !strstr(e, "not run"));
-		} else {
-			assert_float_equal(tt.wall->num[k], 0, 0);
-		}
-		if (!c->same[k])
-			continue;
-		int j = c->same[k] - 1;
-		char want[1024];
-		const char *ej = tt.error->str[j];
-		if (c->run[k] == 'n')
-			snprintf(want, sizeof want, "same sim outputs as %g, not "
-				 "run (same_from: offset_used %s)%s%s",
-				 tt.value->num[j], c->used[k],
-				 c->status[k] == 'o' ? "" : ": ",
-				 c->status[k] == 'o' ? "" : ej);
-		else
-			snprintf(want, sizeof want, "same sim outputs as %g%s%s",
-				 tt.value->num[j], c->status[k] == 'o' ? "" : ": ",
-				 c->status[k] == 'o' ? "" : ej);
-		assert_non_null(e);
-		assert_string_equal(e, want);
-		assert_string_equal(st, tt.status->str[j]);
-		assert_memory_equal(&tt.score->num[k], &tt.score->num[j],
-				    sizeof(double));
-	}
-	ttab_free(&tt);
-	done(&r);
-}
-
 #define FROM "tune.same_from=sim.table: offset_used"
 #define FITC "fit.count_file=${TT_COUNT}/fit.count"
 static void test_same_from(void **state)
 {
 	(void)state;
-	static const fromcase_t cases[] = {
+	static const copycase_t cases[] = {
 		/* without the key: every candidate runs, 3 chosen */
 		{ { "sim.cap=2.5", FITC }, 2.5, 3, 6, 6, "ooooo", "rrrrr",
 		  { 0 }, { 0 } },
@@ -1143,7 +1123,7 @@ static void test_same_from(void **state)
 		  { 0, 0, 0, "2.5 at 3", "2.5 at 3" } },
 	};
 	for (int i = 0; i < ARMSTG_COUNT(cases); i++)
-		expect_from(&cases[i]);
+		expect_copies(&cases[i]);
 	/* a column the table lacks: the run fails, naming the key */
 	const char *bad[] = { "sim.cap=2.5", "tune.same_from=sim.table: used" };
 	trun_t r;
@@ -1473,27 +1453,40 @@ static void no_outputs_after_interrupt(const char *out)
 	closedir(d);
 }
 
+/* a run of sets that interrupter stops (count: its sim.count file):
+ * ARMSTG_ECANCELLED, "interrupted", no output left; the run's wall time
+ * (s) */
+static double run_interrupted(trun_t *r, const char *const *sets, int nsets,
+			      char *count, size_t countsize)
+{
+	new_dirs(r);
+	graph_t *g = graph_load(graph_path, sets, nsets, r->err,
+				sizeof r->err);
+	assert_non_null(g);
+	pthread_t th;
+	snprintf(count, countsize, "%s/sim.count", r->cnt);
+	assert_int_equal(pthread_create(&th, NULL, interrupter, count), 0);
+	run_opts_t o = { .outdir = r->out, .jobs = 1, .quiet = 1 };
+	double t0 = sched_now();
+	int rc = graph_run(g, &o, r->err, sizeof r->err);
+	double wall = sched_now() - t0;
+	pthread_join(th, NULL);
+	rt_interrupted = 0;
+	graph_free(g);
+	assert_int_equal(rc, ARMSTG_ECANCELLED);
+	assert_string_equal(r->err, "interrupted");
+	no_outputs_after_interrupt(r->out);
+	return wall;
+}
+
 static void test_interrupt(void **state)
 {
 	(void)state;
 	trun_t r;
 	const char *sets[] = { "sim.sleep_ms=1000" };
-	new_dirs(&r);
-	graph_t *g = graph_load(graph_path, sets, 1, r.err, sizeof r.err);
-	assert_non_null(g);
-	pthread_t th;
 	char count[128];
-	snprintf(count, sizeof count, "%s/sim.count", r.cnt);
-	assert_int_equal(pthread_create(&th, NULL, interrupter, count), 0);
-	run_opts_t o = { .outdir = r.out, .jobs = 1, .quiet = 1 };
-	int rc = graph_run(g, &o, r.err, sizeof r.err);
-	pthread_join(th, NULL);
-	rt_interrupted = 0;
-	graph_free(g);
-	assert_int_equal(rc, ARMSTG_ECANCELLED);
-	assert_string_equal(r.err, "interrupted");
+	run_interrupted(&r, sets, 1, count, sizeof count);
 	assert_int_equal(count_lines(count), 2);
-	no_outputs_after_interrupt(r.out);
 	/* tune.tsv lists the one candidate that finished, none chosen */
 	ttab_t tt;
 	tune_tsv_named(r.out, "tune.failed.tsv", &tt);
@@ -2019,27 +2012,12 @@ static void test_parallel_interrupt(void **state)
 	(void)state;
 	trun_t r;
 	const char *sets[] = { "sim.sleep_ms=1000", "tune.parallel=3" };
-	new_dirs(&r);
-	graph_t *g = graph_load(graph_path, sets, 2, r.err, sizeof r.err);
-	assert_non_null(g);
-	pthread_t th;
 	char count[128];
-	snprintf(count, sizeof count, "%s/sim.count", r.cnt);
-	assert_int_equal(pthread_create(&th, NULL, interrupter, count), 0);
-	run_opts_t o = { .outdir = r.out, .jobs = 1, .quiet = 1 };
-	double t0 = sched_now();
-	int rc = graph_run(g, &o, r.err, sizeof r.err);
-	double wall = sched_now() - t0;
-	pthread_join(th, NULL);
-	rt_interrupted = 0;
-	graph_free(g);
-	assert_int_equal(rc, ARMSTG_ECANCELLED);
-	assert_string_equal(r.err, "interrupted");
+	double wall = run_interrupted(&r, sets, 2, count, sizeof count);
 	/* up to three candidates started at once (the third may see the
 	 * interrupt first), no fourth */
 	assert_true(count_lines(count) >= 2 && count_lines(count) <= 3);
 	assert_true(wall < 5);
-	no_outputs_after_interrupt(r.out);
 	assert_false(tu_exists(in(r.out, "tune.failed.tsv")));
 	done(&r);
 }
