@@ -231,9 +231,10 @@ def method_T(args, c, d, m, x):
         if m in ("armstg", "armstg_auto", "sphere") and os.environ.get("PUSH"):
             sets.append("tune.values=%s" % os.environ["PUSH"])
         sets += [s for s in args.set if s.split(".")[0] in ("grow", "register", "affine", "tune",
-                                                             "grown_tumour", "to_atlas")
+                                                             "grown_tumour", "to_atlas", "to_atlas_outline")
                  and m in ("armstg", "armstg_auto", "sphere")]
-        graph = GRAPH[m]
+        graph = args.graphs.get(m, GRAPH[m])
+        orig = graph
         if args.diag and m in ("armstg", "armstg_auto", "sphere"):
             # dice_steps.py's sinks (the intermediate tumours and fields) and
             # the growth's tumour points, so dice_steps.py --reuse and
@@ -252,7 +253,7 @@ def method_T(args, c, d, m, x):
         try:
             t, cpu = run_armstg(args, graph, o, env, sets)
         finally:
-            if graph != GRAPH[m]:
+            if graph != orig:
                 os.remove(graph)
         T = x + peers.itk_field_ras(os.path.join(o, "atlas_to_patient_warp.nii.gz"))
         lab = os.path.join(o, "atlas_labels_in_patient.nii.gz")
@@ -376,7 +377,12 @@ def main():
     ap.add_argument("--log", action="store_true",
                     help="run the graphs with -v and keep their log (OUT/CASE/METHOD/armstg.log: "
                     "stage times, every iteration's metric)")
+    ap.add_argument("--graph", action="append", default=[], metavar="METHOD=FILE",
+                    help="run METHOD (armstg, armstg_auto, sphere, ...) with FILE instead of "
+                    "its graph, e.g. a variant with another stage (keep FILE in graphs/: the "
+                    "graphs' relative paths are read from the graph's folder)")
     args = ap.parse_args()
+    args.graphs = dict(g.split("=", 1) for g in args.graph)
     args.here = os.path.dirname(os.path.abspath(__file__))
     args.out = os.path.abspath(args.out)
     os.makedirs(args.out, exist_ok=True)

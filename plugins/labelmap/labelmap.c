@@ -15,6 +15,15 @@
  *           (a tumour's placement without its outline;
  *           bench/pipeline/results.md at 7a4d369, "what the tumour's
  *           shape is worth")
+ *   move    out = the input's non-zero voxels translated by
+ *           t = c(to) - c(volume), c = the centroid of a mask's non-zero
+ *           voxels in world mm: out(x) = 1 where volume(x - t) != 0
+ *           (nearest voxel; 0 where x - t leaves the grid), and, with
+ *           the `mask` input, only where mask > 0 (world coordinates,
+ *           nearest).  The tumour placed in the atlas by the brain
+ *           outlines' map (its size) moved to where the images' map puts
+ *           it (its place): bench/peers/results.md, "The tumour's
+ *           placement in the atlas from the images, tumour masked"  (u8)
  *   points  out = the solid body enclosed by the `points` input's points
  *           whose labels are in `labels` ('all' = every point,
  *           'nonzero' = label != 0, or a list '3-5'), rasterised on the
@@ -79,7 +88,7 @@
 #include "img/lset.h"
 #include "img/sample.h"
 
-enum { OP_SELECT, OP_PAINT, OP_SPHERE, OP_POINTS };
+enum { OP_SELECT, OP_PAINT, OP_SPHERE, OP_POINTS, OP_MOVE };
 enum { OUTLINE_POINTS, OUTLINE_BALLS };
 
 typedef struct {
@@ -97,16 +106,19 @@ typedef struct {
 static const armstg_port_t ins[] = {
 	{ "volume", MSG_VOLUME, 0, "label (or any scalar) volume; op=points: "
 	  "the reference grid (values ignored)" },
-	{ "mask", MSG_VOLUME, 1, "mask painted with `value` (op=paint)" },
+	{ "mask", MSG_VOLUME, 1, "mask painted with `value` (op=paint); "
+	  "op=move: the result kept only where mask > 0" },
 	{ "points", MSG_POINTSET, 1, "points rasterised by op=points (world "
 	  "mm, int32 labels)" },
+	{ "to", MSG_VOLUME, 1, "op=move: the mask whose centroid (world mm) "
+	  "the volume's non-zero voxels are moved onto" },
 };
 static const armstg_port_t outs[] = {
 	{ "volume", MSG_VOLUME, 0, "result on the input's grid" },
 };
 static const armstg_param_t params[] = {
 	{ "op", PT_ENUM, "select", 0, 0, "", "operation",
-	  "select|paint|sphere|points", offsetof(priv_t, op), 0 },
+	  "select|paint|sphere|points|move", offsetof(priv_t, op), 0 },
 	{ "labels", PT_STRING, "nonzero", 0, 0, "",
 	  "values selected by op=select, point labels by op=points: "
 	  "'nonzero' or a list like '4,5' or '1-3' ('all' too for points)",
@@ -523,6 +535,120 @@ static int32_t label_26(const vol_t *in, int32_t *lab)
 	return n;
 }
 
+/* centroid (world mm) of v's non-zero voxels; their number (0: empty).
+ * Sums per slice, then over the slices in order: the same bits on any
+ * thread count. */
+static int64_t centroid(const vol_t *v, int nt, double c[3])
+{
+	double *sl = calloc((size_t)v->nz * 4, sizeof *sl);
+	if (!sl)
+		return -1;
+#pragma omp parallel for num_threads(nt) schedule(static)
+	for (int k = 0; k < v->nz; k++) {
+		double *q = sl + 4 * (size_t)k;
+		for (int j = 0; j < v->ny; j++)
+			for (int i = 0; i < v->nx; i++) {
+				if (vol_get(v, vol_idx(v, i, j, k)) == 0)
+					continue;
+				double w[3];
+				vol_to_world(v, i, j, k, w);
+				q[0] += w[0];
+				q[1] += w[1];
+				q[2] += w[2];
+				q[3]++;
+			}
+	}
+	double t[4] = { 0, 0, 0, 0 };
+	for (int k = 0; k < v->nz; k++)
+		for (int a = 0; a < 4; a++)
+			t[a] += sl[4 * (size_t)k + a];
+	free(sl);
+	for (int a = 0; a < 3; a++)
+		c[a] = t[3] > 0 ? t[a] / t[3] : 0;
+	return (int64_t)t[3];
+}
+
+/* op=move: out(x) = [volume(x - t) != 0] (and mask(x) > 0), t = c(to) -
+ * c(volume) */
+static int op_move(armstg_stage_t *st)
+{
+	const vol_t *in = (const vol_t *)st->in[0];
+	const vol_t *mask = (const vol_t *)st->in[1];
+	const vol_t *to = (const vol_t *)st->in[3];
+	int nt = st->host->threads(st);
+	if (!to)
+		return st->host->fail(st, ARMSTG_EINVAL,
+				      "op=move needs the 'to' input (the mask "
+				      "whose centroid the volume is moved onto)");
+	if (to->nc != 1 || (mask && mask->nc != 1))
+		return st->host->fail(st, ARMSTG_EINVAL,
+				      "op=move: 'to' and 'mask' must have 1 "
+				      "component (masks)");
+	int rc;
+	if ((rc = check_finite(st, to, "'to' mask")) ||
+	    (mask && (rc = check_finite(st, mask, "mask"))))
+		return rc;
+	double ci[3], ct[3], inv[16], minv[16];
+	int64_t ni = centroid(in, nt, ci), nto = centroid(to, nt, ct);
+	if (ni < 0 || nto < 0)
+		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
+	if (!ni)
+		return st->host->fail(st, ARMSTG_EINVAL,
+				      "input mask is empty: nothing to move");
+	if (!nto)
+		return st->host->fail(st, ARMSTG_EINVAL,
+				      "'to' mask is empty: no centroid to move "
+				      "onto");
+	if (aff_invert(in->affine, inv) ||
+	    (mask && aff_invert(mask->affine, minv)))
+		return st->host->fail(st, ARMSTG_EINVAL,
+				      "op=move: a singular affine");
+	const double t[3] = { ct[0] - ci[0], ct[1] - ci[1], ct[2] - ci[2] };
+	st->host->log(st, LOG_INFO, "moved by (%.2f, %.2f, %.2f) mm, %.2f mm: "
+		      "centroid (%.1f, %.1f, %.1f) onto (%.1f, %.1f, %.1f) mm",
+		      t[0], t[1], t[2], sqrt(t[0] * t[0] + t[1] * t[1] +
+					     t[2] * t[2]),
+		      ci[0], ci[1], ci[2], ct[0], ct[1], ct[2]);
+	vol_t *o = st->host->vol_new(in->nx, in->ny, in->nz, 1, DT_U8,
+				     in->affine);
+	if (!o)
+		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
+	uint8_t *d = o->data;
+	int64_t kept = 0, cut = 0;
+#pragma omp parallel for num_threads(nt) schedule(static) collapse(2) \
+	reduction(+ : kept, cut)
+	for (int k = 0; k < in->nz; k++)
+		for (int j = 0; j < in->ny; j++)
+			for (int i = 0; i < in->nx; i++) {
+				double w[3], src[3], c[3];
+				vol_to_world(in, i, j, k, w);
+				for (int a = 0; a < 3; a++)
+					src[a] = w[a] - t[a];
+				aff_apply(inv, src, c);
+				int inside;
+				uint8_t hit = img_vol_near(in, 0, c, 0,
+							   &inside) != 0;
+				if (hit && mask) {
+					aff_apply(minv, w, c);
+					hit = img_vol_near(mask, 0, c, 0,
+							   &inside) > 0;
+					cut += !hit;
+				}
+				kept += hit;
+				d[vol_idx(in, i, j, k)] = hit;
+			}
+	st->host->log(st, LOG_INFO, "%lld voxels of %lld, %lld cut by the "
+		      "mask", (long long)kept, (long long)ni, (long long)cut);
+	if (!kept) {
+		st->host->msg_unref(&o->base);
+		return st->host->fail(st, ARMSTG_EINVAL,
+				      "op=move: nothing left inside the grid "
+				      "and the mask");
+	}
+	st->out[0] = &o->base;
+	return 0;
+}
+
 static int process(armstg_stage_t *st)
 {
 	priv_t *p = st->priv;
@@ -538,6 +664,8 @@ static int process(armstg_stage_t *st)
 	int rc = check_finite(st, in, "input volume");
 	if (rc)
 		return rc;
+	if (p->op == OP_MOVE)
+		return op_move(st);
 	if (p->op == OP_SELECT) {
 		lset_t ls;
 		if (!strcmp(p->labels, "all") ||
@@ -683,7 +811,8 @@ static const armstg_plugin_t desc = {
 	ARMSTG_PLUGIN_HEADER,
 	.name = "labelmap",
 	.description = "label volume operations: select, paint, "
-		       "equal-volume sphere, point set to mask",
+		       "equal-volume sphere, point set to mask, mask moved onto "
+		       "another's centroid",
 	.version = "1.0",
 	.license = "MIT",
 	ARMSTG_INPUTS(ins),

@@ -20,7 +20,7 @@ static void test_select(void **s)
 	(void)s;
 	vol_t *v = labels_vol(NULL);
 	msg_freeze(&v->base);
-	const msg_t *in[3] = { &v->base, NULL };
+	const msg_t *in[4] = { &v->base, NULL };
 	msg_t *out[1];
 	char err[512];
 	const char *p[] = { "labels=1,3-4", NULL };
@@ -50,7 +50,7 @@ static void test_paint_world(void **s)
 	((uint8_t *)m->data)[vol_idx(m, 2, 3, 4)] = 1;  /* world (2,3,4) */
 	msg_freeze(&v->base);
 	msg_freeze(&m->base);
-	const msg_t *in[3] = { &v->base, &m->base };
+	const msg_t *in[4] = { &v->base, &m->base };
 	msg_t *out[1];
 	char err[512];
 	const char *p[] = { "op=paint", "value=99", NULL };
@@ -79,7 +79,7 @@ static void test_sphere(void **s)
 			for (int i = 15; i < 25; i++)
 				((uint8_t *)v->data)[vol_idx(v, i, j, k)] = 1;
 	msg_freeze(&v->base);
-	const msg_t *in[3] = { &v->base, NULL };
+	const msg_t *in[4] = { &v->base, NULL };
 	msg_t *out[1];
 	char err[512];
 	const char *p[] = { "op=sphere", NULL };
@@ -103,7 +103,7 @@ static void test_sphere(void **s)
 	/* empty mask */
 	vol_t *z = vol_new(5, 5, 5, 1, DT_U8, A);
 	msg_freeze(&z->base);
-	const msg_t *in2[3] = { &z->base, NULL };
+	const msg_t *in2[4] = { &z->base, NULL };
 	assert_int_equal(tu_run(TU_PLUGIN(), p, in2, out, err, sizeof err),
 			 ARMSTG_EINVAL);
 	assert_string_equal(err, "input mask is empty: no sphere to fit");
@@ -128,7 +128,7 @@ static void test_sphere_each(void **s)
 			for (int i = 40; i < 47; i++)
 				((uint8_t *)v->data)[vol_idx(v, i, j, k)] = 1;
 	msg_freeze(&v->base);
-	const msg_t *in[3] = { &v->base, NULL };
+	const msg_t *in[4] = { &v->base, NULL };
 	msg_t *out[1];
 	char err[512];
 	const char *pe[] = { "op=sphere", "components=each", NULL };
@@ -171,7 +171,7 @@ static void test_sphere_each(void **s)
 	vol_t *f = vol_new(60, 40, 40, 1, DT_U8, F);
 	memcpy(f->data, v->data, (size_t)vol_nvox(v));
 	msg_freeze(&f->base);
-	const msg_t *inf[3] = { &f->base, NULL };
+	const msg_t *inf[4] = { &f->base, NULL };
 	assert_int_equal(tu_run(TU_PLUGIN(), pe, inf, out, err, sizeof err), 0);
 	const uint8_t *a = ((const vol_t *)out[0])->data;
 	msg_t *out2[1];
@@ -184,7 +184,7 @@ static void test_sphere_each(void **s)
 	/* an empty mask: the same error as joint */
 	vol_t *z = vol_new(5, 5, 5, 1, DT_U8, A);
 	msg_freeze(&z->base);
-	const msg_t *inz[3] = { &z->base, NULL };
+	const msg_t *inz[4] = { &z->base, NULL };
 	assert_int_equal(tu_run(TU_PLUGIN(), pe, inz, out, err, sizeof err),
 			 ARMSTG_EINVAL);
 	assert_string_equal(err, "input mask is empty: no sphere to fit");
@@ -198,11 +198,105 @@ static void test_nan(void **s)
 	vol_t *v = vol_new(3, 3, 3, 1, DT_F32, NULL);
 	((float *)v->data)[5] = NAN;
 	msg_freeze(&v->base);
-	const msg_t *in[3] = { &v->base, NULL };
+	const msg_t *in[4] = { &v->base, NULL };
 	char err[512];
 	assert_int_equal(tu_run(TU_PLUGIN(), NULL, in, NULL, err, sizeof err),
 			 ARMSTG_EINVAL);
 	assert_string_equal(err, "input volume contains NaN or Inf (element 5)");
+	msg_unref(&v->base);
+}
+
+/* op=move: a 4x5x6 box moved onto the centroid of another box stored on a
+ * flipped (LPS-like) grid lands on the box translated by the centroids'
+ * difference, voxel for voxel; the `mask` input cuts it; errors by name */
+static void test_move(void **s)
+{
+	(void)s;
+	double A[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
+	vol_t *v = vol_new(30, 30, 30, 1, DT_U8, A);
+	for (int k = 5; k < 11; k++)
+		for (int j = 5; j < 10; j++)
+			for (int i = 5; i < 9; i++)
+				((uint8_t *)v->data)[vol_idx(v, i, j, k)] = 1;
+	/* centroid (6.5, 7, 7.5) mm; the target: a 2x2x2 box at world x
+	 * 16-17, y 12-13, z 9-10 (centroid (16.5, 12.5, 9.5)) on a grid whose
+	 * i runs along -x from x = 29: t = (10, 5.5, 2) mm */
+	double B[16] = { -1, 0, 0, 29, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
+	vol_t *to = vol_new(30, 30, 30, 1, DT_I16, B);
+	for (int k = 9; k < 11; k++)
+		for (int j = 12; j < 14; j++)
+			for (int x = 16; x < 18; x++)
+				((int16_t *)to->data)[vol_idx(to, 29 - x, j, k)] = 7;
+	vol_t *m = vol_new(30, 30, 30, 1, DT_U8, A);
+	for (int64_t e = 0; e < vol_nvox(m); e++)
+		((uint8_t *)m->data)[e] = 1;
+	for (int k = 0; k < 30; k++) /* the mask leaves out y >= 14 */
+		for (int j = 14; j < 30; j++)
+			for (int i = 0; i < 30; i++)
+				((uint8_t *)m->data)[vol_idx(m, i, j, k)] = 0;
+	msg_freeze(&v->base);
+	msg_freeze(&to->base);
+	msg_freeze(&m->base);
+	const msg_t *in[4] = { &v->base, NULL, NULL, &to->base };
+	msg_t *out[1];
+	char err[512];
+	const char *p[] = { "op=move", NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), p, in, out, err, sizeof err), 0);
+	/* y moves by 5.5 voxels: nearest of y - 5.5 (x.5 rounds to one
+	 * side), so the box spans 5 voxels of y from 10 or 11 */
+	const vol_t *o = (const vol_t *)out[0];
+	assert_int_equal(o->dtype, DT_U8);
+	int64_t n = 0, n_in = 0, jlo = 30;
+	for (int k = 0; k < 30; k++)
+		for (int j = 0; j < 30; j++)
+			for (int i = 0; i < 30; i++)
+				if (((uint8_t *)o->data)[vol_idx(o, i, j, k)]) {
+					n++;
+					n_in += i >= 15 && i < 19 && k >= 7 &&
+						k < 13 && j >= 10 && j < 16;
+					if (j < jlo)
+						jlo = j;
+				}
+	assert_int_equal(n, 4 * 5 * 6);
+	assert_int_equal(n_in, n);
+	assert_true(jlo == 10 || jlo == 11);
+	msg_unref(out[0]);
+	/* with the mask: the rows at y >= 14 are cut */
+	const msg_t *inm[4] = { &v->base, &m->base, NULL, &to->base };
+	assert_int_equal(tu_run(TU_PLUGIN(), p, inm, out, err, sizeof err), 0);
+	o = (const vol_t *)out[0];
+	int64_t nm = 0;
+	for (int64_t e = 0; e < vol_nvox(o); e++)
+		nm += ((uint8_t *)o->data)[e];
+	assert_int_equal(nm, 4 * 6 * (14 - jlo));
+	msg_unref(out[0]);
+	/* errors: no target, an empty target, an empty input */
+	const msg_t *none[4] = { &v->base, NULL, NULL, NULL };
+	assert_int_equal(tu_run(TU_PLUGIN(), p, none, out, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_string_equal(err, "op=move needs the 'to' input (the mask whose "
+			    "centroid the volume is moved onto)");
+	vol_t *z = vol_new(30, 30, 30, 1, DT_U8, A);
+	msg_freeze(&z->base);
+	const msg_t *ez[4] = { &v->base, NULL, NULL, &z->base };
+	assert_int_equal(tu_run(TU_PLUGIN(), p, ez, out, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_string_equal(err, "'to' mask is empty: no centroid to move onto");
+	const msg_t *ze[4] = { &z->base, NULL, NULL, &to->base };
+	assert_int_equal(tu_run(TU_PLUGIN(), p, ze, out, err, sizeof err),
+			 ARMSTG_EINVAL);
+	assert_string_equal(err, "input mask is empty: nothing to move");
+	/* the same voxels on 1 and 3 threads */
+	msg_t *o1[1], *o3[1];
+	assert_int_equal(tu_run_nt(TU_PLUGIN(), p, in, o1, 1, err, sizeof err), 0);
+	assert_int_equal(tu_run_nt(TU_PLUGIN(), p, in, o3, 3, err, sizeof err), 0);
+	assert_memory_equal(((vol_t *)o1[0])->data, ((vol_t *)o3[0])->data,
+			    (size_t)vol_nvox(v));
+	msg_unref(o1[0]);
+	msg_unref(o3[0]);
+	msg_unref(&z->base);
+	msg_unref(&m->base);
+	msg_unref(&to->base);
 	msg_unref(&v->base);
 }
 
@@ -299,7 +393,7 @@ static char logbuf[16384];
 static int run_points(const char *const *params, const vol_t *ref,
 		      const ps_t *ps, msg_t **out, char *err, size_t errsize)
 {
-	const msg_t *in[3] = { ref ? &ref->base : NULL, NULL,
+	const msg_t *in[4] = { ref ? &ref->base : NULL, NULL,
 			       ps ? &ps->base : NULL };
 	fflush(stderr);
 	int save = dup(2);
@@ -707,6 +801,7 @@ int main(void)
 		cmocka_unit_test(test_sphere),
 		cmocka_unit_test(test_sphere_each),
 		cmocka_unit_test(test_nan),
+		cmocka_unit_test(test_move),
 		cmocka_unit_test(test_points_ball),
 		cmocka_unit_test(test_points_shell),
 		cmocka_unit_test(test_points_orientation),
