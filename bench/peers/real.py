@@ -231,7 +231,7 @@ def method_T(args, c, d, m, x):
         if m in ("armstg", "armstg_auto", "sphere") and os.environ.get("PUSH"):
             sets.append("tune.values=%s" % os.environ["PUSH"])
         sets += [s for s in args.set if s.split(".")[0] in ("grow", "register", "affine", "tune",
-                                                             "grown_tumour", "to_atlas", "to_atlas_outline")
+                                                             "grown_tumour", "to_atlas", "to_atlas_image")
                  and m in ("armstg", "armstg_auto", "sphere")]
         graph = args.graphs.get(m, GRAPH[m])
         orig = graph
