@@ -94,7 +94,18 @@ __global__ void k_red_final(red *part, int nb, red *out)
  * and log dominate once the supports are read: 32 / SG points of a warp
  * now evaluate it at once.  A support holds about 30 entries, so SG = 8
  * lanes read about 4 each.) */
-__global__ void k_stress(dmod m, const unsigned char *ipact, const double *ipg,
+/* STRESS_MINB: resident blocks per SM the compiler must allow (registers
+ * per thread <= 65536 / (TPB * STRESS_MINB)); 0: no bound (nvcc's choice:
+ * 2 blocks, 25 % occupancy, by ncu on an H200, bench/pipeline/results.md) */
+#ifndef STRESS_MINB
+#define STRESS_MINB 0
+#endif
+#if STRESS_MINB > 0
+#define STRESS_BOUNDS __launch_bounds__(TPB, STRESS_MINB)
+#else
+#define STRESS_BOUNDS
+#endif
+__global__ void STRESS_BOUNDS k_stress(dmod m, const unsigned char *ipact, const double *ipg,
 			 const double *u, double *VP, red *part)
 {
 	red r;
