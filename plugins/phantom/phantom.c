@@ -367,7 +367,7 @@ static int phantom_process(armstg_stage_t *st)
 		   o[O_ATLAS_MASK]);
 	g->t_atlas = now_s() - t;
 	if (H->cancelled(st)) {
-		rc = ARMSTG_ECANCELLED;
+		rc = H->fail(st, ARMSTG_ECANCELLED, "cancelled after the atlas");
 		goto out;
 	}
 
@@ -376,7 +376,7 @@ static int phantom_process(armstg_stage_t *st)
 	H->progress(st, 0.25, "random deformation (%.3g mm)", P->deform_mm);
 	rc = gen_random(g);
 	if (rc)
-		goto nomem;
+		goto out;
 	gen_tumour(g);
 	g->t_rand = now_s() - t;
 
@@ -404,7 +404,8 @@ static int phantom_process(armstg_stage_t *st)
 			goto out;
 		g->t_search = now_s() - t;
 		if (H->cancelled(st)) {
-			rc = ARMSTG_ECANCELLED;
+			rc = H->fail(st, ARMSTG_ECANCELLED,
+				     "cancelled after the mass effect");
 			goto out;
 		}
 	}
@@ -497,7 +498,9 @@ static int phantom_process(armstg_stage_t *st)
 	rc = 0;
 	goto out;
 nomem:
-	rc = H->fail(st, ARMSTG_ENOMEM, "out of memory");
+	rc = H->fail(st, ARMSTG_ENOMEM, "out of memory: a %dx%dx%d grid with "
+		     "a %dx%dx%d deformation node grid", n[0], n[1], n[2],
+		     g->C.n[0], g->C.n[1], g->C.n[2]);
 out:
 	for (int p = 0; p < O_N; p++)
 		if (o[p])

@@ -118,7 +118,10 @@ int gen_random(gen_t *g)
 	g->ur = malloc(3 * nv * sizeof *g->ur);
 	if (!v || !g->ur) {
 		free(v);
-		return ARMSTG_ENOMEM;
+		return g->st->host->fail(g->st, ARMSTG_ENOMEM, "out of memory: "
+					 "random deformation on the %dx%dx%d "
+					 "node grid (solve_spacing %.3g mm)",
+					 C->n[0], C->n[1], C->n[2], C->h);
 	}
 	ph_rng_t r = { .seed = (uint64_t)g->P->seed, .stream = 11 };
 	ph_modes_t m;

@@ -204,16 +204,17 @@ extern const double gen_sub8[8][3];
  * orientation; g->alab and g->clean on the canonical grid */
 void gen_atlas(gen_t *g, vol_t *t1, vol_t *t2, vol_t *lab, vol_t *mask);
 /* 2. the random inter-subject displacement g->ur (none when deform_mm is
- * 0).  0, or ARMSTG_ENOMEM */
+ * 0).  0, or ARMSTG_ENOMEM (the stage's fail called: its message set) */
 int gen_random(gen_t *g);
 /* 3. (phantom_mass.c) the tumour g->T (analytic) or the real mask's
  * figures; g->has_tumour */
 void gen_tumour(gen_t *g);
-/* 4. the unit mass-effect velocity g->vm (the elastic solve).  0,
- * ARMSTG_ENOMEM, or the code of the stage's fail (its message set) */
+/* 4. the unit mass-effect velocity g->vm (the elastic solve).  0, or the
+ * code of the stage's fail (its message set; out of memory included) */
 int gen_mass_solve(gen_t *g);
 /* 4. the scale of g->vm whose ventricle displacement is mass_effect mm:
- * g->um, g->mscale.  0, ARMSTG_ENOMEM, or the code of the stage's fail */
+ * g->um, g->mscale.  0, or the code of the stage's fail (its message set;
+ * out of memory included) */
 int gen_mass_scale(gen_t *g);
 /* 5. (phantom_patient.c) the patient outputs o[O_PAT_*], true_field and
  * mass_field (o[] made by phantom_process).  0 */

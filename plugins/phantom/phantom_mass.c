@@ -137,9 +137,14 @@ int gen_mass_solve(gen_t *g)
 	float *mu = malloc(nv * sizeof *mu), *ka = malloc(nv * sizeof *ka);
 	float *pc = calloc(ncell > 0 ? ncell : 1, sizeof *pc);
 	g->vm = calloc(3 * nv, sizeof *g->vm);
-	int rc = ARMSTG_ENOMEM;
-	if (!fr || !mu || !ka || !pc || !g->vm)
+	int rc;
+	if (!fr || !mu || !ka || !pc || !g->vm) {
+		rc = g->st->host->fail(g->st, ARMSTG_ENOMEM, "out of memory: "
+				       "mass-effect solve on the %dx%dx%d node "
+				       "grid (solve_spacing %.3g mm)", nx, ny,
+				       nz, C->h);
 		goto out;
+	}
 	double mp, lp, mc, lc;
 	lame(E_PAR, NU_PAR, &mp, &lp);
 	lame(E_CSF, NU_CSF, &mc, &lc);
@@ -191,7 +196,10 @@ int gen_mass_solve(gen_t *g)
 	g->cg_iters = E.iters;
 	g->cg_relres = E.relres;
 	if (src == -1)
-		rc = ARMSTG_ENOMEM;
+		rc = g->st->host->fail(g->st, ARMSTG_ENOMEM, "out of memory: "
+				       "elastic solver on the %dx%dx%d node "
+				       "grid (solve_spacing %.3g mm)", nx, ny,
+				       nz, C->h);
 	else if (src == -2)
 		rc = g->st->host->fail(g->st, ARMSTG_ENUMERIC,
 				       "mass-effect solve did not converge: "
@@ -270,7 +278,11 @@ int gen_mass_scale(gen_t *g)
 	cd.e = malloc((cap > 0 ? cap : 1) * sizeof *cd.e);
 	g->um = calloc(3 * nvC, sizeof *g->um);
 	if (!cd.e || !g->um) {
-		rc = ARMSTG_ENOMEM;
+		rc = g->st->host->fail(g->st, ARMSTG_ENOMEM, "out of memory: "
+				       "mass-effect scale search (%lld "
+				       "candidate voxels, %dx%dx%d nodes)",
+				       (long long)cap, C->n[0], C->n[1],
+				       C->n[2]);
 		goto out;
 	}
 	for (int k = lo[2]; k <= hi[2]; k++)
