@@ -88,6 +88,8 @@ define LIB_template
 lib$(1)_SRC := $$(wildcard lib/$(1)/*.c)
 lib$(1)_OBJ := $$(lib$(1)_SRC:%.c=$(BUILD)/obj/%.o)
 $(BUILD)/obj/lib/$(1)/%.o: EXTRA_CFLAGS = $$(lib$(1)_CFLAGS)
+# its flags (lib.mk) are part of every object's recipe
+$$(lib$(1)_OBJ) $$(patsubst lib/$(1)/tests/%.c,$(BUILD)/obj/lib/$(1)/tests/%.o,$$(wildcard lib/$(1)/tests/*.c)): $$(wildcard lib/$(1)/lib.mk)
 $(BUILD)/lib/lib$(1).a: $$(lib$(1)_OBJ)
 	@mkdir -p $$(dir $$@)
 	rm -f $$@ && ar rcs $$@ $$^
@@ -111,8 +113,11 @@ $(BUILD)/obj/plugins/$(1)/%.o: EXTRA_CFLAGS = $$($(1)_CFLAGS)
 $(BUILD)/obj/plugins/$(1)/%.cu.o: EXTRA_NVFLAGS = $$($(1)_NVFLAGS)
 $(BUILD)/plugins/$(1).so: $$($(1)_OBJ) $$($(1)_LIBA)
 	@mkdir -p $$(dir $$@)
-	$$(CC) -shared -Wl,-z,defs $$(LDFLAGS) -o $$@ $$^ $$($(1)_LDLIBS) $$($(1)_LIBDEP) $$(if $$($(1)_CU),-L/usr/local/cuda/lib64 -lcudart -lstdc++) -lm
+	$$(CC) -shared -Wl,-z,defs $$(LDFLAGS) -o $$@ $$(filter-out %.mk,$$^) $$($(1)_LDLIBS) $$($(1)_LIBDEP) $$(if $$($(1)_CU),-L/usr/local/cuda/lib64 -lcudart -lstdc++) -lm
 $(1)_TESTS := $$(patsubst plugins/$(1)/tests/%.c,$(BUILD)/tests/$(1)_%,$$(wildcard plugins/$(1)/tests/*.c))
+# its flags (plugin.mk) are part of every object's recipe (.c, .cu, tests)
+# and of the link: a change to them rebuilds the plugin
+$$($(1)_OBJ) $$(patsubst plugins/$(1)/tests/%.c,$(BUILD)/obj/plugins/$(1)/tests/%.o,$$(wildcard plugins/$(1)/tests/*.c)) $(BUILD)/plugins/$(1).so: $$(wildcard plugins/$(1)/plugin.mk)
 $(BUILD)/tests/$(1)_%: $(BUILD)/obj/plugins/$(1)/tests/%.o $$($(1)_OBJ) $$($(1)_LIBA) $(RT_LIB)
 	@mkdir -p $$(dir $$@)
 	$$(CC) $$(LDFLAGS) -o $$@ $$^ $$($(1)_LDLIBS) $$($(1)_LIBDEP) $(RT_LIBS) -lcmocka $$(if $$($(1)_CU),-L/usr/local/cuda/lib64 -lcudart -lstdc++)
