@@ -3,14 +3,19 @@
  * Timing harness for the phantom without the runtime's I/O (so it links
  * statically and runs on any x86-64 host):
  *
+ *   make build/lib/libfield.a build/lib/libimg.a
  *   cc -O2 -std=c11 -D_GNU_SOURCE -fopenmp -Iruntime/include -Iruntime \
- *      plugins/phantom/bench/phantom_bench.c runtime/msg.c \
- *      plugins/phantom/ph*.c -static -lm -o /tmp/phantom_bench
+ *      -Ilib plugins/phantom/bench/phantom_bench.c runtime/msg.c \
+ *      plugins/phantom/ph*.c build/lib/libfield.a build/lib/libimg.a \
+ *      -static -lm -o /tmp/phantom_bench
  *   taskset -c 0,1 env OMP_NUM_THREADS=2 /tmp/phantom_bench 2 [brats]
  *
  * Runs the plugin once with its defaults (or preset=brats1mm) on the given
  * number of threads and prints the wall time and the per-phase times of its
  * info table.  Not built by the Makefile (it is not in plugins/phantom/).
+ * lib/field and lib/img are linked as the archives (phantom_LIBS in
+ * plugin.mk), so only the members the phantom uses come in (not png.o,
+ * which would need libpng).
  */
 #include <stdarg.h>
 #include <stdio.h>
