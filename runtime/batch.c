@@ -81,13 +81,6 @@ typedef struct slot {
 	pthread_t th;
 } slot_t;
 
-static double now_s(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
 static void on_signal(int sig)
 {
 	(void)sig;
@@ -280,7 +273,7 @@ static void run_case(batch_t *b, bcase_t *c, int ep)
 	ctx.pool = &b->pool;
 	ctx.first = ep;
 	ctx.casename = c->name;
-	double t0 = now_s();
+	double t0 = sched_now();
 	int rc = -1;
 	graph_t *g = load_case(b, c, err, sizeof err);
 	if (g) {
@@ -290,7 +283,7 @@ static void run_case(batch_t *b, bcase_t *c, int ep)
 		graph_free(g);
 	}
 	pthread_mutex_lock(&b->mu);
-	c->wall_s = now_s() - t0;
+	c->wall_s = sched_now() - t0;
 	c->state = rc ? (rt_interrupted ? C_NOTRUN : C_FAILED) : C_OK;
 	snprintf(c->workers, sizeof c->workers, "%s", ctx.used[0] ? ctx.used :
 		 "-");
@@ -366,7 +359,7 @@ static void progress(batch_t *b)
 	int up = 0;
 	for (int i = 0; i < b->pool.nep; i++)
 		up += !remote_endpoint_dead(b->pool.ep[i]);
-	double el = now_s() - b->t0;
+	double el = sched_now() - b->t0;
 	int fin = b->nok + b->nfailed;
 	int waiting = b->ncases - b->next;
 	char e1[32], e2[32];
@@ -626,7 +619,7 @@ int batch_main(int argc, char **argv)
 	pthread_cond_init(&b->cv, NULL);
 	int nslots = b->pool.nep * b->per_worker;
 	slot_t *slots = calloc((size_t)nslots, sizeof *slots);
-	b->t0 = now_s();
+	b->t0 = sched_now();
 	pthread_mutex_lock(&b->mu);
 	for (int i = 0; slots && i < nslots; i++) {
 		slots[i].b = b;
@@ -639,7 +632,7 @@ int batch_main(int argc, char **argv)
 		}
 	}
 	int last_fin = 0;
-	double next = now_s() + b->progress_s;
+	double next = sched_now() + b->progress_s;
 	while (b->slots > 0) {
 		struct timespec ts;
 		clock_gettime(CLOCK_REALTIME, &ts);
@@ -650,7 +643,7 @@ int batch_main(int argc, char **argv)
 		}
 		pthread_cond_timedwait(&b->cv, &b->mu, &ts);
 		int fin = b->nok + b->nfailed;
-		if (fin != last_fin || now_s() >= next) {
+		if (fin != last_fin || sched_now() >= next) {
 			for (int i = 0; i < b->ncases && !b->quiet; i++) {
 				bcase_t *c = &b->cases[i];
 				/* a line per case as it ends (once) */
@@ -673,7 +666,7 @@ int batch_main(int argc, char **argv)
 			}
 			progress(b);
 			last_fin = fin;
-			next = now_s() + b->progress_s;
+			next = sched_now() + b->progress_s;
 		}
 	}
 	pthread_mutex_unlock(&b->mu);

@@ -352,7 +352,6 @@ void sched_mark_needed(g_run_t *r, int v);
  * a time; stages already ST_DONE (kept by a tuning run) feed the others.
  * Files stay pending.  0, or a negative code with err. */
 int sched_pass(g_run_t *r, char *err, size_t errsize);
-double sched_now(void);
 /* the OpenMP threads a pass shares: OMP_NUM_THREADS when set, else the
  * cores (omp_get_max_threads of the calling thread) */
 int sched_threads_total(void);

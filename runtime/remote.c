@@ -20,13 +20,6 @@
 #include "remote_int.h"
 #include "wire.h"
 
-static double now_s(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
 static pthread_once_t zsys_once = PTHREAD_ONCE_INIT;
 
 static void zsys_setup(void)
@@ -228,14 +221,14 @@ static zsock_t *open_socket(call_t *c)
 static zmsg_t *recv_within(zsock_t *s, zpoller_t *p, double timeout,
 			   int *intr)
 {
-	double end = now_s() + timeout;
+	double end = sched_now() + timeout;
 	*intr = 0;
 	for (;;) {
 		if (rt_interrupted) {
 			*intr = 1;
 			return NULL;
 		}
-		double left = end - now_s();
+		double left = end - sched_now();
 		if (left <= 0)
 			return NULL;
 		int ms = left > 0.1 ? 100 : (int)(left * 1000) + 1;
@@ -403,7 +396,7 @@ static int call_one(call_t *c)
 		goto out;
 	}
 	double beat = 1e-3 * beat_ms(c->node);
-	double last_seen = now_s(), next_ping = now_s() + beat;
+	double last_seen = sched_now(), next_ping = sched_now() + beat;
 	const char *state = "queued";
 	for (;;) {
 		if (rt_interrupted) {
@@ -411,7 +404,7 @@ static int call_one(call_t *c)
 			rc = CALL_CANCELLED;
 			break;
 		}
-		double t = now_s();
+		double t = sched_now();
 		if (t >= next_ping) {
 			send_simple(s, "PING", c->id);
 			next_ping = t + beat;
@@ -432,7 +425,7 @@ static int call_one(call_t *c)
 		wire_buf_t f[MAX_FRAMES];
 		int n = msg_frames(m, f);
 		int verb = n >= 3 ? wire_verb(f, n) : W_BAD;
-		last_seen = now_s();
+		last_seen = sched_now();
 		if (verb == W_HB) {
 			tab_t *h = NULL;
 			char e[256];
@@ -645,7 +638,7 @@ int remote_stage_run(const remote_node_t *n, int first, remote_ctx_t *ctx,
 		}
 		c.server_pub = zcert_public_txt(sc);
 	}
-	double t0 = now_s(), sent = 0;
+	double t0 = sched_now(), sent = 0;
 	for (int i = 0; i < c.nin; i++) {
 		char *buf;
 		size_t len;
@@ -687,7 +680,7 @@ int remote_stage_run(const remote_node_t *n, int first, remote_ctx_t *ctx,
 			remote_endpoint_set_dead(c.ep, 0);
 			rt_log_at(sn, n->name, LOG_INFO, "ran on %s (worker "
 				  "'%s') in %.2f s, %.2f s there; %.1f MiB "
-				  "sent", c.ep, c.worker, now_s() - t0,
+				  "sent", c.ep, c.worker, sched_now() - t0,
 				  c.wall_s, sent / 1048576.0);
 			record(ctx, sn, c.ep, tried);
 			done = 1;

@@ -184,6 +184,11 @@ int outdir_commit(outdir_t *od, const char *const *tmps,
  * outdir_open created, when they are empty. */
 void outdir_close(outdir_t **od, int remove_made);
 
+/* ---- sched.c ---- */
+/* the runtime's one clock: CLOCK_MONOTONIC, in seconds (timings, deadlines,
+ * progress intervals) */
+double sched_now(void);
+
 /* ---- log.c ---- */
 void rt_log_set_level(int level);     /* default LOG_INFO; env ARMSTG_LOG */
 int rt_log_level_for(const char *stage);

@@ -52,13 +52,6 @@ struct rt_stage {
 				         rt_interrupted (NULL: none) */
 };
 
-static double now_s(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
 static rt_stage_t *of(armstg_stage_t *st)
 {
 	return (rt_stage_t *)st;
@@ -92,7 +85,7 @@ static void h_progress(armstg_stage_t *st, double fraction, const char *fmt,
 		       ...)
 {
 	rt_stage_t *s = of(st);
-	double t = now_s();
+	double t = sched_now();
 	/* at most one line per second, plus the final one */
 	if (fraction < 1.0 && t - s->last_progress < 1.0)
 		return;

@@ -132,7 +132,7 @@ static void reply_fail(worker_t *w, zframe_t *peer, uint64_t id,
 
 static void heartbeat(worker_t *w, job_t *j, const char *state, int ahead)
 {
-	j->next_beat = now_s() + j->beat_s;
+	j->next_beat = sched_now() + j->beat_s;
 	tab_t *h = wire_hdr_new();
 	if (h && !wire_hdr_add(h, "id", "%llu", (unsigned long long)j->id) &&
 	    !wire_hdr_add(h, "state", "%s", state) &&
@@ -156,7 +156,7 @@ static void cancel_running(worker_t *w, const char *why)
  * interval), and the requests of clients silent for --timeout */
 static void beat(worker_t *w)
 {
-	double t = now_s();
+	double t = sched_now();
 	if (w->running && !w->running->cancelled) {
 		if (t - w->running->last_seen > w->timeout_s)
 			cancel_running(w, "its client went silent");
@@ -344,7 +344,7 @@ static void on_router(worker_t *w)
 		j->beat_s = 1e-3 * (double)hb;
 		j->req = m;
 		m = NULL;
-		j->last_seen = now_s();
+		j->last_seen = sched_now();
 		job_t **pp = &w->queue;
 		while (*pp)
 			pp = &(*pp)->next;
@@ -357,7 +357,7 @@ static void on_router(worker_t *w)
 	case W_PING: {
 		job_t *j = find_job(w, peer, id, 0);
 		if (j)
-			j->last_seen = now_s();
+			j->last_seen = sched_now();
 		break;
 	}
 	case W_CANCEL: {

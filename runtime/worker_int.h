@@ -69,13 +69,6 @@ typedef struct worker {
 /* set by SIGINT/SIGTERM (worker.c): the worker stops */
 extern volatile sig_atomic_t worker_stop;
 
-static inline double now_s(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
 /* ---- worker_run.c ---- */
 /* the runner thread (a zactor): runs the job each "JOB" message names and
  * answers "DONE" with it */

@@ -157,7 +157,7 @@ static void run_job(worker_t *w, job_t *j)
 	char e[2048], msg[2600], dir[PATH_MAX] = "";
 	rt_stage_t *st = NULL;
 	const char *kind = "refused";
-	double t0 = now_s();
+	double t0 = sched_now();
 	if (wire_req_decode(f, n, w->cap, &req, e, sizeof e)) {
 		snprintf(msg, sizeof msg, "bad request: %s", e);
 		goto fail;
@@ -220,7 +220,7 @@ static void run_job(worker_t *w, job_t *j)
 	int rc = stage_init(st);
 	if (!rc)
 		rc = stage_process(st, (const msg_t *const *)req.in);
-	double wall = now_s() - t0;
+	double wall = sched_now() - t0;
 	if (rc) {
 		snprintf(msg, sizeof msg, "%s", stage_error(st));
 		if (rt_interrupted)
@@ -290,7 +290,7 @@ fail:
 	job_set_fail(w, j, kind, msg);
 	snprintf(j->line, sizeof j->line, "stage '%s' for %s: %s after %.2f "
 		 "s: %s", req.stage[0] ? req.stage : j->stage, j->addr,
-		 !strcmp(kind, "stage") ? "failed" : "refused", now_s() - t0,
+		 !strcmp(kind, "stage") ? "failed" : "refused", sched_now() - t0,
 		 msg);
 	w->nfail++;
 out:
