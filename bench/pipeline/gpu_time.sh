@@ -154,7 +154,7 @@ path   = $S/in/patient_mask.nii
 plugin = nifti_source
 path   = $S/in/grown_mask.nii
 
-$(awk '/^\[stage register\]/ { f = 1 } f && /^\[/ && !/^\[stage register\]/ { f = 0 } f' graphs/armstg.ini)
+$(graph_stage register graphs/armstg.ini)
 
 [stage atlas_tissues]
 plugin = nifti_source
@@ -177,7 +177,7 @@ op     = select
 labels = nonzero
 volume = patient_brain.volume
 
-$(awk '/^\[stage to_atlas\]/ { f = 1 } f && /^\[/ && !/^\[stage to_atlas\]/ { f = 0 } f' graphs/armstg.ini)
+$(graph_stage to_atlas graphs/armstg.ini)
 EOF
 	for pol in ${POLICIES:-passive}; do
 		for n in $SCALING; do

@@ -73,6 +73,13 @@ run_graph() {
 	return $_rg_rc
 }
 
+# graph_stage NAME GRAPH: the [stage NAME] section of the graph file GRAPH,
+# from its header line to the next section header (not included)
+graph_stage() {
+	awk -v h="[stage $1]" 'index($0, h) == 1 { f = 1 }
+		f && /^\[/ && index($0, h) != 1 { f = 0 } f' "$2"
+}
+
 # absolute path of $1 (which need not exist)
 abspath() {
 	case $1 in
