@@ -187,7 +187,7 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	const vol_t *lv = (const vol_t *)st->in[2];
 	char err[1024] = "";
 	int rc = 0;
-	double t0 = tled_grow_now(), jmin_all = INFINITY;
+	double t0 = lib_now_s(), jmin_all = INFINITY;
 	double t_built = t0, t_relax = 0; /* s: the growth's time split */
 	/* where a node is: front=push reads u^h(X_a), the displacement of
 	 * the material point (MLS shape functions do not interpolate: with
@@ -415,8 +415,8 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	       m.h_min / TLED_MM,
 	       reused ? "the previous growth's (the same nodes, labels and "
 			"model parameters: model_reuse)" : "built",
-	       tled_grow_now() - t0, ops && ops->name ? ops->name : "cpu");
-	t_built = tled_grow_now();
+	       lib_now_s() - t0, ops && ops->name ? ops->name : "cpu");
+	t_built = lib_now_s();
 	if (!reused) {
 		char ph[512];
 		int o = 0;
@@ -850,10 +850,10 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	}
 	H->log(st, LOG_INFO, "%d growth steps, %lld tumour nodes, %.2f s, "
 	       "min det F %.4f", lmax + 1, (long long)ndriven,
-	       tled_grow_now() - t0, jmin_all);
+	       lib_now_s() - t0, jmin_all);
 	H->log(st, LOG_DEBUG, "growth time: model build %.2f s, relaxations "
 	       "%.2f s, layer tests and bookkeeping %.2f s", t_built - t0,
-	       t_relax, tled_grow_now() - t_built - t_relax);
+	       t_relax, lib_now_s() - t_built - t_relax);
 	H->log(st, LOG_DEBUG, "relaxation time: stresses %.2f s, gather %.2f "
 	       "s, forces (fused or resident backend) %.2f s, update %.2f s, contact "
 	       "%.2f s, time-step estimates %.2f s (%lld, %lld Lanczos "

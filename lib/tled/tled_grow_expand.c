@@ -233,7 +233,7 @@ do {                                                               \
 				       EXPAND_GMAX, step);
 			break;
 		}
-		double ts = tled_grow_now();
+		double ts = lib_now_s();
 		g->hk->step = step;
 		g->itl->step = step + 1;
 		for (int64_t p = 0; p < m->nip; p++) {
@@ -246,10 +246,10 @@ do {                                                               \
 		snprintf(tag, sizeof tag, "growth step %d (expand, g %.3f)",
 			 step + 1, gshow);
 		tled_relax_stats_t rs;
-		double tr0 = tled_grow_now();
+		double tr0 = lib_now_s();
 		rc = tled_grow_relax_step(st, s, so, NULL, tag, &rs, err,
 					  errsize);
-		t_relax += tled_grow_now() - tr0;
+		t_relax += lib_now_s() - tr0;
 		if (rc) {
 			EXPAND_FREE();
 			return rc;
@@ -286,7 +286,7 @@ do {                                                               \
 		H->tab_set_num(tab, row, "attached", 0);
 		H->tab_set_num(tab, row, "contacts", (double)rs.contacts);
 		H->tab_set_num(tab, row, "integration_points", (double)m->nip);
-		H->tab_set_num(tab, row, "wall_s", tled_grow_now() - ts);
+		H->tab_set_num(tab, row, "wall_s", lib_now_s() - ts);
 		H->progress(st, vfrac < 1 ? vfrac : 1, "growth step %d "
 			    "(expand, g %.3f): core at %.1f %% of the "
 			    "tumour's volume, %d iterations", step + 1,

@@ -17,18 +17,12 @@
 
 #include "tled_grow.h"
 #include "tled_layer.h"
+#include "clock.h"
 
 /* a growth function ran out of memory (tled_grow_process writes the
  * message; the host's failure codes are negative) */
 #define TLED_GROW_OOM 1
 
-/* monotonic wall clock, s (the growth's time split) */
-static inline double tled_grow_now(void)
-{
-	struct timespec t;
-	clock_gettime(CLOCK_MONOTONIC, &t);
-	return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
 
 /* where a node is: its displacement as the front reads it
  * (tled_solver_uh or tled_solver_nodal_u) */

@@ -126,7 +126,7 @@ int tled_grow_replay(tled_growth_t *g)
 	int rc;
 	for (int step = 0; step <= lmax; step++) {
 		int l = lmax - step;
-		double ts = tled_grow_now();
+		double ts = lib_now_s();
 		g->hk->step = step;
 		g->itl->step = step + 1;
 		int moved = 0;
@@ -290,10 +290,10 @@ int tled_grow_replay(tled_growth_t *g)
 			char tag[64];
 			snprintf(tag, sizeof tag, "growth step %d (layer %d)",
 				 step + 1, l);
-			double tr0 = tled_grow_now();
+			double tr0 = lib_now_s();
 			rc = tled_grow_relax_step(st, s, so, moved ? tgt : NULL,
 						  tag, &rs, err, errsize);
-			t_relax += tled_grow_now() - tr0;
+			t_relax += lib_now_s() - tr0;
 			if (rc)
 				return rc;
 		}
@@ -360,7 +360,7 @@ int tled_grow_replay(tled_growth_t *g)
 		}
 		ndriven += swept;
 		int64_t row = H->tab_add_row(tab);
-		double wall = tled_grow_now() - ts;
+		double wall = lib_now_s() - ts;
 		H->tab_set_num(tab, row, "step", step + 1);
 		H->tab_set_num(tab, row, "layer", l);
 		tled_grow_tab_relax(H, tab, row, &rs);

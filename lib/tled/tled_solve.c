@@ -11,6 +11,7 @@
  * tled_solve_con.c.  SI units.
  */
 #include "tled_solve_int.h"
+#include "clock.h"
 
 #include <float.h>
 #include <limits.h>
@@ -20,14 +21,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-
-/* monotonic wall clock, s (tled_solver_t.tm) */
-static double now_s(void)
-{
-	struct timespec t;
-	clock_gettime(CLOCK_MONOTONIC, &t);
-	return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
 
 static void cpu_forces(void *ctx, const tled_model_t *m, const uint8_t *ipact,
 		       const double *u, double *VP, double *f,
@@ -279,19 +272,19 @@ static int he_forces(void *ctx, tled_force_info_t *fi)
 	host_eng_t *e = ctx;
 	tled_solver_t *s = e->s;
 	if (e->hops->forces == cpu_forces && s->m->fb_loc) {
-		double t0 = now_s();
+		double t0 = lib_now_s();
 		tled_forces_fused_c(s->m, s->ipact, s->u, s->VP, s->f, fi);
-		s->tm[TLED_TM_FORCES] += now_s() - t0;
+		s->tm[TLED_TM_FORCES] += lib_now_s() - t0;
 		return 0;
 	}
 	if (e->hops->forces == cpu_forces) {
 		/* the reference's two halves, timed apart */
-		double t0 = now_s();
+		double t0 = lib_now_s();
 		tled_ip_stress_c(s->m, s->ipact, s->u, s->VP, fi);
-		double t1 = now_s();
+		double t1 = lib_now_s();
 		tled_gather_c(s->m, s->ipact, s->VP, s->f);
 		s->tm[TLED_TM_STRESS] += t1 - t0;
-		s->tm[TLED_TM_GATHER] += now_s() - t1;
+		s->tm[TLED_TM_GATHER] += lib_now_s() - t1;
 		return 0;
 	}
 	e->hops->forces(e->hops->ctx, s->m, s->ipact, s->u, s->VP, s->f, fi);
@@ -408,9 +401,9 @@ static tled_ops_t engine_of(const tled_ops_t *ops, host_eng_t *he)
 /* ENG with the call's wall time added to s->tm[k] */
 #define ENGT(k, call)                                                          \
 	do {                                                                   \
-		double t_ = now_s();                                           \
+		double t_ = lib_now_s();                                           \
 		ENG(call);                                                     \
-		s->tm[k] += now_s() - t_;                                      \
+		s->tm[k] += lib_now_s() - t_;                                      \
 	} while (0)
 #define ENG(call)                                                              \
 	do {                                                                   \
@@ -461,9 +454,9 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		tled_solver_impose(s);
 	}
 	double dt;
-	double tpk = now_s();
+	double tpk = lib_now_s();
 	int pick_rc = tled_solver_pick_dt(s, o, &dt, err, errsize);
-	s->tm[TLED_TM_EIGS] += now_s() - tpk;
+	s->tm[TLED_TM_EIGS] += lib_now_s() - tpk;
 	if (pick_rc)
 		return -1;
 	st->dt = dt;
@@ -524,7 +517,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	if (E.begin(E.ctx, s, ebc ? NULL : target, grow ? o->ipg_to : NULL))
 		return tled_errf(err, errsize, "%s: %s backend: %s", tag,
 			    E.name ? E.name : "cpu", E.strerror(E.ctx));
-	double tloop = now_s(), tpart0 = 0; /* the loop's time, s->tm's parts */
+	double tloop = lib_now_s(), tpart0 = 0; /* the loop's time, s->tm's parts */
 	for (int k = 0; k < TLED_TM_N; k++)
 		if (k != TLED_TM_REST)
 			tpart0 += s->tm[k];
@@ -663,14 +656,14 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			 * against the brain boundary drifted out and back for
 			 * ever (10 000 iterations per growth step, phantom) */
 			int64_t nc = 0;
-			double vm = ci.vmax, tc0 = now_s();
+			double vm = ci.vmax, tc0 = lib_now_s();
 			if (hostcon)
 				he_contact(&(host_eng_t){ .s = s }, o->contact_stick ? dt : 0,
 					   &nc, &vm);
 			else
 				ENG(E.rcontact(E.ctx, o->contact_stick ? dt : 0,
 					       &nc, &vm));
-			s->tm[TLED_TM_CONTACT] += now_s() - tc0;
+			s->tm[TLED_TM_CONTACT] += lib_now_s() - tc0;
 			s->contacts += nc;
 			/* the outward velocity the last step gave a node in
 			 * contact was removed with it: measure the distance to
@@ -734,10 +727,10 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		    ((ramp && it == ramp + 1) || (it > ramp + 1 && it % 1000 == 0) ||
 		     squeezed || stiffer)) {
 			jmin_est = fi.Jmin;
-			double lmx, lmn, te0 = now_s();
+			double lmx, lmn, te0 = lib_now_s();
 			ENG(E.end(E.ctx, s));
 			int eigs_rc = tled_solver_eigs(s, o, &lmx, &lmn);
-			s->tm[TLED_TM_EIGS] += now_s() - te0;
+			s->tm[TLED_TM_EIGS] += lib_now_s() - te0;
 			if (!eigs_rc && lmx > 0) {
 				if (stiffer) {
 					s->dt_watch++;
@@ -793,7 +786,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		for (int k = 0; k < TLED_TM_N; k++)
 			if (k != TLED_TM_REST)
 				tpart += s->tm[k];
-		s->tm[TLED_TM_REST] += now_s() - tloop - (tpart - tpart0);
+		s->tm[TLED_TM_REST] += lib_now_s() - tloop - (tpart - tpart0);
 	}
 	if (it > o->max_iter)
 		it = o->max_iter;

@@ -39,6 +39,7 @@
 #include "armstg/volmath.h"
 #include "afr.h"
 #include "field/field.h"
+#include "clock.h"
 
 #define MAX_LEVELS 8
 
@@ -149,12 +150,6 @@ static int affine_init(armstg_stage_t *st)
 	return 0;
 }
 
-static double now_s(void)
-{
-	struct timespec t;
-	clock_gettime(CLOCK_MONOTONIC, &t);
-	return t.tv_sec + 1e-9 * t.tv_nsec;
-}
 
 static double mean_sp(const fgrid_t *g)
 {
@@ -325,7 +320,7 @@ static void log_row(void *ctx, int it, double mi, double step, int64_t nvalid)
 	h->tab_set_num(c->tab, r, "mi", mi);
 	h->tab_set_num(c->tab, r, "step_mm", step);
 	h->tab_set_num(c->tab, r, "samples", (double)nvalid);
-	h->tab_set_num(c->tab, r, "seconds", now_s() - c->t0);
+	h->tab_set_num(c->tab, r, "seconds", lib_now_s() - c->t0);
 }
 
 static int log_cancelled(void *ctx)
@@ -451,7 +446,7 @@ static int affine_process(armstg_stage_t *st)
 		nt = 1;
 	char err[512];
 	int rc = 0;
-	const double t0 = now_s();
+	const double t0 = lib_now_s();
 
 	if (field_check_vol(vf, "fixed volume", 1, 2, err, sizeof err) ||
 	    field_check_vol(vm, "moving volume", 1, 2, err, sizeof err) ||
@@ -650,7 +645,7 @@ static int affine_process(armstg_stage_t *st)
 			     T.A[2] * (T.A[3] * T.A[7] - T.A[4] * T.A[6]);
 		h->log(st, LOG_INFO, "done in %.1f s: mi %.4f, det A %.4f, "
 		       "translation at the centre (%.2f, %.2f, %.2f) mm LPS",
-		       now_s() - t0, mi, det, prm[9], prm[10], prm[11]);
+		       lib_now_s() - t0, mi, det, prm[9], prm[10], prm[11]);
 	}
 	st->out[OUT_FIELD] = &ofield->base;
 	st->out[OUT_WARPED] = &owarp->base;

@@ -115,6 +115,7 @@
 #include "img/sample.h"
 #include "demons_int.h"
 #include "demons_label.h"
+#include "clock.h"
 
 static const armstg_port_t demons_inputs[] = {
 	{ "fixed", MSG_VOLUME, 0, "fixed volume (the field lives on its grid)" },
@@ -268,12 +269,6 @@ static int demons_init(armstg_stage_t *st)
 	return 0;
 }
 
-static double now_s(void)
-{
-	struct timespec t;
-	clock_gettime(CLOCK_MONOTONIC, &t);
-	return t.tv_sec + 1e-9 * t.tv_nsec;
-}
 
 
 /* squarings of the exponential: the update's largest vector, mvox voxels,
@@ -325,7 +320,7 @@ static int demons_process(armstg_stage_t *st)
 		nt = 1;
 	char err[512];
 	int rc = 0;
-	const double t0 = now_s();
+	const double t0 = lib_now_s();
 
 	if (field_check_vol_nt(vf, "fixed volume", 1, 2, nt, err, sizeof err) ||
 	    field_check_vol_nt(vm, "moving volume", 1, 2, nt, err, sizeof err))
@@ -691,7 +686,7 @@ static int demons_process(armstg_stage_t *st)
 			}
 			if (sg_field > 0)
 				fimg_smooth(&S, sg_field, nt);
-			double secs = now_s() - t0;
+			double secs = lib_now_s() - t0;
 			if ((rc = add_row(st, tab, l + 1, it + 1, mse, mu, mx, secs,
 					  lncc))) {
 				rc = FAIL(rc, "out of memory (table)");
@@ -810,7 +805,7 @@ static int demons_process(armstg_stage_t *st)
 			}
 			h->log(st, js.n_nonpositive ? LOG_WARN : LOG_INFO,
 			       "done in %.1f s: Jacobian det in [%.3f, %.3f], %lld "
-			       "folded voxels", now_s() - t0, js.min, js.max,
+			       "folded voxels", lib_now_s() - t0, js.min, js.max,
 			       (long long)js.n_nonpositive);
 		}
 		fimg_free(&Jd);

@@ -45,6 +45,7 @@
 #include "armstg/plugin.h"
 #include "armstg/volmath.h"
 #include "phantom_int.h"
+#include "clock.h"
 
 #define OFF(f) offsetof(phantom_priv_t, f)
 
@@ -182,12 +183,6 @@ static const armstg_port_t outputs[] = {
 	  "solver figures, timings" },
 };
 
-static double now_s(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
 
 /* the output volumes' affine for orientation orient (OR_*) */
 static void orient_affine(const ph_grid_t *G, int orient, double A[16])
@@ -208,7 +203,7 @@ static int phantom_process(armstg_stage_t *st)
 {
 	const armstg_host_t *H = st->host;
 	const phantom_priv_t *P = st->priv;
-	double t0 = now_s();
+	double t0 = lib_now_s();
 	gen_t *g = calloc(1, sizeof *g);
 	vol_t *o[O_N] = { 0 };
 	tab_t *info = NULL;
@@ -361,24 +356,24 @@ static int phantom_process(armstg_stage_t *st)
 	}
 
 	/* 1. atlas */
-	double t = now_s();
+	double t = lib_now_s();
 	H->progress(st, 0.0, "atlas %dx%dx%d at %.3g mm", n[0], n[1], n[2], h);
 	gen_atlas(g, o[O_ATLAS_T1], o[O_ATLAS_T2], o[O_ATLAS_LABELS],
 		   o[O_ATLAS_MASK]);
-	g->t_atlas = now_s() - t;
+	g->t_atlas = lib_now_s() - t;
 	if (H->cancelled(st)) {
 		rc = H->fail(st, ARMSTG_ECANCELLED, "cancelled after the atlas");
 		goto out;
 	}
 
 	/* 2. random deformation, 3. tumour */
-	t = now_s();
+	t = lib_now_s();
 	H->progress(st, 0.25, "random deformation (%.3g mm)", P->deform_mm);
 	rc = gen_random(g);
 	if (rc)
 		goto out;
 	gen_tumour(g);
-	g->t_rand = now_s() - t;
+	g->t_rand = lib_now_s() - t;
 
 	/* 4. mass effect */
 	if (P->mass_effect > 0) {
@@ -390,19 +385,19 @@ static int phantom_process(armstg_stage_t *st)
 				     "tumour_radius is 0");
 			goto out;
 		}
-		t = now_s();
+		t = lib_now_s();
 		H->progress(st, 0.35, "mass effect: elastic solve");
 		rc = gen_mass_solve(g);
 		if (rc)
 			goto out;
-		g->t_elastic = now_s() - t;
-		t = now_s();
+		g->t_elastic = lib_now_s() - t;
+		t = lib_now_s();
 		H->progress(st, 0.5, "mass effect: %d CG iterations, scaling to "
 			    "%.3g mm", g->cg_iters, P->mass_effect);
 		rc = gen_mass_scale(g);
 		if (rc)
 			goto out;
-		g->t_search = now_s() - t;
+		g->t_search = lib_now_s() - t;
 		if (H->cancelled(st)) {
 			rc = H->fail(st, ARMSTG_ECANCELLED,
 				     "cancelled after the mass effect");
@@ -411,19 +406,19 @@ static int phantom_process(armstg_stage_t *st)
 	}
 
 	/* 5. patient */
-	t = now_s();
+	t = lib_now_s();
 	H->progress(st, 0.65, "patient images");
 	rc = gen_patient(g, o);
 	if (rc)
 		goto out;
-	g->t_patient = now_s() - t;
+	g->t_patient = lib_now_s() - t;
 
-	t = now_s();
+	t = lib_now_s();
 	double dj_t = gen_min_detj(&g->G, P->orientation,
 				   o[O_TRUE_FIELD]->data, g->nt);
 	double dj_m = gen_min_detj(&g->G, P->orientation,
 				   o[O_MASS_FIELD]->data, g->nt);
-	g->t_jac = now_s() - t;
+	g->t_jac = lib_now_s() - t;
 	if (!(dj_t > 0) || !(dj_m > 0)) {
 		rc = H->fail(st, ARMSTG_ENUMERIC,
 			     "the generated field folds: min det(Jacobian) "
@@ -476,7 +471,7 @@ static int phantom_process(armstg_stage_t *st)
 			{ "time_elastic_s", g->t_elastic },
 			{ "time_scale_search_s", g->t_search },
 			{ "time_patient_s", g->t_patient },
-			{ "time_total_s", now_s() - t0 },
+			{ "time_total_s", lib_now_s() - t0 },
 		};
 		for (size_t c = 0; c < sizeof cols / sizeof cols[0]; c++)
 			if (H->tab_set_num(T, 0, cols[c].k, cols[c].v))
@@ -486,7 +481,7 @@ static int phantom_process(armstg_stage_t *st)
 		       "(asked %.2f), max |u| %.2f mm, min det J %.3f, "
 		       "CG %d it, %.2f s", n[0], n[1], n[2], h, g->vent_shift,
 		       P->mass_effect, maxt, dj_t, g->cg_iters,
-		       now_s() - t0);
+		       lib_now_s() - t0);
 	}
 	for (int p = 0; p < O_INFO; p++) {
 		st->out[p] = (msg_t *)o[p];
