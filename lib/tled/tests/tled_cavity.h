@@ -154,6 +154,21 @@ static inline int cavity_model_build(const cavity_cfg_t *c, tled_model_t *m,
 	return rc;
 }
 
+/* radial targets of the driven nodes, ua mm outward (a new array, 3 n;
+ * the others 0; NULL when out of memory) */
+static inline double *cavity_radial_targets(const tled_model_t *m, double ua)
+{
+	double *tgt = calloc((size_t)(3 * m->n), sizeof *tgt);
+	for (int64_t a = 0; tgt && a < m->n; a++)
+		if (m->kind[a] == TLED_DRIVEN) {
+			const double *x = m->X + 3 * a;
+			double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+			for (int d = 0; d < 3; d++)
+				tgt[3 * a + d] = x[d] / r * ua * TLED_MM;
+		}
+	return tgt;
+}
+
 static inline void cavity_run(const cavity_cfg_t *c, int steps,
 			      cavity_res_t *res)
 {

@@ -30,14 +30,8 @@ static void relax_both(int ebc, int contact)
 	tled_model_t m;
 	char err[512];
 	assert_int_equal(cavity_model_build(&c, &m, err, sizeof err), 0);
-	double *tgt = calloc((size_t)(3 * m.n), sizeof *tgt);
-	for (int64_t a = 0; a < m.n; a++)
-		if (m.kind[a] == TLED_DRIVEN) {
-			const double *x = m.X + 3 * a;
-			double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-			for (int d = 0; d < 3; d++)
-				tgt[3 * a + d] = x[d] / r * c.ua * TLED_MM;
-		}
+	double *tgt = cavity_radial_targets(&m, c.ua);
+	assert_non_null(tgt);
 	double *u[2];
 	int iters[2];
 	for (int b = 0; b < 2; b++) {
@@ -158,14 +152,8 @@ static void test_two_threads(void **state)
 	tled_model_t m;
 	char err[512];
 	assert_int_equal(cavity_model_build(&c, &m, err, sizeof err), 0);
-	double *tgt = calloc((size_t)(3 * m.n), sizeof *tgt);
-	for (int64_t a = 0; a < m.n; a++)
-		if (m.kind[a] == TLED_DRIVEN) {
-			const double *x = m.X + 3 * a;
-			double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-			for (int d = 0; d < 3; d++)
-				tgt[3 * a + d] = x[d] / r * c.ua * TLED_MM;
-		}
+	double *tgt = cavity_radial_targets(&m, c.ua);
+	assert_non_null(tgt);
 	par_job_t j[3];
 	tled_model_t mk[3];
 	for (int k = 0; k < 3; k++) {
