@@ -634,14 +634,7 @@ int batch_main(int argc, char **argv)
 	int last_fin = 0;
 	double next = sched_now() + b->progress_s;
 	while (b->slots > 0) {
-		struct timespec ts;
-		clock_gettime(CLOCK_REALTIME, &ts);
-		ts.tv_nsec += 200000000L;
-		if (ts.tv_nsec >= 1000000000L) {
-			ts.tv_sec++;
-			ts.tv_nsec -= 1000000000L;
-		}
-		pthread_cond_timedwait(&b->cv, &b->mu, &ts);
+		sched_cond_wait_ms(&b->cv, &b->mu, 200);
 		int fin = b->nok + b->nfailed;
 		if (fin != last_fin || sched_now() >= next) {
 			for (int i = 0; i < b->ncases && !b->quiet; i++) {

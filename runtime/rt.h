@@ -6,6 +6,7 @@
 #ifndef ARMSTG_RT_H
 #define ARMSTG_RT_H
 
+#include <pthread.h>
 #include <stdio.h>
 
 #include "armstg/plugin.h"
@@ -188,6 +189,10 @@ void outdir_close(outdir_t **od, int remove_made);
 /* the runtime's one clock: CLOCK_MONOTONIC, in seconds (timings, deadlines,
  * progress intervals) */
 double sched_now(void);
+/* pthread_cond_timedwait for at most ms milliseconds (mu held): a waiter
+ * that must also notice rt_interrupted, set by a signal handler, wakes
+ * at least that often */
+void sched_cond_wait_ms(pthread_cond_t *cv, pthread_mutex_t *mu, long ms);
 
 /* ---- log.c ---- */
 void rt_log_set_level(int level);     /* default LOG_INFO; env ARMSTG_LOG */

@@ -73,14 +73,7 @@ int tune_same_wait(tctx_t *c, g_run_t *x, int k)
 			break;
 		}
 		/* timed: rt_interrupted comes from a signal handler */
-		struct timespec ts;
-		clock_gettime(CLOCK_REALTIME, &ts);
-		ts.tv_nsec += 50000000L;
-		if (ts.tv_nsec >= 1000000000L) {
-			ts.tv_sec++;
-			ts.tv_nsec -= 1000000000L;
-		}
-		pthread_cond_timedwait(&c->cv, &c->mu, &ts);
+		sched_cond_wait_ms(&c->cv, &c->mu, 50);
 	}
 	pthread_mutex_unlock(&c->mu);
 	return same;
