@@ -13,6 +13,7 @@
 # Summaries in $OUT/r (summary.txt: one line per run; w-*.txt: the [tune]
 # lines and the growths' times), the logs in $OUT/logs.tgz.
 cd "$(dirname "$0")/../.."
+. bench/pipeline/case_env.sh
 T0=$(date +%s)
 tar -xJf libs.tar.xz
 export LD_LIBRARY_PATH=$PWD/libs
@@ -28,13 +29,9 @@ fi
 run() { # case build parallel
   p=$1 b=$2 n=$3 tag=$1-$2$3
   d=/tmp/v-$tag; rm -rf $d
-  D=$PWD/data/brats2013/brats_2013_${p}_1
   bin=build; [ "$b" = m ] && bin=buildm
   t0=$(date +%s.%N)
-  env ATLAS_T1=$PWD/data/sri24/spgr.nii.gz ATLAS_LABELS=$PWD/data/sri24/tzo116plus.nii.gz \
-    ATLAS_TISSUES=$PWD/data/sri24/tissues.nii.gz PATIENT_T1=$D/T1c_subtrMeanDivStd.nii.gz \
-    PATIENT_FLAIR=$D/Flair_subtrMeanDivStd.nii.gz PATIENT_LABELS=$D/OTMultiClass.nii.gz \
-    PATIENT_MASK=$D/brainmask.nii.gz ARMSTG_PLUGIN_PATH=$PWD/$bin/plugins TLED=tled_cuda \
+  brats_run ${p#pat} $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/$bin/plugins TLED=tled_cuda \
     TUNE_PARALLEL=$n $bin/armstg run graphs/armstg.ini --jobs $JOBS --out $d -v > $R/v-$tag.log 2>&1
   rc=$?
   w=$(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{printf "%.1f", b-a}')

@@ -10,6 +10,7 @@
 # tune.tsv and metrics.tsv of every run, the logs in $OUT/logs.tgz.
 # EXTRA: more options for the new build's runs (e.g. "--set tune.parallel=4").
 cd "$(dirname "$0")/../.."
+. bench/pipeline/case_env.sh
 tar -xJf libs.tar.xz
 export LD_LIBRARY_PATH=$PWD/libs
 R=$OUT/r; mkdir -p $R
@@ -17,12 +18,8 @@ CASES=${CASES:-"pat0001 pat0002"} JOBS=${JOBS:-4} EXTRA=${EXTRA:-}
 { cat .commit; date -u; nproc; nvidia-smi --query-gpu=name --format=csv,noheader; } > $R/machine.txt
 run() { # tag build case [options]
   tag=$1 b=$2 p=$3; shift 3; d=/tmp/v-$tag; rm -rf $d
-  D=$PWD/data/brats2013/brats_2013_${p}_1
   t0=$(date +%s.%N)
-  env ATLAS_T1=$PWD/data/sri24/spgr.nii.gz ATLAS_LABELS=$PWD/data/sri24/tzo116plus.nii.gz \
-    ATLAS_TISSUES=$PWD/data/sri24/tissues.nii.gz PATIENT_T1=$D/T1c_subtrMeanDivStd.nii.gz \
-    PATIENT_FLAIR=$D/Flair_subtrMeanDivStd.nii.gz PATIENT_LABELS=$D/OTMultiClass.nii.gz \
-    PATIENT_MASK=$D/brainmask.nii.gz ARMSTG_PLUGIN_PATH=$PWD/$b/plugins TLED=tled_cuda \
+  brats_run ${p#pat} $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/$b/plugins TLED=tled_cuda \
     $b/armstg run graphs/armstg.ini --jobs $JOBS --out $d -v "$@" > $R/v-$tag.log 2>&1
   rc=$?
   echo "== $tag ($b $p $*) rc $rc wall $(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{print b-a}')" > $R/w-$tag.txt

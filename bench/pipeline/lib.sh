@@ -27,36 +27,9 @@ build_all() {
 		"$BUILD/plugins/h5_sink.so"
 }
 
-# the environment that points the user-facing graphs at an exported phantom
-# (bench/pipeline/phantom_export.ini) in folder $1
-phantom_env() {
-	export PH="$1"
-	export ATLAS_T1="$PH/atlas_t1.nii.gz"
-	export ATLAS_LABELS="$PH/atlas_labels.nii.gz"
-	export ATLAS_TISSUES="$PH/atlas_labels.nii.gz"  # 1 CSF 2 GM 3 WM 4 LV 5 V3
-	export CSF_LABELS=1,4,5
-	export VENTRICLES=4,5
-	export TUMOUR_LABEL=6
-	export PATIENT_T1="$PH/patient_t1.nii.gz"
-	export PATIENT_FLAIR="$PH/patient_flair.nii.gz"
-	export PATIENT_LABELS="$PH/patient_tumour.nii.gz"  # BraTS 2013 codes
-	export PATIENT_MASK="$PH/patient_mask.nii.gz"
-}
-
-# the environment for BraTS 2013 case $1 (0001..0003) in data folder $2
-brats_env() {
-	_be_d="$2/brats2013/brats_2013_pat$1_1"
-	export ATLAS_T1="$2/sri24/spgr.nii.gz"
-	export ATLAS_LABELS="$2/sri24/tzo116plus.nii.gz"
-	export ATLAS_TISSUES="$2/sri24/tissues.nii.gz"
-	export CSF_LABELS=1
-	export VENTRICLES=201-414
-	export TUMOUR_LABEL=1000
-	export PATIENT_T1="$_be_d/T1c_subtrMeanDivStd.nii.gz"
-	export PATIENT_FLAIR="$_be_d/Flair_subtrMeanDivStd.nii.gz"
-	export PATIENT_LABELS="$_be_d/OTMultiClass.nii.gz"
-	export PATIENT_MASK="$_be_d/brainmask.nii.gz"
-}
+# phantom_env, brats_env: the graphs' environment for a case
+# shellcheck source=bench/pipeline/case_env.sh disable=SC1091
+. bench/pipeline/case_env.sh
 
 # run_graph GRAPH OUT [--set ...]: run quietly, log in OUT.log; prints the
 # wall time in seconds; returns the run's exit status

@@ -10,6 +10,7 @@
 #     CASES="pat0001 pat0002" NSEEDS=5 DEPTH=3 sh carry/tled/bench/pipeline/score_noise.sh
 # bench/pipeline/results.md, "The cheap score's own noise".
 cd "$(dirname "$0")/../.."
+. bench/pipeline/case_env.sh
 [ -d libs ] || tar -xJf libs.tar.xz
 export LD_LIBRARY_PATH=$PWD/libs
 R=$OUT/r; mkdir -p $R
@@ -17,7 +18,6 @@ CASES=${CASES:-"pat0001 pat0002"} NSEEDS=${NSEEDS:-5} DEPTH=${DEPTH:-3} JOBS=${J
 STOP_S=${STOP_S:-400}; T0=$(date +%s)
 printf 'case\tdepth\tseed\tscoring\tncc_band\tjac_min_mask\twall_s\n' > $R/noise.tsv
 for p in $CASES; do
-  D=$PWD/data/brats2013/brats_2013_${p}_1
   for s in $(seq 1 $NSEEDS); do
     for mode in cheap full; do
       [ $(( $(date +%s) - T0 )) -lt $STOP_S ] || continue
@@ -25,10 +25,7 @@ for p in $CASES; do
       [ $mode = cheap ] && set -- --set "register.iterations=40,30,0"
       d=/tmp/noise-$p-$s-$mode; rm -rf $d
       t0=$(date +%s.%N)
-      env ATLAS_T1=$PWD/data/sri24/spgr.nii.gz ATLAS_LABELS=$PWD/data/sri24/tzo116plus.nii.gz \
-        ATLAS_TISSUES=$PWD/data/sri24/tissues.nii.gz PATIENT_T1=$D/T1c_subtrMeanDivStd.nii.gz \
-        PATIENT_FLAIR=$D/Flair_subtrMeanDivStd.nii.gz PATIENT_LABELS=$D/OTMultiClass.nii.gz \
-        PATIENT_MASK=$D/brainmask.nii.gz ARMSTG_PLUGIN_PATH=$PWD/build/plugins TLED=tled_cuda \
+      brats_run ${p#pat} $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/build/plugins TLED=tled_cuda \
         build/armstg run graphs/armstg.ini --jobs $JOBS --out $d -q --set tune.values=$DEPTH \
         --set nodes.seed=$s "$@" > /tmp/noise-$p-$s-$mode.log 2>&1
       w=$(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{printf "%.1f", b-a}')

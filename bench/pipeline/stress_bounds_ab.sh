@@ -4,15 +4,13 @@
 # -DSTRESS_MINB=3 and 4), BraTS 2013 pat0002 at one 6 mm depth, twice each; run from
 # the checkout on the GPU host with carry/tled from bench/pipeline/carry_prep.sh.
 cd carry/tled && tar -xJf libs.tar.xz && export LD_LIBRARY_PATH=$PWD/libs
-R=$OUT/r; mkdir -p $R; D=$PWD/data/brats2013/brats_2013_pat0002_1
+. bench/pipeline/case_env.sh
+R=$OUT/r; mkdir -p $R
 nvidia-smi --query-gpu=name --format=csv,noheader > $R/lb.txt
 i=0
 for v in build buildv3 buildv4 build buildv3 buildv4; do
   i=$((i+1)); o=/tmp/o-$i-$v; t0=$(date +%s.%N)
-  env ATLAS_T1=$PWD/data/sri24/spgr.nii.gz ATLAS_LABELS=$PWD/data/sri24/tzo116plus.nii.gz \
-    ATLAS_TISSUES=$PWD/data/sri24/tissues.nii.gz PATIENT_T1=$D/T1c_subtrMeanDivStd.nii.gz \
-    PATIENT_FLAIR=$D/Flair_subtrMeanDivStd.nii.gz PATIENT_LABELS=$D/OTMultiClass.nii.gz \
-    PATIENT_MASK=$D/brainmask.nii.gz ARMSTG_PLUGIN_PATH=$PWD/$v/plugins TLED=tled_cuda \
+  brats_run 0002 $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/$v/plugins TLED=tled_cuda \
     build/armstg run graphs/armstg.ini --set tune.values=6 --jobs 4 --out $o -v > /tmp/l-$i.log 2>&1
   rc=$?; w=$(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{printf "%.1f", b-a}')
   g=$(awk -F'\t' '$1=="grow"{print $4}' $o/run.tsv)
