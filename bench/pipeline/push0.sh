@@ -18,6 +18,17 @@ old=$1; new=$2; out=$3; cases=${4:-0001 0003}
 here=$(cd "$(dirname "$0")/../.." && pwd)
 data=${DATA:-$here/../shared/data}
 mkdir -p "$out"
+out=$(cd "$out" && pwd)   # run cds to the tree's root
+# run B O GRAPH [OPTION...]: build B's (old or new) armstg on GRAPH from the
+# tree's root, 2 threads, niced, --jobs 1, into O (fresh); its log in O.log,
+# its /usr/bin/time (user, sys, wall s) in O.time
+run() {
+	bin=$old/armstg; [ "$1" = new ] && bin=$new/armstg
+	o=$2 rg=$3; shift 3
+	rm -rf "$o"
+	(cd "$here" && OMP_NUM_THREADS=2 /usr/bin/time -f "%U %S %e" -o "$o.time" \
+	 nice -n 5 "$bin" run "$rg" "$@" --out "$o" --jobs 1 > "$o.log" 2>&1)
+}
 g=$out/armstg_push0.ini
 cp "${GRAPH:-$here/graphs/armstg.ini}" "$g"
 cat >> "$g" <<'INI'
@@ -45,13 +56,11 @@ INI
 for p in $cases; do
 	d=$data/brats2013/brats_2013_pat${p}_1
 	for b in old new; do
-		bin=$old/armstg; [ $b = new ] && bin=$new/armstg
-		o=$out/pat$p-$b; rm -rf "$o"
-		(cd "$here" && PATIENT_T1=$d/T1c_subtrMeanDivStd.nii.gz \
+		o=$out/pat$p-$b
+		(export PATIENT_T1=$d/T1c_subtrMeanDivStd.nii.gz \
 		 PATIENT_FLAIR=$d/Flair_subtrMeanDivStd.nii.gz \
-		 PATIENT_LABELS=$d/OTMultiClass.nii.gz PATIENT_MASK=$d/brainmask.nii.gz \
-		 OMP_NUM_THREADS=2 nice -n 5 "$bin" run "$g" --set tune.values=0 \
-		 --out "$o" --jobs 1 > "$o.log" 2>&1)
+		 PATIENT_LABELS=$d/OTMultiClass.nii.gz PATIENT_MASK=$d/brainmask.nii.gz
+		 run $b "$o" "$g" --set tune.values=0)
 		echo "pat$p $b: grow wall_s $(awk -F'\t' '$1=="grow"{print $4}' "$o/run.tsv")"
 	done
 	a=$out/pat$p-old; c=$out/pat$p-new
@@ -118,10 +127,8 @@ table      = grow.stats
 INI
 	for r in 1 2 3; do
 		for b in old new; do
-			bin=$old/armstg; [ $b = new ] && bin=$new/armstg
-			o=$out/grow-pat$p-$b-$r; rm -rf "$o"
-			OMP_NUM_THREADS=2 /usr/bin/time -f "%U %S %e" -o "$o.time" \
-				nice -n 5 "$bin" run "$t" --out "$o" --jobs 1 > "$o.log" 2>&1
+			o=$out/grow-pat$p-$b-$r
+			run $b "$o" "$t"
 			echo "pat$p grow alone $b run $r: user sys wall $(cat "$o.time") s"
 		done
 	done
