@@ -75,20 +75,6 @@ static int affine_orthogonal(const double A[16])
 	return 1;
 }
 
-static int zwrite(znzFile f, const void *p, size_t n)
-{
-	const char *c = p;
-	while (n) {
-		/* gzwrite takes an unsigned int length */
-		size_t k = n > (1u << 30) ? (1u << 30) : n;
-		if (znzwrite(c, 1, k, f) != k)
-			return -1;
-		c += k;
-		n -= k;
-	}
-	return 0;
-}
-
 /*
  * .nii.gz in parallel: the file's bytes (header, extension, data with the
  * vectors' x and y negated) cut into pieces of GZ_PIECE bytes, each
@@ -225,6 +211,25 @@ static int write_gz_members(FILE *f, const nii_bytes_t *b, int nthreads)
 	return bad ? -1 : 0;
 }
 
+/* write the file's bytes to f uncompressed (.nii), in the pieces of the
+ * gzip path; 0, -1 (a write failed) or ARMSTG_ENOMEM */
+static int write_plain(FILE *f, const nii_bytes_t *b)
+{
+	unsigned char *buf = malloc(GZ_PIECE);
+	if (!buf)
+		return ARMSTG_ENOMEM;
+	int bad = 0;
+	for (size_t off = 0; !bad && off < b->total; off += GZ_PIECE) {
+		const size_t len = b->total - off < GZ_PIECE ? b->total - off
+							     : GZ_PIECE;
+		nii_fill(b, off, len, buf);
+		if (fwrite(buf, 1, len, f) != len)
+			bad = -1;
+	}
+	free(buf);
+	return bad;
+}
+
 int vol_write_nifti(const char *path, const vol_t *v, char *err,
 		    size_t errsize)
 {
@@ -344,81 +349,35 @@ int vol_write_nifti_nt(const char *path, const vol_t *v, int nthreads,
 	char extender[4] = { 1, 0, 0, 0 };
 	h.vox_offset = (float)(348 + 4 + esize);
 
-	int gz = ends_with(path, ".gz");
+	/* the file's bytes (header, extender, extension, data with the
+	 * vectors' x and y negated: RAS -> LPS), one piece at a time */
+	unsigned char head[348 + 4 + sizeof ext];
+	memcpy(head, &h, 348);
+	memcpy(head + 348, extender, 4);
+	memcpy(head + 352, ext, (size_t)esize);
+	const size_t es = vol_dtype_size(v->dtype);
+	const nii_bytes_t b = {
+		.head = head, .nhead = 352 + (size_t)esize, .v = v, .es = es,
+		.nneg = is_vec ? 2 * vol_nvox(v) : 0,
+		.total = 352 + (size_t)esize + (size_t)vol_nvox(v) * v->nc * es };
 	errno = 0;
-	if (gz) {
-		/* gzip members compressed in parallel (write_gz_members) */
-		unsigned char head[348 + 4 + sizeof ext];
-		memcpy(head, &h, 348);
-		memcpy(head + 348, extender, 4);
-		memcpy(head + 352, ext, (size_t)esize);
-		const size_t es = vol_dtype_size(v->dtype);
-		const nii_bytes_t b = {
-			.head = head, .nhead = 352 + (size_t)esize, .v = v,
-			.es = es, .nneg = is_vec ? 2 * vol_nvox(v) : 0,
-			.total = 352 + (size_t)esize +
-				 (size_t)vol_nvox(v) * v->nc * es };
-		FILE *fp = fopen(path, "wb");
-		if (!fp)
-			return ferr(err, errsize, ARMSTG_EIO,
-				    "cannot create '%s': %s", path,
-				    strerror(errno ? errno : EIO));
-		int bad = write_gz_members(fp, &b, nthreads);
-		int saved = errno;
-		if (fclose(fp) != 0)
-			bad = 1;
-		if (bad) {
-			unlink(path);
-			return ferr(err, errsize, ARMSTG_EIO,
-				    "cannot write '%s': %s", path,
-				    strerror(saved ? saved : EIO));
-		}
-		return 0;
-	}
-	znzFile f = znzopen(path, "wb", 0);
-	if (znz_isnull(f))
+	FILE *fp = fopen(path, "wb");
+	if (!fp)
 		return ferr(err, errsize, ARMSTG_EIO, "cannot create '%s': %s",
 			    path, strerror(errno ? errno : EIO));
-	int bad = zwrite(f, &h, sizeof h) || zwrite(f, extender, 4) ||
-		  zwrite(f, ext, (size_t)esize);
-	size_t es = vol_dtype_size(v->dtype);
-	int64_t nv = vol_nvox(v);
-	if (!bad && is_vec) {
-		/* RAS -> LPS for x and y, in chunks (fields can be large) */
-		enum { CH = 1 << 16 };
-		char *buf = malloc(CH * es);
-		if (!buf) {
-			znzclose(f);
-			unlink(path);
-			return ferr(err, errsize, ARMSTG_ENOMEM,
-				    "'%s': out of memory", path);
-		}
-		for (int64_t e0 = 0; !bad && e0 < 3 * nv; e0 += CH) {
-			int64_t k = 3 * nv - e0 < CH ? 3 * nv - e0 : CH;
-			memcpy(buf, (const char *)v->data + e0 * (int64_t)es,
-			       (size_t)k * es);
-			for (int64_t e = 0; e < k; e++) {
-				if (e0 + e >= 2 * nv)
-					break;
-				if (v->dtype == DT_F32)
-					((float *)buf)[e] = -((float *)buf)[e];
-				else
-					((double *)buf)[e] = -((double *)buf)[e];
-			}
-			bad = zwrite(f, buf, (size_t)k * es);
-		}
-		free(buf);
-	} else if (!bad) {
-		bad = zwrite(f, v->data, (size_t)nv * v->nc * es);
-	}
+	/* .nii.gz: gzip members compressed in parallel (write_gz_members) */
+	int bad = ends_with(path, ".gz") ? write_gz_members(fp, &b, nthreads)
+					 : write_plain(fp, &b);
 	int saved = errno;
-	if (znzclose(f) != 0)
-		bad = 1;
+	if (fclose(fp) != 0 && !bad)
+		bad = -1;
 	if (bad) {
 		unlink(path);
-		return ferr(err, errsize, ARMSTG_EIO,
-			    "cannot write '%s': %s", path,
-			    strerror(saved ? saved : EIO));
+		if (bad == ARMSTG_ENOMEM)
+			return ferr(err, errsize, ARMSTG_ENOMEM,
+				    "'%s': out of memory", path);
+		return ferr(err, errsize, ARMSTG_EIO, "cannot write '%s': %s",
+			    path, strerror(saved ? saved : EIO));
 	}
 	return 0;
 }
