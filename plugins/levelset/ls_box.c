@@ -186,40 +186,24 @@ static int smooth_surface(box_t *b)
 		for (int64_t q = 0; q < ns; q++) {
 			if (pass == 0)
 				off[q] = cnt;
-			int ijk[3];
-			box_ijk(b, b->surf_vox[q], ijk);
-			for (int dk = -1; dk <= 1; dk++)
-				for (int dj = -1; dj <= 1; dj++)
-					for (int di = -1; di <= 1; di++) {
-						int a = ijk[0] + di,
-						    c = ijk[1] + dj,
-						    e = ijk[2] + dk;
-						if (a < 0 || c < 0 || e < 0 ||
-						    a >= b->n[0] ||
-						    c >= b->n[1] ||
-						    e >= b->n[2])
-							continue;
-						int64_t u = bidx(b, a, c, e);
-						for (int f = 0; f < 6; f++) {
-							int32_t o = fid[u * 6 +
-									f];
-							if (o < 0)
-								continue;
-							double dx = orig[3 * o] -
-								    orig[3 * q],
-							       dy = orig[3 * o + 1] -
-								    orig[3 * q + 1],
-							       dz = orig[3 * o + 2] -
-								    orig[3 * q + 2];
-							if (dx * dx + dy * dy +
-								    dz * dz >
-							    r2)
-								continue;
-							if (pass == 1)
-								nb[cnt] = o;
-							cnt++;
-						}
-					}
+			int64_t u[27];
+			int nu = box_nb27(b, b->surf_vox[q], u);
+			for (int t = 0; t < nu; t++)
+				for (int f = 0; f < 6; f++) {
+					int32_t o = fid[u[t] * 6 + f];
+					if (o < 0)
+						continue;
+					const double *x = orig + 3 * o,
+						     *y = orig + 3 * q;
+					double dx = x[0] - y[0],
+					       dy = x[1] - y[1],
+					       dz = x[2] - y[2];
+					if (dx * dx + dy * dy + dz * dz > r2)
+						continue;
+					if (pass == 1)
+						nb[cnt] = o;
+					cnt++;
+				}
 		}
 		if (pass == 0) {
 			off[ns] = cnt;
@@ -302,45 +286,41 @@ int ls_box_setup(box_t *b, const ls_mask_t *mk, const int32_t *lab,
 					b->in[bidx(b, a, cc, e)] = 1;
 			}
 	/* boundary points: centres of faces between inside and outside
-	 * voxels (outside the volume counts as outside) */
+	 * voxels (outside the volume counts as outside); pass 0 counts
+	 * them, pass 1 stores them */
 	int64_t ns = 0;
-	for (int64_t v = 0; v < b->nv; v++) {
-		if (!b->in[v])
-			continue;
-		int ijk[3];
-		box_ijk(b, v, ijk);
-		for (int f = 0; f < 6; f++) {
-			int64_t w = bidx(b, ijk[0] + ls_nb6[f][0],
-					 ijk[1] + ls_nb6[f][1],
-					 ijk[2] + ls_nb6[f][2]);
-			if (!b->in[w])
-				ns++;
+	for (int pass = 0; pass < 2; pass++) {
+		if (pass == 1) {
+			b->ns = ns;
+			b->surf = malloc((size_t)(ns ? ns : 1) * 3 *
+					 sizeof(double));
+			b->surf_vox = malloc((size_t)(ns ? ns : 1) *
+					     sizeof(int64_t));
+			b->surf_dir = malloc((size_t)(ns ? ns : 1));
+			if (!b->surf || !b->surf_vox || !b->surf_dir)
+				return -1;
+			ns = 0;
 		}
-	}
-	b->ns = ns;
-	b->surf = malloc((size_t)(ns ? ns : 1) * 3 * sizeof(double));
-	b->surf_vox = malloc((size_t)(ns ? ns : 1) * sizeof(int64_t));
-	b->surf_dir = malloc((size_t)(ns ? ns : 1));
-	if (!b->surf || !b->surf_vox || !b->surf_dir)
-		return -1;
-	ns = 0;
-	for (int64_t v = 0; v < b->nv; v++) {
-		if (!b->in[v])
-			continue;
-		int ijk[3];
-		box_ijk(b, v, ijk);
-		for (int f = 0; f < 6; f++) {
-			int64_t w = bidx(b, ijk[0] + ls_nb6[f][0],
-					 ijk[1] + ls_nb6[f][1],
-					 ijk[2] + ls_nb6[f][2]);
-			if (b->in[w])
+		for (int64_t v = 0; v < b->nv; v++) {
+			if (!b->in[v])
 				continue;
-			box_world(b, ijk[0] + 0.5 * ls_nb6[f][0],
-				  ijk[1] + 0.5 * ls_nb6[f][1],
-				  ijk[2] + 0.5 * ls_nb6[f][2],
-				  b->surf + 3 * ns);
-			b->surf_dir[ns] = (int8_t)f;
-			b->surf_vox[ns++] = v;
+			int ijk[3];
+			box_ijk(b, v, ijk);
+			for (int f = 0; f < 6; f++) {
+				const int *d = ls_nb6[f];
+				if (b->in[bidx(b, ijk[0] + d[0], ijk[1] + d[1],
+					       ijk[2] + d[2])])
+					continue;
+				if (pass == 1) {
+					box_world(b, ijk[0] + 0.5 * d[0],
+						  ijk[1] + 0.5 * d[1],
+						  ijk[2] + 0.5 * d[2],
+						  b->surf + 3 * ns);
+					b->surf_dir[ns] = (int8_t)f;
+					b->surf_vox[ns] = v;
+				}
+				ns++;
+			}
 		}
 	}
 	if (smooth_surface(b))

@@ -65,6 +65,25 @@ static inline void box_ijk(const box_t *b, int64_t v, int ijk[3])
 	ijk[2] = (int)(v / ((int64_t)b->n[0] * b->n[1]));
 }
 
+/* the box voxels of the 3x3x3 block around box voxel v (v included), k
+ * slowest then j then i: their indices in nb; returns how many (8..27) */
+static inline int box_nb27(const box_t *b, int64_t v, int64_t nb[27])
+{
+	int ijk[3], n = 0;
+	box_ijk(b, v, ijk);
+	for (int dk = -1; dk <= 1; dk++)
+		for (int dj = -1; dj <= 1; dj++)
+			for (int di = -1; di <= 1; di++) {
+				int a = ijk[0] + di, c = ijk[1] + dj,
+				    e = ijk[2] + dk;
+				if (a < 0 || c < 0 || e < 0 || a >= b->n[0] ||
+				    c >= b->n[1] || e >= b->n[2])
+					continue;
+				nb[n++] = bidx(b, a, c, e);
+			}
+	return n;
+}
+
 /* the six face neighbours' offsets (ls_box.c) */
 extern const int ls_nb6[6][3];
 

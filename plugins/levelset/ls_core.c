@@ -192,26 +192,15 @@ static int find_seeds(const box_t *b, const double *g, const double *gnext,
 				gmax = g[v];
 			if (gnext && gnext[v] >= 0)
 				alive = 1;
-			int ijk[3];
-			box_ijk(b, v, ijk);
-			for (int dk = -1; dk <= 1; dk++)
-				for (int dj = -1; dj <= 1; dj++)
-					for (int di = -1; di <= 1; di++) {
-						int a = ijk[0] + di,
-						    c = ijk[1] + dj,
-						    e = ijk[2] + dk;
-						if (a < 0 || c < 0 || e < 0 ||
-						    a >= b->n[0] ||
-						    c >= b->n[1] ||
-						    e >= b->n[2])
-							continue;
-						int64_t w = bidx(b, a, c, e);
-						if (b->in[w] && g[w] >= 0 &&
-						    lab[w] < 0) {
-							lab[w] = s;
-							q[qt++] = w;
-						}
-					}
+			int64_t u[27];
+			int nu = box_nb27(b, v, u);
+			for (int t = 0; t < nu; t++) {
+				int64_t w = u[t];
+				if (b->in[w] && g[w] >= 0 && lab[w] < 0) {
+					lab[w] = s;
+					q[qt++] = w;
+				}
+			}
 		}
 		if (alive)
 			continue;
