@@ -185,6 +185,12 @@ static inline int64_t ph_nvox(const ph_grid_t *g)
 	return (int64_t)g->n[0] * g->n[1] * g->n[2];
 }
 
+/* element index of voxel (i,j,k): i fastest */
+static inline int64_t ph_gidx(const ph_grid_t *g, int i, int j, int k)
+{
+	return ((int64_t)k * g->n[1] + j) * g->n[0] + i;
+}
+
 /* trilinear sample of a planar 3-component double field at world p
  * (indices clamped to the grid: constant extension) */
 void ph_field_sample(const ph_grid_t *g, const double *u, const double p[3],

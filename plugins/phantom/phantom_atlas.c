@@ -26,7 +26,7 @@ const double gen_sub8[8][3] = {
 static int boundary_voxel(const ph_grid_t *G, const uint8_t *lab, int i,
 			  int j, int k)
 {
-	int64_t e = ((int64_t)k * G->n[1] + j) * G->n[0] + i;
+	int64_t e = ph_gidx(G, i, j, k);
 	int64_t sy = G->n[0], sz = (int64_t)G->n[0] * G->n[1];
 	uint8_t l = lab[e];
 	if (i > 0 && lab[e - 1] != l) return 1;
@@ -38,49 +38,31 @@ static int boundary_voxel(const ph_grid_t *G, const uint8_t *lab, int i,
 	return 0;
 }
 
-void gen_atlas(gen_t *g, vol_t *t1, vol_t *t2, vol_t *lab, vol_t *mask)
+/* the analytic atlas on the canonical grid: g->alab, then g->clean (the
+ * tissue intensities; partial volume by 2x2x2 supersampling where a
+ * neighbour's label differs) */
+static void analytic_atlas(gen_t *g)
 {
 	const ph_grid_t *G = &g->G;
 	const int nx = G->n[0], ny = G->n[1], nz = G->n[2];
-	int flip[3];
-	orient_flips(g->P->atlas_orientation, flip);
-	float *T1 = t1->data, *T2 = t2->data;
-	uint8_t *L = lab->data, *M = mask->data;
-	if (g->real) {
-		/* labels and clean images came from the inputs (ph_real.c) */
-		for (int k = 0; k < nz; k++)
-			for (int j = 0; j < ny; j++)
-				for (int i = 0; i < nx; i++) {
-					int64_t e = ((int64_t)k * ny + j) * nx + i;
-					int64_t o = oidx(G, flip, i, j, k);
-					T1[o] = g->clean[PH_T1][e];
-					T2[o] = g->clean[PH_T2][e];
-					L[o] = g->alab[e];
-					M[o] = g->alab[e] != PH_BG;
-				}
-		return;
-	}
 #pragma omp parallel for schedule(dynamic, 1) num_threads(g->nt)
 	for (int k = 0; k < nz; k++)
 		for (int j = 0; j < ny; j++)
 			for (int i = 0; i < nx; i++) {
 				double p[3];
 				gworld(G, i, j, k, p);
-				g->alab[((int64_t)k * ny + j) * nx + i] =
+				g->alab[ph_gidx(G, i, j, k)] =
 					(uint8_t)ph_anat_label(&g->A, p);
 			}
 #pragma omp parallel for schedule(dynamic, 1) num_threads(g->nt)
 	for (int k = 0; k < nz; k++)
 		for (int j = 0; j < ny; j++)
 			for (int i = 0; i < nx; i++) {
-				int64_t e = ((int64_t)k * ny + j) * nx + i;
-				int64_t o = oidx(G, flip, i, j, k);
+				int64_t e = ph_gidx(G, i, j, k);
 				int l = g->alab[e];
 				double a[PH_NMOD];
 				for (int m = 0; m < PH_NMOD; m++)
 					a[m] = ph_tissue_intensity(m, l);
-				/* partial volume: 2x2x2 supersampling where a
-				 * neighbour differs */
 				if (boundary_voxel(G, g->alab, i, j, k)) {
 					for (int m = 0; m < PH_NMOD; m++)
 						a[m] = 0;
@@ -98,10 +80,32 @@ void gen_atlas(gen_t *g, vol_t *t1, vol_t *t2, vol_t *lab, vol_t *mask)
 				}
 				for (int m = 0; m < PH_NMOD; m++)
 					g->clean[m][e] = (float)a[m];
-				T1[o] = (float)a[PH_T1];
-				T2[o] = (float)a[PH_T2];
-				L[o] = (uint8_t)l;
-				M[o] = l != PH_BG;
+			}
+}
+
+/* the atlas outputs in the atlas orientation: T1, T2 (the clean images),
+ * labels and mask, from g->alab and g->clean (the analytic atlas's, or
+ * the real one's from the inputs, ph_real.c) */
+void gen_atlas(gen_t *g, vol_t *t1, vol_t *t2, vol_t *lab, vol_t *mask)
+{
+	const ph_grid_t *G = &g->G;
+	const int nx = G->n[0], ny = G->n[1], nz = G->n[2];
+	int flip[3];
+	orient_flips(g->P->atlas_orientation, flip);
+	float *T1 = t1->data, *T2 = t2->data;
+	uint8_t *L = lab->data, *M = mask->data;
+	if (!g->real)
+		analytic_atlas(g);
+#pragma omp parallel for schedule(static) num_threads(g->nt)
+	for (int k = 0; k < nz; k++)
+		for (int j = 0; j < ny; j++)
+			for (int i = 0; i < nx; i++) {
+				int64_t e = ph_gidx(G, i, j, k);
+				int64_t o = oidx(G, flip, i, j, k);
+				T1[o] = g->clean[PH_T1][e];
+				T2[o] = g->clean[PH_T2][e];
+				L[o] = g->alab[e];
+				M[o] = g->alab[e] != PH_BG;
 			}
 }
 
@@ -130,8 +134,7 @@ int gen_random(gen_t *g)
 	for (int k = 0; k < C->n[2]; k++)
 		for (int j = 0; j < C->n[1]; j++)
 			for (int i = 0; i < C->n[0]; i++) {
-				int64_t e = ((int64_t)k * C->n[1] + j) *
-						    C->n[0] + i;
+				int64_t e = ph_gidx(C, i, j, k);
 				double p[3], w[3];
 				gworld(C, i, j, k, p);
 				ph_modes_eval3(&m, p, w);

@@ -79,7 +79,7 @@ static inline int64_t oidx(const ph_grid_t *G, const int flip[3], int i,
 		j = G->n[1] - 1 - j;
 	if (flip[2])
 		k = G->n[2] - 1 - k;
-	return ((int64_t)k * G->n[1] + j) * G->n[0] + i;
+	return ph_gidx(G, i, j, k);
 }
 
 /* ------------------------------------------------------------------ */

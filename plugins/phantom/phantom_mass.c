@@ -294,8 +294,7 @@ int gen_mass_scale(gen_t *g)
 				tumour_at(g, x, &ts);
 				if (ts.t < 1.0)
 					continue;
-				cd.e[cd.n++] = ((int64_t)k * G->n[1] + j) *
-						       G->n[0] + i;
+				cd.e[cd.n++] = ph_gidx(G, i, j, k);
 			}
 	double vmax = 0;
 	for (int64_t e = 0; e < nvC; e++) {

@@ -64,7 +64,7 @@ int gen_patient(gen_t *g, vol_t **o)
 	for (int k = 0; k < nz; k++)
 		for (int j = 0; j < ny; j++)
 			for (int i = 0; i < nx; i++) {
-				int64_t e = ((int64_t)k * ny + j) * nx + i;
+				int64_t e = ph_gidx(G, i, j, k);
 				int64_t oe = oidx(G, flip, i, j, k);
 				double x[3], a[3];
 				float fm[3], ft[3];
@@ -108,9 +108,7 @@ int gen_patient(gen_t *g, vol_t **o)
 				for (int i = 0; i < C->n[0]; i++) {
 					double p[3];
 					gworld(C, i, j, k, p);
-					g->bias[m * nvC +
-						((int64_t)k * C->n[1] + j) *
-							C->n[0] + i] =
+					g->bias[m * nvC + ph_gidx(C, i, j, k)] =
 						(float)(ph_modes_eval1(&bm, p) /
 							bnd);
 				}
@@ -125,7 +123,7 @@ int gen_patient(gen_t *g, vol_t **o)
 	for (int k = 0; k < nz; k++)
 		for (int j = 0; j < ny; j++)
 			for (int i = 0; i < nx; i++) {
-				int64_t e = ((int64_t)k * ny + j) * nx + i;
+				int64_t e = ph_gidx(G, i, j, k);
 				int64_t oe = oidx(G, flip, i, j, k);
 				int l = g->plab[e], tl = g->ptum[e];
 				PM[oe] = l != PH_BG;
