@@ -9,17 +9,14 @@
 set -u
 BA=$1 GA=$2 BB=$3 GB=$4 OUT=$5
 D=${DATA:-../shared/data}
-P=$D/brats2013/brats_2013_pat0002_1
+. "$(dirname "$0")/case_env.sh"
 mkdir -p "$OUT"
 S=$OUT/summary.txt
 { git log -1 --format='%h %s' 2>/dev/null; date -u; nproc; uptime; } > "$S"
 run() { # tag build graph
 	t0=$(date +%s.%N)
-	/usr/bin/time -f '%U %S' -o "$OUT/$1.cpu" env ATLAS_T1=$D/sri24/spgr.nii.gz ATLAS_LABELS=$D/sri24/tzo116plus.nii.gz \
-	    ATLAS_TISSUES=$D/sri24/tissues.nii.gz PATIENT_T1=$P/T1c_subtrMeanDivStd.nii.gz \
-	    PATIENT_FLAIR=$P/Flair_subtrMeanDivStd.nii.gz PATIENT_LABELS=$P/OTMultiClass.nii.gz \
-	    PATIENT_MASK=$P/brainmask.nii.gz ARMSTG_PLUGIN_PATH=$2/plugins \
-	    OMP_NUM_THREADS=2 TLED=tled_cpu \
+	brats_run 0002 "$D" /usr/bin/time -f '%U %S' -o "$OUT/$1.cpu" \
+	    env ARMSTG_PLUGIN_PATH=$2/plugins OMP_NUM_THREADS=2 TLED=tled_cpu \
 	    "$2/armstg" run "$3" --jobs 2 --out "$OUT/$1" -v > "$OUT/$1.log" 2>&1
 	rc=$?
 	t1=$(date +%s.%N)

@@ -19,6 +19,8 @@ set -u
 BUILD=$1 OUT=$2 CASES=$3 SPACINGS=$4 VARIANTS=$5 PUSH=${6:-6}
 TO=${TLED_FINE_TIMEOUT:-600}
 DATA=${DATA:-../shared/data}
+# shellcheck source=bench/pipeline/case_env.sh disable=SC1091
+. bench/pipeline/case_env.sh
 export ARMSTG_PLUGIN_PATH="$BUILD/plugins" TLED="${TLED:-tled_cuda}"
 for c in $CASES; do
     case $c in default|lobulated|irregular|pat[0-9][0-9][0-9][0-9]) ;;
@@ -40,14 +42,7 @@ for c in $CASES; do
             irregular) g=graphs/demo.ini
                 cs="--set phantom.lobulation=0.9 --set phantom.two_components=true" ;;
             pat*) g=graphs/armstg.ini; cs=""
-                p=$DATA/brats2013/brats_2013_${c}_1
-                export ATLAS_T1=$DATA/sri24/spgr.nii.gz \
-                    ATLAS_LABELS=$DATA/sri24/tzo116plus.nii.gz \
-                    ATLAS_TISSUES=$DATA/sri24/tissues.nii.gz \
-                    PATIENT_T1=$p/T1c_subtrMeanDivStd.nii.gz \
-                    PATIENT_FLAIR=$p/Flair_subtrMeanDivStd.nii.gz \
-                    PATIENT_LABELS=$p/OTMultiClass.nii.gz \
-                    PATIENT_MASK=$p/brainmask.nii.gz ;;
+                brats_env "${c#pat}" "$DATA" ;;
             *) echo "fine.sh: unknown case '$c'" >&2; exit 2 ;;
             esac
             d=$(mktemp -d /tmp/tledfine.XXXXXX)
