@@ -8,17 +8,16 @@
 # brats2013/brats_2013_pat0001_1/), e.g. carry/tled:
 #     sh carry/tled/gpu_ab.sh        # logs under $OUT/r
 cd "$(dirname "$0")"
+. bench/pipeline/case_env.sh
 tar -xJf libs.tar.xz
 export LD_LIBRARY_PATH=$PWD/libs DATA=$PWD/data
 R=$OUT/r; mkdir -p $R
 cat .commit; date -u; nproc
-D=$PWD/data/brats2013/brats_2013_pat0001_1
-ENVS="ATLAS_T1=$PWD/data/sri24/spgr.nii.gz ATLAS_LABELS=$PWD/data/sri24/tzo116plus.nii.gz ATLAS_TISSUES=$PWD/data/sri24/tissues.nii.gz PATIENT_T1=$D/T1c_subtrMeanDivStd.nii.gz PATIENT_FLAIR=$D/Flair_subtrMeanDivStd.nii.gz PATIENT_LABELS=$D/OTMultiClass.nii.gz PATIENT_MASK=$D/brainmask.nii.gz"
 pp() { # tag build spacing
   tag=$1 b=$2 sp=$3; d=/tmp/pp-$tag; rm -rf $d
   set --; [ "$sp" = def ] || set -- --set nodes.spacing=$sp
   t0=$(date +%s.%N)
-  env $ENVS ARMSTG_PLUGIN_PATH=$PWD/$b/plugins TLED=tled_cuda $b/armstg run graphs/armstg.ini --set tune.values=6 "$@" --jobs 1 --out $d -v > $R/pp-$tag.log 2>&1
+  brats_run 0001 $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/$b/plugins TLED=tled_cuda $b/armstg run graphs/armstg.ini --set tune.values=6 "$@" --jobs 1 --out $d -v > $R/pp-$tag.log 2>&1
   echo "== $tag ($b, spacing $sp) rc $? wall $(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{print b-a}')"
   awk '/stage            plugin/{f=1;next} f && /\[armstg@local\] [a-z_]+ +[a-z_-]+ +ok/ {print $5, $2}' $R/pp-$tag.log | sort -rn | head -6 | tr '\n' ';'; echo
   grep -E "model: |growth time|relaxation time|build phases|Lanczos operator|host-array|device: [0-9]+ time steps" $R/pp-$tag.log | sed 's/^.*\] //' | sed 's/merge.*nodal rows [0-9.]* s, //' | cut -c1-300

@@ -9,19 +9,19 @@
 #     sh carry/tled/search_ab.sh     # logs under $OUT/r
 # 2-core runs pinned to disjoint core pairs, run concurrently in A/B pairs; then GPU runs one at a time
 cd "$(dirname "$0")"
+. bench/pipeline/case_env.sh
 tar -xJf libs.tar.xz
 export LD_LIBRARY_PATH=$PWD/libs DATA=$PWD/data
 R=$OUT/r; mkdir -p $R
 cat .commit; date -u; nproc; nvidia-smi --query-gpu=name --format=csv,noheader
 run() { # tag build case mode cores
   tag=$1 b=$2 p=$3 mode=$4 cores=$5; d=/tmp/v-$tag; rm -rf $d
-  D=$PWD/data/brats2013/brats_2013_${p}_1
-  E="ATLAS_T1=$PWD/data/sri24/spgr.nii.gz ATLAS_LABELS=$PWD/data/sri24/tzo116plus.nii.gz ATLAS_TISSUES=$PWD/data/sri24/tissues.nii.gz PATIENT_T1=$D/T1c_subtrMeanDivStd.nii.gz PATIENT_FLAIR=$D/Flair_subtrMeanDivStd.nii.gz PATIENT_LABELS=$D/OTMultiClass.nii.gz PATIENT_MASK=$D/brainmask.nii.gz ARMSTG_PLUGIN_PATH=$PWD/$b/plugins"
+  E="ARMSTG_PLUGIN_PATH=$PWD/$b/plugins"
   t0=$(date +%s.%N)
   if [ $mode = two ]; then
-    env $E OMP_NUM_THREADS=2 TLED=tled_cpu taskset -c $cores $b/armstg run graphs/armstg.ini --jobs 2 --out $d -v > $R/v-$tag.log 2>&1
+    brats_run ${p#pat} $PWD/data env $E OMP_NUM_THREADS=2 TLED=tled_cpu taskset -c $cores $b/armstg run graphs/armstg.ini --jobs 2 --out $d -v > $R/v-$tag.log 2>&1
   else
-    env $E TLED=tled_cuda $b/armstg run graphs/armstg.ini --jobs 1 --out $d -v > $R/v-$tag.log 2>&1
+    brats_run ${p#pat} $PWD/data env $E TLED=tled_cuda $b/armstg run graphs/armstg.ini --jobs 1 --out $d -v > $R/v-$tag.log 2>&1
   fi
   echo "== $tag ($b $p $mode) rc $? wall $(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{print b-a}')" > $R/w-$tag.txt
   grep -E "tune" $R/v-$tag.log | grep -v debug | sed 's/^.*\] //' | cut -c1-200 >> $R/w-$tag.txt

@@ -9,19 +9,19 @@
 #     sh carry/tled/search_final.sh     # summaries under $OUT/r
 # 2 cores each (three at once on disjoint core pairs), then the GPU (tled_cuda, --jobs 4 and 1)
 cd "$(dirname "$0")"
+. bench/pipeline/case_env.sh
 [ -d libs ] || tar -xJf libs.tar.xz
 export LD_LIBRARY_PATH=$PWD/libs DATA=$PWD/data
 R=$OUT/r; mkdir -p $R
 { cat .commit; date -u; nproc; nvidia-smi --query-gpu=name --format=csv,noheader; } > $R/summary.txt
 run() { # tag case mode cores|jobs
   tag=$1 p=$2 mode=$3 c=$4; d=/tmp/x-$tag; rm -rf $d
-  D=$PWD/data/brats2013/brats_2013_${p}_1
-  E="ATLAS_T1=$PWD/data/sri24/spgr.nii.gz ATLAS_LABELS=$PWD/data/sri24/tzo116plus.nii.gz ATLAS_TISSUES=$PWD/data/sri24/tissues.nii.gz PATIENT_T1=$D/T1c_subtrMeanDivStd.nii.gz PATIENT_FLAIR=$D/Flair_subtrMeanDivStd.nii.gz PATIENT_LABELS=$D/OTMultiClass.nii.gz PATIENT_MASK=$D/brainmask.nii.gz ARMSTG_PLUGIN_PATH=$PWD/build/plugins"
+  E="ARMSTG_PLUGIN_PATH=$PWD/build/plugins"
   t0=$(date +%s.%N)
   if [ $mode = two ]; then
-    env $E OMP_NUM_THREADS=2 TLED=tled_cpu taskset -c $c build/armstg run graphs/armstg.ini --jobs 2 --out $d -v > $d.log 2>&1
+    brats_run ${p#pat} $PWD/data env $E OMP_NUM_THREADS=2 TLED=tled_cpu taskset -c $c build/armstg run graphs/armstg.ini --jobs 2 --out $d -v > $d.log 2>&1
   else
-    env $E TLED=tled_cuda build/armstg run graphs/armstg.ini --jobs $c --out $d -v > $d.log 2>&1
+    brats_run ${p#pat} $PWD/data env $E TLED=tled_cuda build/armstg run graphs/armstg.ini --jobs $c --out $d -v > $d.log 2>&1
   fi
   { echo "== $tag ($p $mode $c) rc $? wall $(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{print b-a}')"
     cut -f1-6 $d/tune.tsv; grep -E "^tune" $d/run.tsv; } > $R/s-$tag.txt
@@ -35,8 +35,8 @@ run g1b pat0001 gpu 1; cat $R/s-g1b.txt >> $R/summary.txt
 for n in 1 2 3; do cp /tmp/x-c$n/metrics.tsv $R/metrics-c$n.tsv; cp /tmp/x-g$n/metrics.tsv $R/metrics-g$n.tsv; done
 cat $R/summary.txt
 alone() { # case: alone on 2 cores
-  p=$1; D=$PWD/data/brats2013/brats_2013_${p}_1; t0=$(date +%s.%N)
-  env ATLAS_T1=$PWD/data/sri24/spgr.nii.gz ATLAS_LABELS=$PWD/data/sri24/tzo116plus.nii.gz ATLAS_TISSUES=$PWD/data/sri24/tissues.nii.gz PATIENT_T1=$D/T1c_subtrMeanDivStd.nii.gz PATIENT_FLAIR=$D/Flair_subtrMeanDivStd.nii.gz PATIENT_LABELS=$D/OTMultiClass.nii.gz PATIENT_MASK=$D/brainmask.nii.gz ARMSTG_PLUGIN_PATH=$PWD/build/plugins OMP_NUM_THREADS=2 TLED=tled_cpu taskset -c 0,1 build/armstg run graphs/armstg.ini --jobs 2 --out /tmp/y-$p -v > /tmp/y-$p.log 2>&1
+  p=$1; t0=$(date +%s.%N)
+  brats_run ${p#pat} $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/build/plugins OMP_NUM_THREADS=2 TLED=tled_cpu taskset -c 0,1 build/armstg run graphs/armstg.ini --jobs 2 --out /tmp/y-$p -v > /tmp/y-$p.log 2>&1
   echo "$p alone 2 cores rc $? wall $(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{print b-a}')" >> $R/summary.txt
   cmp /tmp/y-$p/metrics.tsv /tmp/x-c${p#pat000}/metrics.tsv && echo "$p: metrics as in the three-at-once run" >> $R/summary.txt
 }
