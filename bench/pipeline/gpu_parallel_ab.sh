@@ -6,12 +6,13 @@
 # buildm/, libs.tar.xz and data/ (bench/pipeline/carry_prep.sh), e.g.
 #     RUNS="m:1 n:1 n:3" CASES="pat0001 pat0002" sh carry/tled/bench/pipeline/gpu_parallel_ab.sh
 # First the CUDA tests (tled_cuda_test_*, a GPU required; TESTS=0: not), then for each
-# case each run of RUNS in order: B:N, B = n (build/) or m (buildm/), N =
-# TUNE_PARALLEL.  Every run's metrics.tsv and the chosen depth are compared
+# case each run of RUNS in order: B:N[:KEY=VALUE], B = n (build/) or m
+# (buildm/), N = TUNE_PARALLEL, KEY=VALUE an optional --set of that run
+# (e.g. n:2:grow.density_csf=0.2).  Every run's metrics.tsv and the chosen depth are compared
 # with the case's first run's.  STOP_S (default 540): no run starts after
 # that many seconds, so the summaries come back inside one 600 s call.
-# Summaries in $OUT/r (summary.txt: one line per run; w-*.txt: the [tune]
-# lines and the growths' times), the logs in $OUT/logs.tgz.
+# $OUT/r/summary.txt: one line per run; $OUT/logs.tgz: the logs, w-*.txt (the
+# [tune] lines and the growths' times), each run's tune.tsv and metrics.tsv.
 cd "$(dirname "$0")/../.."
 . bench/pipeline/case_env.sh
 T0=$(date +%s)
@@ -26,13 +27,13 @@ if [ "${TESTS:-1}" = 1 ]; then
   echo "cuda tests rc $?" >> $R/cuda-tests.txt
   grep -h "^two threads\|^parity" build/test-logs/tled_cuda_test_parity.log >> $R/cuda-tests.txt 2>/dev/null
 fi
-run() { # case build parallel
-  p=$1 b=$2 n=$3 tag=$1-$2$3
+run() { # case build parallel [KEY=VALUE]
+  p=$1 b=$2 n=$3 tag=$1-$2$3${4:+-$(echo "$4" | tr -c 'A-Za-z0-9.\n' _)}
   d=/tmp/v-$tag; rm -rf $d
   bin=build; [ "$b" = m ] && bin=buildm
   t0=$(date +%s.%N)
   brats_run ${p#pat} $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/$bin/plugins TLED=tled_cuda \
-    TUNE_PARALLEL=$n $bin/armstg run graphs/armstg.ini --jobs $JOBS --out $d -v > $R/v-$tag.log 2>&1
+    TUNE_PARALLEL=$n $bin/armstg run graphs/armstg.ini --jobs $JOBS --out $d ${4:+--set "$4"} -v > $R/v-$tag.log 2>&1
   rc=$?
   w=$(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{printf "%.1f", b-a}')
   ch=$(awk -F'\t' 'NR > 1 && $5 == 1 {print $1}' $d/tune.tsv 2>/dev/null)
@@ -45,13 +46,16 @@ run() { # case build parallel
   { echo "== $tag rc $rc wall $w"; grep -E "tune" $R/v-$tag.log | grep -v debug | sed 's/^.*\] //' | cut -c1-200
     grep -E "grow.*(growth time|device:)" $R/v-$tag.log | sed 's/^.*\] //' | cut -c1-200; } > $R/w-$tag.txt
   cp $d/tune.tsv $R/tune-$tag.tsv 2>/dev/null
+  cp $d/metrics.tsv $R/metrics-$tag.tsv 2>/dev/null
 }
 for p in $CASES; do
   first=
   for r in $RUNS; do
     [ $(( $(date +%s) - T0 )) -lt $STOP_S ] || { echo "$p ${r}: not started (STOP_S)" >> $R/summary.txt; continue; }
-    run $p ${r%%:*} ${r##*:}
+    rb=${r%%:*} rr=${r#*:}; rn=${rr%%:*} rs=; [ "$rr" = "$rn" ] || rs=${rr#*:}
+    run $p $rb $rn $rs
   done
 done
 cat $R/machine.txt; tail -3 $R/cuda-tests.txt 2>/dev/null; cat $R/summary.txt
-cd $R && tar -czf $OUT/logs.tgz *.log && rm -f *.log
+# few files come back from a device call: everything but the summary in one
+cd $R && tar -czf $OUT/logs.tgz --exclude=summary.txt . && find . -type f ! -name summary.txt -delete

@@ -393,6 +393,9 @@ static tled_ops_t engine_of(const tled_ops_t *ops, host_eng_t *he)
 		e.end = he_end;
 		e.push = he_push;
 		e.strerror = he_strerror;
+		e.defer = NULL; /* the host's values are there at once */
+		e.sync = NULL;
+		e.watch = NULL;
 	}
 	return e;
 }
@@ -415,6 +418,45 @@ static tled_ops_t engine_of(const tled_ops_t *ops, host_eng_t *he)
 			return rc_;                                            \
 		}                                                              \
 	} while (0)
+
+/* the error of an inverted or non-finite integration point (tled_relax's
+ * forces watch) */
+static int forces_err(const tled_model_t *m, const tled_force_info_t *fi,
+		      const char *tag, int it, char *err, size_t errsize)
+{
+	int64_t p = fi->ip_bad;
+	static const char *matname[MAT_N] = { "brain", "CSF", "tumour" };
+	int mt = m->ipmat ? m->ipmat[p] : 0;
+	return tled_errf(err, errsize, "%s, iteration %d: %s at the "
+		    "integration point (%.2f, %.2f, %.2f) mm "
+		    "(%s; %lld such points; min det F = %.3g): "
+		    "the step deforms the tissue too much "
+		    "(smaller growth steps, larger ramp_iter, "
+		    "or finer nodes)",
+		    tag, it,
+		    isfinite(fi->Jmin) ? "inverted material (det F <= 0)"
+				       : "non-finite stress",
+		    m->ipX[3 * p] / TLED_MM,
+		    m->ipX[3 * p + 1] / TLED_MM,
+		    m->ipX[3 * p + 2] / TLED_MM,
+		    mt >= 0 && mt < MAT_N ? matname[mt] : "?",
+		    (long long)fi->nbad, fi->Jmin);
+}
+
+/* adaptive damping (Joldes et al. 2011): a Rayleigh quotient rq (1/s^2)
+ * never falls below omega_min^2, so the running minimum *lam approaches it
+ * from above as the slowest mode comes to dominate the increments; the
+ * damping *c = 2 omega_min (1/s) follows every 10th iteration */
+static void damp_update(const tled_solver_t *s, double rq, int it,
+			double *lam, double *c)
+{
+	if (rq > 0 && rq < *lam)
+		*lam = rq;
+	if (s->lmax > 0 && *lam < 1e-10 * s->lmax)
+		*lam = 1e-10 * s->lmax;
+	if (it % 10 == 0)
+		*c = 2 * sqrt(*lam);
+}
 
 int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	       const double *target, const char *tag, tled_relax_stats_t *st,
@@ -517,6 +559,12 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	if (E.begin(E.ctx, s, ebc ? NULL : target, grow ? o->ipg_to : NULL))
 		return tled_errf(err, errsize, "%s: %s backend: %s", tag,
 			    E.name ? E.name : "cpu", E.strerror(E.ctx));
+	/* the backend's deferred reads (tled_ops_t defer): one read of the
+	 * step's scalars per iteration instead of four; not with collocated
+	 * conditions, whose projection reads the state on the host */
+	int defer = E.defer && E.sync && E.watch && !hostcon;
+	if (defer)
+		ENG(E.defer(E.ctx, 1));
 	double tloop = lib_now_s(), tpart0 = 0; /* the loop's time, s->tm's parts */
 	for (int k = 0; k < TLED_TM_N; k++)
 		if (k != TLED_TM_REST)
@@ -538,52 +586,67 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			ENG(E.rforces(E.ctx, &fi)); /* timed in he_forces */
 		else
 			ENGT(TLED_TM_FORCES, E.rforces(E.ctx, &fi));
-		if (fi.nbad > 0) {
-			int64_t p = fi.ip_bad;
-			E.end(E.ctx, s);
-			static const char *matname[MAT_N] = { "brain", "CSF",
-							      "tumour" };
-			int mt = m->ipmat ? m->ipmat[p] : 0;
-			return tled_errf(err, errsize, "%s, iteration %d: %s at the "
-				    "integration point (%.2f, %.2f, %.2f) mm "
-				    "(%s; %lld such points; min det F = %.3g): "
-				    "the step deforms the tissue too much "
-				    "(smaller growth steps, larger ramp_iter, "
-				    "or finer nodes)",
-				    tag, it,
-				    isfinite(fi.Jmin) ? "inverted material (det F <= 0)"
-						      : "non-finite stress",
-				    m->ipX[3 * p] / TLED_MM,
-				    m->ipX[3 * p + 1] / TLED_MM,
-				    m->ipX[3 * p + 2] / TLED_MM,
-				    mt >= 0 && mt < MAT_N ? matname[mt] : "?",
-				    (long long)fi.nbad, fi.Jmin);
-		}
-		if (E0 < 0)
-			E0 = fi.W;
+		/* the forces' watch: an inverted or non-finite point ends the
+		 * call (deferred: after the sync below) */
+#define FORCES_CHECK()                                                         \
+	do {                                                                   \
+		if (fi.nbad > 0) {                                             \
+			E.end(E.ctx, s);                                       \
+			return forces_err(m, &fi, tag, it, err, errsize);      \
+		}                                                              \
+		if (E0 < 0)                                                    \
+			E0 = fi.W;                                             \
+	} while (0)
+		if (!defer)
+			FORCES_CHECK();
 		/* Rayleigh quotient of the last increment du = dt v,
 		 * rq = du . (f - fprev) / du . M du (1/s^2): the adaptive
 		 * damping's omega_min^2 and the time step's watch (below) */
-		double rq = -1;
-		if (have_prev && ((o->damping < 0 && it > ramp + 1) || autodt)) {
-			double num = 0, den = 0;
+		double rq = -1, num = 0, den = 0;
+		int want_rq = have_prev &&
+			      ((o->damping < 0 && it > ramp + 1) || autodt);
+		if (want_rq)
 			ENG(E.rayleigh(E.ctx, dt, &num, &den));
-			if (den > 0 && num > 0)
-				rq = num / den;
+		/* adaptive damping (damp_update): the damping c changes every
+		 * 10th iteration, from the quotients up to this one; deferred,
+		 * only then are they read before the step */
+		int damping = o->damping < 0 && have_prev && it > ramp + 1;
+		int early = !defer || (damping && it % 10 == 0);
+		if (defer && early) {
+			ENGT(TLED_TM_STEP, E.sync(E.ctx));
+			FORCES_CHECK();
 		}
-		/* adaptive damping */
-		if (o->damping < 0 && have_prev && it > ramp + 1) {
-			/* a Rayleigh quotient never falls below omega_min^2, so
-			 * the running minimum approaches it from above; as the
-			 * slowest mode comes to dominate the increments */
-			if (rq > 0 && rq < lam)
-				lam = rq;
-			if (s->lmax > 0 && lam < 1e-10 * s->lmax)
-				lam = 1e-10 * s->lmax;
-			if (it % 10 == 0)
-				c = 2 * sqrt(lam);
+		if (early) {
+			if (want_rq && den > 0 && num > 0)
+				rq = num / den;
+			if (damping)
+				damp_update(s, rq, it, &lam, &c);
 		}
 		ENGT(TLED_TM_STEP, E.rstep(E.ctx, dt, c, &ci));
+		/* deferred: the contact's launch joins the step's read (the
+		 * device skips it where the checks below end the call:
+		 * tled_ops_t watch), but on the first iteration, whose strain
+		 * energy is the blow-up watch's reference */
+		int64_t dnc = 0;
+		double dvm = 0;
+		int dcon = defer && o->contact && E0 >= 0;
+		if (dcon) {
+			double emax = blow * (E0 + (Wext > 0 ? Wext : 0) + Wfloor);
+			ENG(E.watch(E.ctx, emax, L));
+			dvm = INFINITY; /* written by the sync when dnc > 0 */
+			ENGT(TLED_TM_CONTACT, E.rcontact(E.ctx, o->contact_stick ? dt : 0,
+							 &dnc, &dvm));
+		}
+		if (defer) {
+			ENGT(TLED_TM_STEP, E.sync(E.ctx));
+			if (!early) {
+				FORCES_CHECK();
+				if (want_rq && den > 0 && num > 0)
+					rq = num / den;
+				if (damping)
+					damp_update(s, rq, it, &lam, &c);
+			}
+		}
 		if (hostcon && (s->nc > 0 || o->contact))
 			ENG(E.end(E.ctx, s));
 		if (ebc && s->nc > 0 && ci.node_nan < 0) {
@@ -657,12 +720,19 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			 * ever (10 000 iterations per growth step, phantom) */
 			int64_t nc = 0;
 			double vm = ci.vmax, tc0 = lib_now_s();
-			if (hostcon)
+			if (dcon) {
+				nc = dnc;
+				if (nc > 0)
+					vm = dvm;
+			} else if (hostcon) {
 				he_contact(&(host_eng_t){ .s = s }, o->contact_stick ? dt : 0,
 					   &nc, &vm);
-			else
+			} else {
 				ENG(E.rcontact(E.ctx, o->contact_stick ? dt : 0,
 					       &nc, &vm));
+				if (defer)
+					ENG(E.sync(E.ctx));
+			}
 			s->tm[TLED_TM_CONTACT] += lib_now_s() - tc0;
 			s->contacts += nc;
 			/* the outward velocity the last step gave a node in
@@ -788,6 +858,9 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 				tpart += s->tm[k];
 		s->tm[TLED_TM_REST] += lib_now_s() - tloop - (tpart - tpart0);
 	}
+#undef FORCES_CHECK
+	if (defer)
+		ENG(E.defer(E.ctx, 0));
 	if (it > o->max_iter)
 		it = o->max_iter;
 	/* the last iteration is always in the log (its error estimate is

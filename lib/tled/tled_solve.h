@@ -178,6 +178,24 @@ typedef struct tled_ops {
 	int (*kvstart)(void *ctx, const double *x);
 	int (*kvstep)(void *ctx, double bk, double *a, double *b);
 	int (*kvnext)(void *ctx, double b);
+	/* optional, with the resident engine (all three or none): deferred
+	 * reads.  After defer(ctx, 1), rforces, rayleigh, rstep and rcontact
+	 * may queue their work and return before writing their out-values;
+	 * sync waits for the queue and writes every pending one (one
+	 * device-to-host read where there were four per time step).  The
+	 * work runs in the calls' order.  While deferred, rstep's update
+	 * leaves u and v as they are when the last rforces found a bad
+	 * integration point (nbad > 0), and the next rcontact after
+	 * watch(ctx, emax, L) leaves them too when that rforces found one, or
+	 * that rstep a non-finite node, or its kinetic energy plus that
+	 * rforces' strain energy is not finite or above emax (J), or its
+	 * largest speed times dt is above L (m): tled_relax's watchdogs, which
+	 * then end the call, see the state they would have seen reading each
+	 * value at once.  defer(ctx, 0) (and begin) return to reading at
+	 * once. */
+	int (*defer)(void *ctx, int on);
+	int (*sync)(void *ctx);
+	int (*watch)(void *ctx, double emax, double L);
 } tled_ops_t;
 
 struct tled_solver_opts {

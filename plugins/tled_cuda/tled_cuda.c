@@ -74,13 +74,14 @@ static int tled_cuda_process(armstg_stage_t *st)
 	if (cs.steps > 0)
 		st->host->log(st, LOG_INFO, "device: %lld time steps, %.3f ms "
 			      "per step (forces %.3f, update %.3f, contact "
-			      "%.3f, damping %.3f; %.1f MB moved per step, "
+			      "%.3f, damping %.3f, read %.3f; %.1f MB moved per step, "
 			      "%.0f GB/s), model upload %.1f ms", cs.steps,
 			      cs.step_ms / (double)cs.steps,
 			      cs.forces_ms / (double)cs.steps,
 			      cs.update_ms / (double)cs.steps,
 			      cs.contact_ms / (double)cs.steps,
 			      cs.other_ms / (double)cs.steps,
+			      cs.wait_ms / (double)cs.steps,
 			      cs.bytes_per_step / 1e6,
 			      cs.bytes_per_step / (cs.step_ms / cs.steps) / 1e6,
 			      cs.upload_ms);

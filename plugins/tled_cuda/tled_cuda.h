@@ -71,6 +71,8 @@ typedef struct tled_cuda_stats {
 	double update_ms;     /* central-difference update (rstep) */
 	double contact_ms;    /* contact (rcontact) */
 	double other_ms;      /* damping estimate (rayleigh) */
+	double wait_ms;       /* the deferred reads' waits (tled_ops_t sync):
+	                         with them the parts above are their launches */
 	long long hforces;    /* host-array force calls (time-step estimates,
 	                         growth energy), with their copies */
 	double hforces_ms;

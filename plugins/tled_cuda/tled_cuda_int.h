@@ -47,6 +47,16 @@ struct dmod {
 	double cband; /* contact band, m (TLED_CT_BAND x mean spacing) */
 };
 
+/* the deferred reads' watch (tled_ops_t watch): gf NULL = none; else the
+ * contact kernels skip every node when the last forces' record gf found a
+ * bad point, the last update's gcd a non-finite node, or the step's energy
+ * gcd->s0 + gf->s0 (J) is not finite or above emax, or its largest speed
+ * times dt (s) is above L (m) */
+struct cwatch {
+	const red *gf, *gcd;
+	double emax, L, dt;
+};
+
 /* ---- kernels (tled_cuda_kernels.cu); launched on TPB threads a block,
  * reductions into part[blockIdx.x], finished by k_red_final ---- */
 __global__ void k_red_final(red *part, int nb, red *out);
@@ -58,10 +68,11 @@ __global__ void k_stress(dmod m, const unsigned char *ipact, const double *ipg,
 __global__ void k_gather(dmod m, const unsigned char *ipact, const double *VP,
 			 double *f);
 /* central differences with mass damping: s0 kinetic energy, max v^2 and
- * where, first non-finite node */
+ * where, first non-finite node; no node moves when gf (the deferred forces'
+ * record, or NULL) counts a bad point */
 __global__ void k_cd(dmod m, const unsigned char *kind, const double *f,
 		     double *u, double *v, double a1, double a2, double dt,
-		     red *part);
+		     const red *gf, red *part);
 /* the Rayleigh quotient's terms: s0 du . (f - fprev), s1 du . M du */
 __global__ void k_rayleigh(dmod m, const unsigned char *dkind, const double *v,
 			   const double *f, const double *fprev, double dt,
@@ -76,7 +87,8 @@ __global__ void k_grow(int nip, const double *g0, const double *g1, double rr,
 /* contact with the brain boundary: cnt nodes in contact */
 __global__ void k_contact(dmod m, const unsigned char *kind, const double *s0,
 			  double *u, double *v, double stick_dt, int *ctb,
-			  double *ctq, double *ctgap, double *ctd, red *part);
+			  double *ctq, double *ctgap, double *ctd, cwatch w,
+			  red *part);
 /* the Lanczos operator's two states (tled_ops_t kapply): out = u +
  * h im x, h = +-eps, im per node (3n entries) */
 __global__ void k_kpert(long long n3, const double *u, const double *im,
@@ -97,6 +109,6 @@ __global__ void k_kupd(long long n3, double *w, const double *v1,
 __global__ void k_kdiv(long long n3, const double *w, double b, double *v);
 /* max v^2 over the dynamic nodes */
 __global__ void k_vmax(dmod m, const unsigned char *dkind, const double *v,
-		       red *part);
+		       cwatch w, red *part);
 
 #endif

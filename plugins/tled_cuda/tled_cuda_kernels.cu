@@ -205,12 +205,13 @@ __global__ void k_gather(dmod m, const unsigned char *ipact, const double *VP,
  * energy, max v^2 and where, first non-finite node */
 __global__ void k_cd(dmod m, const unsigned char *kind, const double *f,
 		     double *u, double *v, double a1, double a2, double dt,
-		     red *part)
+		     const red *gf, red *part)
 {
 	red r;
 	red_init(r);
 	r.mx = 0;
-	for (int a = blockIdx.x * blockDim.x + threadIdx.x; a < m.n;
+	int n = gf && gf->cnt > 0 ? 0 : m.n; /* the deferred watch */
+	for (int a = blockIdx.x * blockDim.x + threadIdx.x; a < n;
 	     a += gridDim.x * blockDim.x) {
 		if (kind[a] != TLED_FREE)
 			continue;
@@ -383,13 +384,29 @@ __device__ double d_side(const dmod &m, int a, const double y[3], int *b,
 
 /* contact with the brain boundary, nodal driving (tled_contact with
  * useh = 0): cnt = nodes in contact */
+/* the deferred watch (tled_ops_t watch): tled_relax's checks after a step,
+ * the same expressions in the same order as its host code: 1 where they end
+ * the call, so that the contact leaves the state as they saw it */
+__device__ __forceinline__ int d_watch(const cwatch &w)
+{
+	if (!w.gf)
+		return 0;
+	if (w.gf->cnt > 0 || w.gcd->first != LLONG_MAX)
+		return 1;
+	double e = w.gcd->s0 + w.gf->s0;
+	double vmax = sqrt(w.gcd->mx > 0 ? w.gcd->mx : 0);
+	return !isfinite(e) || e > w.emax || vmax * w.dt > w.L;
+}
+
 __global__ void k_contact(dmod m, const unsigned char *kind, const double *s0,
 			  double *u, double *v, double stick_dt, int *ctb,
-			  double *ctq, double *ctgap, double *ctd, red *part)
+			  double *ctq, double *ctgap, double *ctd, cwatch w,
+			  red *part)
 {
 	red r;
 	red_init(r);
-	for (int a = blockIdx.x * blockDim.x + threadIdx.x; a < m.n;
+	int n = d_watch(w) ? 0 : m.n;
+	for (int a = blockIdx.x * blockDim.x + threadIdx.x; a < n;
 	     a += gridDim.x * blockDim.x) {
 		if (kind[a] == TLED_FIXED)
 			continue;
@@ -428,12 +445,13 @@ __global__ void k_contact(dmod m, const unsigned char *kind, const double *s0,
 }
 
 __global__ void k_vmax(dmod m, const unsigned char *dkind, const double *v,
-		       red *part)
+		       cwatch w, red *part)
 {
 	red r;
 	red_init(r);
 	r.mx = 0;
-	for (int a = blockIdx.x * blockDim.x + threadIdx.x; a < m.n;
+	int n = d_watch(w) ? 0 : m.n;
+	for (int a = blockIdx.x * blockDim.x + threadIdx.x; a < n;
 	     a += gridDim.x * blockDim.x)
 		if (dkind[a] == TLED_FREE) {
 			const double *va = v + 3 * (size_t)a;

@@ -46,13 +46,28 @@ struct tled_cuda {
 	unsigned char *kind, *dkind, *ipact;
 	int *ctb;            /* contact cache (d_side) */
 	double *ctq, *ctgap, *ctd;
-	red *part, *res;
-	red *hres; /* pinned */
+	red *part, *res; /* res: RS_N records (below) */
+	red *hres; /* pinned, RS_N records */
+	/* the deferred reads (tled_ops_t defer, sync, watch): the out-values
+	 * the queued reductions will fill at the next sync (RS_*: which
+	 * record), and the watch of the next contact */
+	int defer;
+	unsigned pend; /* 1 << RS_* */
+	tled_force_info_t *q_fi;
+	double *q_num, *q_den, *q_vm, q_dt;
+	tled_cd_info_t *q_ci;
+	int64_t *q_cnt;
+	int w_on;
+	double w_emax, w_L;
 	int nbl_n, nbl_ip;
 	int have_target, growing;
 	tled_solver_t *s;
 	tled_cuda_stats_t st;
 };
+
+/* the reduction records: RS_NOW read at once (fetch), the others queued
+ * while deferred (queue) and read together (cu_sync) */
+enum { RS_NOW = 0, RS_F, RS_RQ, RS_CD, RS_CT, RS_VM, RS_N };
 
 static double now_ms(void)
 {
@@ -263,7 +278,7 @@ static int ensure_model(tled_cuda_t *c, const tled_model_t *m)
 	    dalloc(c, (void **)&c->dkind, (size_t)m->n, "kinds") ||
 	    dalloc(c, (void **)&c->ipact, (size_t)m->nip, "active points") ||
 	    dalloc(c, (void **)&c->part, MAXBLK * sizeof(red), "reductions") ||
-	    dalloc(c, (void **)&c->res, sizeof(red), "reductions") ||
+	    dalloc(c, (void **)&c->res, RS_N * sizeof(red), "reductions") ||
 	    dalloc(c, (void **)&c->kres, 2 * sizeof(red), "reductions") ||
 	    dalloc(c, (void **)&c->ctb, (size_t)m->n * TLED_CT_K * sizeof(int), "contact") ||
 	    dalloc(c, (void **)&c->ctq, n3 * sizeof(double), "contact") ||
@@ -293,6 +308,16 @@ static int nblk(int nb)
 	return nb < MAXBLK ? (nb > 0 ? nb : 1) : MAXBLK;
 }
 
+/* finish a reduction launched on nb blocks into record k (RS_*), read at
+ * the next sync */
+static int queue(tled_cuda_t *c, int nb, int k, const char *what)
+{
+	k_red_final<<<1, TPB>>>(c->part, nb, c->res + k);
+	CK(c, cudaGetLastError(), what);
+	c->pend |= 1u << k;
+	return 0;
+}
+
 /* finish a reduction launched on nb blocks and copy the record to c->hres */
 static int fetch(tled_cuda_t *c, int nb, const char *what)
 {
@@ -303,9 +328,19 @@ static int fetch(tled_cuda_t *c, int nb, const char *what)
 	return 0;
 }
 
+static void forces_info(const red &r, tled_force_info_t *fi)
+{
+	fi->W = r.s0;
+	fi->Jmin = -r.mx;
+	fi->ip_jmin = r.imx;
+	fi->nbad = r.cnt;
+	fi->ip_bad = r.first == LLONG_MAX ? -1 : r.first;
+}
+
+/* q: queue the record (RS_F, written to *fi at the next sync) */
 static int dev_forces(tled_cuda_t *c, const double *u, double *f,
 		      const unsigned char *ipact, const double *ipg,
-		      tled_force_info_t *fi)
+		      tled_force_info_t *fi, int q)
 {
 	/* SG lanes per point, one warp per node */
 	int nb = nblk((int)((c->dm.nip + TPB / SG - 1) / (TPB / SG)));
@@ -316,16 +351,13 @@ static int dev_forces(tled_cuda_t *c, const double *u, double *f,
 	CK(c, cudaGetLastError(), "force gather");
 	if (!fi)
 		return 0; /* nothing to read: no wait for the device */
+	if (q) {
+		c->q_fi = fi;
+		return queue(c, nb, RS_F, "stresses");
+	}
 	if (fetch(c, nb, "stresses"))
 		return -1;
-	{
-		const red &r = *c->hres;
-		fi->W = r.s0;
-		fi->Jmin = -r.mx;
-		fi->ip_jmin = r.imx;
-		fi->nbad = r.cnt;
-		fi->ip_bad = r.first == LLONG_MAX ? -1 : r.first;
-	}
+	forces_info(*c->hres, fi);
 	return 0;
 }
 
@@ -353,7 +385,7 @@ static void cu_forces(void *ctx, const tled_model_t *m, const uint8_t *ipact,
 		  (m->ipg && cerr(c, cudaMemcpy(c->ipg, m->ipg, (size_t)m->nip * sizeof(double),
 						cudaMemcpyHostToDevice), "forces")) ||
 		  dev_forces(c, c->hu, c->hf, ipact ? c->ipact : NULL,
-			     m->ipg ? c->ipg : NULL, info) ||
+			     m->ipg ? c->ipg : NULL, info, 0) ||
 		  cerr(c, cudaMemcpy(f, c->hf, n3, cudaMemcpyDeviceToHost), "forces");
 	c->st.hforces++;
 	c->st.hforces_ms += now_ms() - t0;
@@ -414,11 +446,11 @@ static int cu_kapply(void *ctx, const double *x, double eps, double *y)
 	 * order: + first) */
 	k_kpert<<<nb, TPB>>>(n3, c->ku, c->kim, c->kx, eps, c->hu);
 	CK(c, cudaGetLastError(), "time-step estimate");
-	if (dev_forces(c, c->hu, c->hf, c->kact, c->kipg, NULL))
+	if (dev_forces(c, c->hu, c->hf, c->kact, c->kipg, NULL, 0))
 		return -1;
 	k_kpert<<<nb, TPB>>>(n3, c->ku, c->kim, c->kx, -eps, c->hu);
 	CK(c, cudaGetLastError(), "time-step estimate");
-	if (dev_forces(c, c->hu, c->kfm, c->kact, c->kipg, NULL))
+	if (dev_forces(c, c->hu, c->kfm, c->kact, c->kipg, NULL, 0))
 		return -1;
 	k_kdiff<<<nb, TPB>>>(n3, c->kim, c->hf, c->kfm, eps, c->kx);
 	CK(c, cudaGetLastError(), "time-step estimate");
@@ -466,11 +498,11 @@ static int cu_kvstep(void *ctx, double bk, double *a, double *b)
 		double eps = 1e-6 * c->kh / xmax;
 		k_kpert<<<nb, TPB>>>(n3, c->ku, c->kim, c->kv1, eps, c->hu);
 		CK(c, cudaGetLastError(), "time-step estimate");
-		if (dev_forces(c, c->hu, c->hf, c->kact, c->kipg, NULL))
+		if (dev_forces(c, c->hu, c->hf, c->kact, c->kipg, NULL, 0))
 			return -1;
 		k_kpert<<<nb, TPB>>>(n3, c->ku, c->kim, c->kv1, -eps, c->hu);
 		CK(c, cudaGetLastError(), "time-step estimate");
-		if (dev_forces(c, c->hu, c->kfm, c->kact, c->kipg, NULL))
+		if (dev_forces(c, c->hu, c->kfm, c->kact, c->kipg, NULL, 0))
 			return -1;
 		k_kdiff<<<nb, TPB>>>(n3, c->kim, c->hf, c->kfm, eps, c->kw);
 	}
@@ -520,6 +552,9 @@ static int cu_begin(void *ctx, tled_solver_t *s, const double *target,
 	if (ensure_model(c, m))
 		return -1;
 	c->s = s;
+	c->defer = 0;
+	c->pend = 0;
+	c->w_on = 0;
 	CK(c, cudaMemcpy(c->u, s->u, n3, cudaMemcpyHostToDevice), "begin");
 	CK(c, cudaMemcpy(c->ustart, s->u, n3, cudaMemcpyHostToDevice), "begin");
 	CK(c, cudaMemset(c->v, 0, n3), "begin");
@@ -579,7 +614,7 @@ static int cu_rforces(void *ctx, tled_force_info_t *fi)
 	tled_cuda_t *c = (tled_cuda_t *)ctx;
 	double t0 = now_ms();
 	int rc = dev_forces(c, c->u, c->f, c->ipact, c->growing ? c->ipg : NULL,
-			    fi);
+			    fi, c->defer);
 	double dt = now_ms() - t0;
 	c->st.step_ms += dt;
 	c->st.forces_ms += dt;
@@ -594,14 +629,29 @@ static int cu_rayleigh(void *ctx, double dt, double *num, double *den)
 	k_rayleigh<<<nb, TPB>>>(c->dm, c->dkind, c->v, c->f, c->fprev, dt,
 				c->part);
 	CK(c, cudaGetLastError(), "damping");
-	if (fetch(c, nb, "damping"))
-		return -1;
-	*num = c->hres->s0;
-	*den = c->hres->s1;
+	if (c->defer) {
+		c->q_num = num;
+		c->q_den = den;
+		if (queue(c, nb, RS_RQ, "damping"))
+			return -1;
+	} else {
+		if (fetch(c, nb, "damping"))
+			return -1;
+		*num = c->hres->s0;
+		*den = c->hres->s1;
+	}
 	double dtm = now_ms() - t0;
 	c->st.step_ms += dtm;
 	c->st.other_ms += dtm;
 	return 0;
+}
+
+static void cd_info(const red &r, tled_cd_info_t *ci)
+{
+	ci->ke = r.s0;
+	ci->vmax = sqrt(r.mx > 0 ? r.mx : 0);
+	ci->node_vmax = r.imx;
+	ci->node_nan = r.first == LLONG_MAX ? -1 : r.first;
 }
 
 static int cu_rstep(void *ctx, double dt, double cdamp, tled_cd_info_t *ci)
@@ -610,16 +660,20 @@ static int cu_rstep(void *ctx, double dt, double cdamp, tled_cd_info_t *ci)
 	double t0 = now_ms();
 	double a1 = (2 - cdamp * dt) / (2 + cdamp * dt), a2 = 2 * dt / (2 + cdamp * dt);
 	int nb = nblk(c->nbl_n);
-	k_cd<<<nb, TPB>>>(c->dm, c->dkind, c->f, c->u, c->v, a1, a2, dt, c->part);
+	k_cd<<<nb, TPB>>>(c->dm, c->dkind, c->f, c->u, c->v, a1, a2, dt,
+			  c->defer ? c->res + RS_F : NULL, c->part);
 	CK(c, cudaGetLastError(), "update");
-	if (fetch(c, nb, "update"))
-		return -1;
-	const red &r = *c->hres;
-	ci->ke = r.s0;
-	ci->vmax = sqrt(r.mx > 0 ? r.mx : 0);
-	ci->node_vmax = r.imx;
-	ci->node_nan = r.first == LLONG_MAX ? -1 : r.first;
 	c->st.steps++;
+	if (c->defer) {
+		c->q_ci = ci;
+		c->q_dt = dt;
+		if (queue(c, nb, RS_CD, "update"))
+			return -1;
+	} else {
+		if (fetch(c, nb, "update"))
+			return -1;
+		cd_info(*c->hres, ci);
+	}
 	double dtm = now_ms() - t0;
 	c->st.step_ms += dtm;
 	c->st.update_ms += dtm;
@@ -634,14 +688,34 @@ static int cu_rcontact(void *ctx, double stick_dt, int64_t *count, double *vmax)
 		return 0;
 	double t0 = now_ms();
 	int nb = nblk(c->nbl_n);
+	cwatch w = { NULL, NULL, 0, 0, 0 };
+	if (c->defer && c->w_on)
+		w = { c->res + RS_F, c->res + RS_CD, c->w_emax, c->w_L, c->q_dt };
+	c->w_on = 0;
 	k_contact<<<nb, TPB>>>(c->dm, c->dkind, c->s0, c->u, c->v, stick_dt,
-			       c->ctb, c->ctq, c->ctgap, c->ctd, c->part);
+			       c->ctb, c->ctq, c->ctgap, c->ctd, w, c->part);
 	CK(c, cudaGetLastError(), "contact");
+	if (c->defer) {
+		/* the speed after the contact is read with its count, and
+		 * used when there was any (as below) */
+		c->q_cnt = count;
+		c->q_vm = vmax;
+		if (queue(c, nb, RS_CT, "contact"))
+			return -1;
+		k_vmax<<<nb, TPB>>>(c->dm, c->dkind, c->v, w, c->part);
+		CK(c, cudaGetLastError(), "contact");
+		if (queue(c, nb, RS_VM, "contact"))
+			return -1;
+		double dtm = now_ms() - t0;
+		c->st.step_ms += dtm;
+		c->st.contact_ms += dtm;
+		return 0;
+	}
 	if (fetch(c, nb, "contact"))
 		return -1;
 	*count = c->hres->cnt;
 	if (*count > 0) {
-		k_vmax<<<nb, TPB>>>(c->dm, c->dkind, c->v, c->part);
+		k_vmax<<<nb, TPB>>>(c->dm, c->dkind, c->v, w, c->part);
 		CK(c, cudaGetLastError(), "contact");
 		if (fetch(c, nb, "contact"))
 			return -1;
@@ -650,6 +724,56 @@ static int cu_rcontact(void *ctx, double stick_dt, int64_t *count, double *vmax)
 	double dtm = now_ms() - t0;
 	c->st.step_ms += dtm;
 	c->st.contact_ms += dtm;
+	return 0;
+}
+
+/* the deferred reads (tled_ops_t defer, sync, watch) */
+static int cu_sync(void *ctx)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	if (!c->pend)
+		return 0;
+	double t0 = now_ms();
+	CK(c, cudaMemcpy(c->hres + 1, c->res + 1, (RS_N - 1) * sizeof(red),
+			 cudaMemcpyDeviceToHost), "the step's read");
+	unsigned p = c->pend;
+	c->pend = 0;
+	const red *h = c->hres;
+	if (p & (1u << RS_F))
+		forces_info(h[RS_F], c->q_fi);
+	if (p & (1u << RS_RQ)) {
+		*c->q_num = h[RS_RQ].s0;
+		*c->q_den = h[RS_RQ].s1;
+	}
+	if (p & (1u << RS_CD))
+		cd_info(h[RS_CD], c->q_ci);
+	if (p & (1u << RS_CT)) {
+		*c->q_cnt = h[RS_CT].cnt;
+		if (*c->q_cnt > 0)
+			*c->q_vm = sqrt(h[RS_VM].mx > 0 ? h[RS_VM].mx : 0);
+	}
+	double dtm = now_ms() - t0;
+	c->st.step_ms += dtm;
+	c->st.wait_ms += dtm;
+	return 0;
+}
+
+static int cu_defer(void *ctx, int on)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	if (!on && cu_sync(ctx))
+		return -1;
+	c->defer = on != 0;
+	c->w_on = 0;
+	return 0;
+}
+
+static int cu_watch(void *ctx, double emax, double L)
+{
+	tled_cuda_t *c = (tled_cuda_t *)ctx;
+	c->w_on = 1;
+	c->w_emax = emax;
+	c->w_L = L;
 	return 0;
 }
 
@@ -712,7 +836,7 @@ tled_cuda_t *tled_cuda_open(int device, char *err, size_t errsize)
 	cudaDeviceProp pr;
 	if ((e = cudaSetDevice(device)) != cudaSuccess ||
 	    (e = cudaGetDeviceProperties(&pr, device)) != cudaSuccess ||
-	    (e = cudaMallocHost((void **)&c->hres, sizeof(red))) != cudaSuccess) {
+	    (e = cudaMallocHost((void **)&c->hres, RS_N * sizeof(red))) != cudaSuccess) {
 		snprintf(err, errsize, "CUDA device %d: %s", device,
 			 cudaGetErrorString(e));
 		cudaGetLastError();
@@ -823,6 +947,9 @@ void tled_cuda_ops(tled_cuda_t *c, tled_ops_t *ops)
 	ops->kvstart = cu_kvstart;
 	ops->kvstep = cu_kvstep;
 	ops->kvnext = cu_kvnext;
+	ops->defer = cu_defer;
+	ops->sync = cu_sync;
+	ops->watch = cu_watch;
 }
 
 } /* extern "C" */

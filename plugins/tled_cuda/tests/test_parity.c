@@ -194,6 +194,121 @@ static void test_two_threads(void **state)
 	tled_model_free(&m);
 }
 
+/* The deferred reads (tled_ops_t defer, sync, watch): the backend queues
+ * the reductions of the forces, the damping's quotient, the update and the
+ * contact, and tled_relax reads them in one copy per time step instead of
+ * four.  Asserted against the same backend reading each value at once
+ * (those members NULL), on the cavity with contact:
+ * - converged: the iterations, every displacement and every velocity, and
+ *   the iteration log, bit for bit;
+ * - the inverted-point watch (a 3 mm push, which inverts here) and the
+ *   energy watch (the time step forced to 1.3x the critical one): the
+ *   same message, and the same state left behind (u and v bit for bit),
+ *   which needs the device to skip the update and the contact that the
+ *   deferred reads had already queued. */
+typedef struct {
+	int rc, iters;
+	char err[512];
+	double *u, *v, dt_crit;
+	tled_iter_log_t lg;
+} defer_run_t;
+
+static void defer_relax(const cavity_cfg_t *c, double ua, double dt,
+			int immediate, defer_run_t *r)
+{
+	tled_model_t m;
+	char err[512];
+	assert_int_equal(cavity_model_build(c, &m, err, sizeof err), 0);
+	double *tgt = cavity_radial_targets(&m, ua);
+	assert_non_null(tgt);
+	tled_ops_t ops = g_cu_ops;
+	if (immediate)
+		ops.defer = NULL, ops.sync = NULL, ops.watch = NULL;
+	tled_solver_t s;
+	assert_int_equal(tled_solver_init(&s, &m, err, sizeof err), 0);
+	tled_solver_opts_t so;
+	tled_solver_opts_default(&so);
+	so.ops = &ops;
+	so.contact = 1;
+	so.tol = c->tol * TLED_MM;
+	so.max_iter = 40000;
+	if (dt > 0) {
+		so.dt = dt;
+		so.dt_policy = TLED_DT_FORCE;
+	}
+	memset(&r->lg, 0, sizeof r->lg);
+	r->lg.every = 1;
+	so.itlog = &r->lg;
+	tled_relax_stats_t rs;
+	r->rc = tled_relax(&s, &so, tgt, "cavity", &rs, r->err, sizeof r->err);
+	r->iters = rs.iters;
+	r->dt_crit = rs.dt_crit;
+	size_t b = (size_t)(3 * m.n) * sizeof(double);
+	r->u = malloc(b);
+	r->v = malloc(b);
+	memcpy(r->u, s.u, b);
+	memcpy(r->v, s.v, b);
+	tled_solver_free(&s);
+	free(tgt);
+	tled_model_free(&m);
+}
+
+static void defer_same(defer_run_t *a, defer_run_t *b, size_t n3,
+		       const char *what)
+{
+	printf("deferred reads, %s: rc %d / %d, iterations %d / %d%s%s\n",
+	       what, a->rc, b->rc, a->iters, b->iters, a->rc ? ": " : "",
+	       a->rc ? a->err : "");
+	assert_int_equal(a->rc, b->rc);
+	assert_string_equal(a->err, b->err);
+	assert_int_equal(a->iters, b->iters);
+	assert_memory_equal(a->u, b->u, n3 * sizeof(double));
+	assert_memory_equal(a->v, b->v, n3 * sizeof(double));
+	assert_int_equal(a->lg.nrow, b->lg.nrow);
+	if (a->lg.nrow > 0)
+		assert_memory_equal(a->lg.row, b->lg.row, (size_t)a->lg.nrow *
+				    TLED_IT_NCOL * sizeof(double));
+	for (int k = 0; k < 2; k++) {
+		defer_run_t *r = k ? b : a;
+		free(r->u);
+		free(r->v);
+		tled_iter_log_free(&r->lg);
+	}
+}
+
+static void test_deferred_reads(void **state)
+{
+	TLED_TEST_REQUIRE();
+	cavity_cfg_t c;
+	cavity_cfg_default(&c);
+	c.h = 2.0;
+	c.tol = 1e-4;
+	tled_model_t m;
+	char err[512];
+	assert_int_equal(cavity_model_build(&c, &m, err, sizeof err), 0);
+	size_t n3 = (size_t)(3 * m.n);
+	tled_model_free(&m);
+	defer_run_t d, i;
+	/* converged */
+	defer_relax(&c, 1.0, 0, 0, &d);
+	defer_relax(&c, 1.0, 0, 1, &i);
+	assert_int_equal(d.rc, 0);
+	double dt_crit = d.dt_crit;
+	defer_same(&d, &i, n3, "converged, 1 mm");
+	/* an inverted point */
+	defer_relax(&c, 3.0, 0, 0, &d);
+	defer_relax(&c, 3.0, 0, 1, &i);
+	assert_int_not_equal(d.rc, 0);
+	assert_non_null(strstr(d.err, "inverted") ? d.err : NULL);
+	defer_same(&d, &i, n3, "3 mm");
+	/* an energy blow-up */
+	defer_relax(&c, 1.0, 1.3 * dt_crit, 0, &d);
+	defer_relax(&c, 1.0, 1.3 * dt_crit, 1, &i);
+	assert_int_not_equal(d.rc, 0);
+	assert_null(strstr(d.err, "iteration 1:")); /* past the first: the watch queued */
+	defer_same(&d, &i, n3, "1.3 x the critical time step");
+}
+
 /* a stage error, not a crash, when the device cannot hold the model */
 static void test_no_device_message(void **state)
 {
@@ -209,6 +324,7 @@ int main(void)
 		cmocka_unit_test(test_parity_nodal),
 		cmocka_unit_test(test_parity_collocated),
 		cmocka_unit_test(test_two_threads),
+		cmocka_unit_test(test_deferred_reads),
 		cmocka_unit_test(test_no_device_message),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
