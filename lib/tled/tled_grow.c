@@ -360,7 +360,8 @@ int tled_grow_process(armstg_stage_t *st, const tled_grow_params_t *pv,
 	if (tled_material_set(&mo.mat[MAT_BRAIN], pv->e_brain, pv->nu_brain,
 			      pv->density) ||
 	    tled_material_set(&mo.mat[MAT_CSF], pv->e_csf, pv->nu_csf,
-			      pv->density) ||
+			      pv->density_csf > 0 ? pv->density_csf
+						  : pv->density) ||
 	    tled_material_set(&mo.mat[MAT_TUMOUR], pv->e_tumour, pv->nu_tumour,
 			      pv->density)) {
 		rc = H->fail(st, ARMSTG_EINVAL, "invalid material parameters");

@@ -132,6 +132,7 @@
 typedef struct tled_grow_params {
 	double e_brain, nu_brain, e_tumour, nu_tumour, e_csf, nu_csf;
 	double density;
+	double density_csf; /* kg/m^3, 0: density */
 	int support_k;
 	int support_point;
 	double support_dilation;
