@@ -315,7 +315,7 @@ int fimg_jacobian(const fimg_t *u, fimg_t *out, field_jac_stats_t *stats,
  * much better than S alone (S damps every non-linear component).  A
  * linear field stays exact where S is (r = 0 there), except for the
  * residuals of the cloud's face nodes (where S is a weighted mean), which
- * reach up to 3 sigma inward with Gaussian weights (test_field.c: 0.003 mm
+ * reach up to 3 sigma inward with Gaussian weights (test_from_points.c: 0.003 mm
  * on a 3 mm field).  Support, search radius and taper: those of the first
  * pass.
  */
