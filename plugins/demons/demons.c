@@ -271,17 +271,6 @@ static int demons_init(armstg_stage_t *st)
 
 
 
-/* squarings of the exponential: the update's largest vector, mvox voxels,
- * scaled to at most half a voxel (with max_step 1 the LNCC update comes out
- * as 1 + 1e-8 voxel and must not cost a second squaring) */
-static int squarings(double mvox)
-{
-	int n = 0;
-	while (mvox / ldexp(1.0, n) > 0.5 * (1 + 1e-4) && n < 30)
-		n++;
-	return n;
-}
-
 static int add_row(armstg_stage_t *st, tab_t *t, int level, int it,
 		   double mse, double mean_u, double max_u, double secs,
 		   int lncc)
@@ -674,7 +663,7 @@ static int demons_process(armstg_stage_t *st)
 				/* s <- s o exp(u): scaling and squaring fused
 				 * with the composition (lib/field) */
 				fimg_t *v;
-				fimg_compose_exp(&S, &A, &B, squarings(mvox), &v, nt);
+				fimg_compose_exp(&S, &A, &B, dm_squarings(mvox), &v, nt);
 				fimg_t t = S;
 				S = *v;
 				*v = t;

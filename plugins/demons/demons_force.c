@@ -61,9 +61,7 @@ void dm_compute_force(const demons_priv_t *p, const level_t *L,
 	const int64_t st[3] = { 1, nx, (int64_t)nx * ny };
 	const int dims[3] = { nx, ny, nz };
 	double Li[3][3];
-	for (int a = 0; a < 3; a++)
-		for (int w = 0; w < 3; w++)
-			Li[a][w] = g->w2v[a * 4 + w];
+	dm_grid_li(g, Li);
 	const float *F = L->F.d, *W = L->W.d;
 	const float *FM = L->FM.d, *WM = L->WM.d;
 	const int sym = p->force == FORCE_SYMMETRIC;
@@ -167,9 +165,7 @@ int dm_compute_force_lncc(const demons_priv_t *p, const level_t *L,
 	if (img_box_sum(S, 6, dims, p->radius, nt))
 		return ARMSTG_ENOMEM;
 	double Li[3][3];
-	for (int a = 0; a < 3; a++)
-		for (int c = 0; c < 3; c++)
-			Li[a][c] = g->w2v[a * 4 + c];
+	dm_grid_li(g, Li);
 	const double nmin = 0.25 * pow(2 * p->radius + 1, 3);
 #pragma omp parallel for num_threads(nt) schedule(static)
 	for (int64_t r = 0; r < (int64_t)ny * nz; r++) {

@@ -10,6 +10,7 @@
 #ifndef DEMONS_INT_H
 #define DEMONS_INT_H
 
+#include <math.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -104,5 +105,24 @@ int dm_compute_force_lncc(const demons_priv_t *p, const level_t *L,
 			      fimg_t *U, double *score, int64_t *nused, int nt);
 void dm_update_stats(fimg_t *U, const level_t *L, float scale,
 			 double *mean, double *max, double *max_vox, int nt);
+
+/* squarings of the exponential: the update's largest vector, mvox voxels,
+ * scaled to at most half a voxel (with max_step 1 the LNCC update comes out
+ * as 1 + 1e-8 voxel and must not cost a second squaring) */
+static inline int dm_squarings(double mvox)
+{
+	int n = 0;
+	while (mvox / ldexp(1.0, n) > 0.5 * (1 + 1e-4) && n < 30)
+		n++;
+	return n;
+}
+
+/* d index / d world of grid g: the 3x3 part of its w2v */
+static inline void dm_grid_li(const fgrid_t *g, double Li[3][3])
+{
+	for (int a = 0; a < 3; a++)
+		for (int c = 0; c < 3; c++)
+			Li[a][c] = g->w2v[a * 4 + c];
+}
 
 #endif

@@ -42,6 +42,7 @@
 #include <string.h>
 
 #include "armstg/plugin.h"
+#include "demons_int.h"
 #include "demons_label.h"
 #include "img/edt.h"
 
@@ -259,9 +260,7 @@ static int label_step(dlabel_t *d, const fimg_t *FM, const fimg_t *WM,
 	const int64_t st[3] = { 1, nx, (int64_t)nx * ny };
 	const int dims[3] = { nx, ny, nz };
 	double Li[3][3];
-	for (int a = 0; a < 3; a++)
-		for (int c = 0; c < 3; c++)
-			Li[a][c] = g->w2v[a * 4 + c];
+	dm_grid_li(g, Li);
 	const float *F = d->FD.d, *W = d->WD.d;
 	/* the masks on the level grid (A's): the image term's voxels */
 	const float *fm = FM && FM->d ? FM->d : NULL, *wm = WM && WM->d ? WM->d : NULL;
@@ -365,16 +364,6 @@ int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
 					a[i] += wf * u[i];
 			}
 	return 0;
-}
-
-/* the squarings of exp(u) for its largest vector mvox (voxels): scaled to at
- * most half a voxel (as demons.c's) */
-static int squarings(double mvox)
-{
-	int n = 0;
-	while (mvox / ldexp(1.0, n) > 0.5 * (1 + 1e-4) && n < 30)
-		n++;
-	return n;
 }
 
 /* the correction's weight on the block: w = min(1, d(x, outside R) / blend)
@@ -489,7 +478,7 @@ int dlabel_correct(dlabel_t *d, fimg_t *S, const fimg_t *FM, double blend_mm,
 		/* s <- s o exp(w u) on the block (lib/field) */
 		memcpy(P.d, d->S.d, sizeof(float) * 3 * (size_t)nv);
 		fimg_t *res;
-		if ((rc = fimg_compose_exp(&d->S, &d->U, &B, squarings(mvox), &res,
+		if ((rc = fimg_compose_exp(&d->S, &d->U, &B, dm_squarings(mvox), &res,
 					   nt)))
 			goto out;
 		fimg_t t = d->S;
