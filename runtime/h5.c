@@ -39,7 +39,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include <hdf5.h>
@@ -255,18 +254,6 @@ static int link_name(hid_t g, hsize_t i, char *out, size_t outsize)
 	return k < 0 || (size_t)k >= outsize ? -1 : 0;
 }
 
-static int check_readable(const char *path, char *err, size_t errsize)
-{
-	struct stat sb;
-	if (stat(path, &sb))
-		return ferr(err, errsize, ARMSTG_EIO, "cannot open '%s': %s",
-			    path, strerror(errno));
-	if (S_ISDIR(sb.st_mode))
-		return ferr(err, errsize, ARMSTG_EIO,
-			    "'%s' is a folder, not a file", path);
-	return 0;
-}
-
 /* open an HDF5 file read-only and its group; returns 0 or an error */
 static int open_group(const char *path, const char *group, hid_t *fid,
 		      hid_t *gid, char *err, size_t errsize)
@@ -391,7 +378,7 @@ int ps_read_h5(const char *path, ps_t **out, char *err, size_t errsize)
 	*out = NULL;
 	if (!path || !*path)
 		return ferr(err, errsize, ARMSTG_EINVAL, "no file name given");
-	rc = check_readable(path, err, errsize);
+	rc = form_readable(path, "file", err, errsize);
 	if (rc)
 		return rc;
 	h5_enter();
@@ -778,7 +765,7 @@ int tab_read_file(const char *path, tab_t **out, char *err, size_t errsize)
 	*out = NULL;
 	if (!path || !*path)
 		return ferr(err, errsize, ARMSTG_EINVAL, "no file name given");
-	int rc = check_readable(path, err, errsize);
+	int rc = form_readable(path, "file", err, errsize);
 	if (rc)
 		return rc;
 	return is_h5_name(path) ? tab_read_h5(path, out, err, errsize)

@@ -530,13 +530,9 @@ int vol_read_nifti(const char *path, vol_t **out, char *err, size_t errsize)
 			    "no NIfTI file name given");
 	nii_init();
 
-	struct stat sb;
-	if (stat(path, &sb))
-		return ferr(err, errsize, ARMSTG_EIO, "cannot open '%s': %s",
-			    path, strerror(errno));
-	if (S_ISDIR(sb.st_mode))
-		return ferr(err, errsize, ARMSTG_EIO,
-			    "'%s' is a folder, not a NIfTI file", path);
+	rc = form_readable(path, "NIfTI file", err, errsize);
+	if (rc)
+		return rc;
 	if (!nifti_name_ok(path))
 		return ferr(err, errsize, ARMSTG_EINVAL,
 			    "'%s': not a NIfTI file name (expected .nii or "
