@@ -191,6 +191,15 @@ static inline int64_t ph_gidx(const ph_grid_t *g, int i, int j, int k)
 	return ((int64_t)k * g->n[1] + j) * g->n[0] + i;
 }
 
+/* world mm of voxel (i,j,k) */
+static inline void ph_gworld(const ph_grid_t *g, int i, int j, int k,
+			     double p[3])
+{
+	p[0] = g->o[0] + i * g->h;
+	p[1] = g->o[1] + j * g->h;
+	p[2] = g->o[2] + k * g->h;
+}
+
 /* trilinear sample of a planar 3-component double field at world p
  * (indices clamped to the grid: constant extension) */
 void ph_field_sample(const ph_grid_t *g, const double *u, const double p[3],

@@ -91,9 +91,9 @@ int ph_real_atlas(const ph_real_in_t *in, const ph_grid_t *G, uint8_t *alab,
 	for (int k = 0; k < nz; k++)
 		for (int j = 0; j < ny; j++)
 			for (int i = 0; i < nx; i++) {
-				int64_t e = ((int64_t)k * ny + j) * nx + i;
-				double p[3] = { G->o[0] + i * G->h, G->o[1] + j * G->h,
-						G->o[2] + k * G->h };
+				int64_t e = ph_gidx(G, i, j, k);
+				double p[3];
+				ph_gworld(G, i, j, k, p);
 				double t = nn_at(in->tissues, Wt, p);
 				long tl = isnan(t) ? 0 : lround(t);
 				int l = tl == in->csf ? PH_CSF : tl == in->gm ? PH_GM
@@ -196,9 +196,9 @@ int ph_real_tumour(const vol_t *tum, const ph_grid_t *G, uint8_t *tmask,
 	for (int k = 0; k < nz; k++)
 		for (int j = 0; j < ny; j++)
 			for (int i = 0; i < nx; i++) {
-				int64_t e = ((int64_t)k * ny + j) * nx + i;
-				double p[3] = { G->o[0] + i * G->h, G->o[1] + j * G->h,
-						G->o[2] + k * G->h };
+				int64_t e = ph_gidx(G, i, j, k);
+				double p[3];
+				ph_gworld(G, i, j, k, p);
 				double v = nn_at(tum, W, p);
 				long c = isnan(v) ? 0 : lround(v);
 				/* BraTS codes: 1 necrosis, 2 edema, 3 non-enhancing,

@@ -50,7 +50,7 @@ static void analytic_atlas(gen_t *g)
 		for (int j = 0; j < ny; j++)
 			for (int i = 0; i < nx; i++) {
 				double p[3];
-				gworld(G, i, j, k, p);
+				ph_gworld(G, i, j, k, p);
 				g->alab[ph_gidx(G, i, j, k)] =
 					(uint8_t)ph_anat_label(&g->A, p);
 			}
@@ -68,7 +68,7 @@ static void analytic_atlas(gen_t *g)
 						a[m] = 0;
 					for (int s = 0; s < 8; s++) {
 						double p[3];
-						gworld(G, i, j, k, p);
+						ph_gworld(G, i, j, k, p);
 						for (int c = 0; c < 3; c++)
 							p[c] += gen_sub8[s][c] *
 								G->h;
@@ -136,7 +136,7 @@ int gen_random(gen_t *g)
 			for (int i = 0; i < C->n[0]; i++) {
 				int64_t e = ph_gidx(C, i, j, k);
 				double p[3], w[3];
-				gworld(C, i, j, k, p);
+				ph_gworld(C, i, j, k, p);
 				ph_modes_eval3(&m, p, w);
 				for (int c = 0; c < 3; c++)
 					v[c * nv + e] = w[c];

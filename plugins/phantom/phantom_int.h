@@ -116,15 +116,6 @@ typedef struct gen {
 	double t_atlas, t_rand, t_elastic, t_search, t_patient, t_jac;
 } gen_t;
 
-/* world mm of voxel (i,j,k) of an axis-aligned grid */
-static inline void gworld(const ph_grid_t *G, int i, int j, int k,
-			  double p[3])
-{
-	p[0] = G->o[0] + i * G->h;
-	p[1] = G->o[1] + j * G->h;
-	p[2] = G->o[2] + k * G->h;
-}
-
 /* nearest atlas voxel label at world a (0 outside the grid) */
 static inline int atlas_nn(const gen_t *g, const double a[3])
 {

@@ -155,7 +155,7 @@ int gen_mass_solve(gen_t *g)
 			for (int i = 0; i < nx; i++) {
 				int64_t e = ((int64_t)k * ny + j) * nx + i;
 				double x[3], a[3];
-				gworld(C, i, j, k, x);
+				ph_gworld(C, i, j, k, x);
 				healthy_to_atlas(g, x, a);
 				int l = label_at(g, a);
 				fr[e] = l != PH_BG;
@@ -171,7 +171,7 @@ int gen_mass_solve(gen_t *g)
 		for (int j = 0; j < ny - 1; j++)
 			for (int i = 0; i < nx - 1; i++) {
 				double x0[3];
-				gworld(C, i, j, k, x0);
+				ph_gworld(C, i, j, k, x0);
 				int in = 0;
 				for (int s = 0; s < 8; s++) {
 					double x[3], a[3];
@@ -234,7 +234,7 @@ static double vent_measure(const gen_t *g, const cand_t *cd, const double *um)
 		    k = (int)(e / ((int64_t)G->n[0] * G->n[1]));
 		double x[3], a[3];
 		float fm[3], ft[3];
-		gworld(G, i, j, k, x);
+		ph_gworld(G, i, j, k, x);
 		point_fields(g, um, x, fm, ft);
 		for (int c = 0; c < 3; c++)
 			a[c] = x[c] + (double)ft[c];
@@ -290,7 +290,7 @@ int gen_mass_scale(gen_t *g)
 			for (int i = lo[0]; i <= hi[0]; i++) {
 				double x[3];
 				ph_tsample_t ts;
-				gworld(G, i, j, k, x);
+				ph_gworld(G, i, j, k, x);
 				tumour_at(g, x, &ts);
 				if (ts.t < 1.0)
 					continue;

@@ -68,7 +68,7 @@ int gen_patient(gen_t *g, vol_t **o)
 				int64_t oe = oidx(G, flip, i, j, k);
 				double x[3], a[3];
 				float fm[3], ft[3];
-				gworld(G, i, j, k, x);
+				ph_gworld(G, i, j, k, x);
 				point_fields(g, um, x, fm, ft);
 				for (int c = 0; c < 3; c++) {
 					tf[c * nv + oe] = ft[c];
@@ -107,7 +107,7 @@ int gen_patient(gen_t *g, vol_t **o)
 			for (int j = 0; j < C->n[1]; j++)
 				for (int i = 0; i < C->n[0]; i++) {
 					double p[3];
-					gworld(C, i, j, k, p);
+					ph_gworld(C, i, j, k, p);
 					g->bias[m * nvC + ph_gidx(C, i, j, k)] =
 						(float)(ph_modes_eval1(&bm, p) /
 							bnd);
@@ -135,7 +135,7 @@ int gen_patient(gen_t *g, vol_t **o)
 					continue;
 				}
 				double x[3], ut[3], val[PH_NMOD] = { 0 };
-				gworld(G, i, j, k, x);
+				ph_gworld(G, i, j, k, x);
 				for (int c = 0; c < 3; c++)
 					ut[c] = tf[c * nv + oe];
 				/* healthy tissue at the deformed position: the
