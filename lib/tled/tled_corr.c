@@ -51,38 +51,54 @@ typedef struct corr_ctx {
 	double *ev;          /* 3 per entry scratch */
 } corr_ctx_t;
 
+/* ip p's fit c = M^-1 sum w p v over its entries on constrained nodes */
+static inline void corr_ip_fit(const corr_ctx_t *cx, int64_t p,
+			       const double *v, double cc[4][3])
+{
+	const tled_model_t *m = cx->m;
+	double b[4][3] = { { 0 } };
+	for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+		int64_t a = m->ipnode[e];
+		if (!cx->con[a])
+			continue;
+		for (int r = 0; r < 4; r++)
+			for (int c = 0; c < 3; c++)
+				b[r][c] += cx->w[e] * cx->P[4 * e + r] *
+					   v[3 * a + c];
+	}
+	const double *Mi = cx->Mi + 16 * p;
+	for (int r = 0; r < 4; r++)
+		for (int c = 0; c < 3; c++)
+			cc[r][c] = Mi[4 * r] * b[0][c] + Mi[4 * r + 1] * b[1][c] +
+				   Mi[4 * r + 2] * b[2][c] +
+				   Mi[4 * r + 3] * b[3][c];
+}
+
+/* entry e's residual, component c: w_a (v_a - p_a^T c), v_a = 0 on a node
+ * not constrained */
+static inline double corr_entry_resid(const corr_ctx_t *cx, int64_t e,
+				      const double cc[4][3], const double *v,
+				      int c)
+{
+	int64_t a = cx->m->ipnode[e];
+	const double *pa = cx->P + 4 * e;
+	double fit = pa[0] * cc[0][c] + pa[1] * cc[1][c] + pa[2] * cc[2][c] +
+		     pa[3] * cc[3][c];
+	double va = cx->con[a] ? v[3 * a + c] : 0;
+	return cx->w[e] * (va - fit);
+}
+
 /* per-entry residual values  e = w_a (v_a - p_a^T c), c = M^-1 sum w p v */
 static void corr_resid(const corr_ctx_t *cx, const double *v, double *ev)
 {
 	const tled_model_t *m = cx->m;
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
 	for (int64_t p = 0; p < m->nip; p++) {
-		double b[4][3] = { { 0 } }, cc[4][3];
-		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
-			int64_t a = m->ipnode[e];
-			if (!cx->con[a])
-				continue;
-			for (int r = 0; r < 4; r++)
-				for (int c = 0; c < 3; c++)
-					b[r][c] += cx->w[e] * cx->P[4 * e + r] *
-						   v[3 * a + c];
-		}
-		const double *Mi = cx->Mi + 16 * p;
-		for (int r = 0; r < 4; r++)
+		double cc[4][3];
+		corr_ip_fit(cx, p, v, cc);
+		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++)
 			for (int c = 0; c < 3; c++)
-				cc[r][c] = Mi[4 * r] * b[0][c] + Mi[4 * r + 1] * b[1][c] +
-					   Mi[4 * r + 2] * b[2][c] +
-					   Mi[4 * r + 3] * b[3][c];
-		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
-			int64_t a = m->ipnode[e];
-			const double *pa = cx->P + 4 * e;
-			for (int c = 0; c < 3; c++) {
-				double fit = pa[0] * cc[0][c] + pa[1] * cc[1][c] +
-					     pa[2] * cc[2][c] + pa[3] * cc[3][c];
-				double va = cx->con[a] ? v[3 * a + c] : 0;
-				ev[3 * e + c] = cx->w[e] * (va - fit);
-			}
-		}
+				ev[3 * e + c] = corr_entry_resid(cx, e, cc, v, c);
 	}
 }
 
@@ -110,34 +126,14 @@ static void corr_apply_fused(const corr_ctx_t *cx, const double *v,
 						     m->fb_ptr[bk])) *
 					      sizeof *bb);
 			for (int64_t p = p0; p < p1; p++) {
-				double b[4][3] = { { 0 } }, cc[4][3];
-				for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
-					int64_t a = m->ipnode[e];
-					if (!cx->con[a])
-						continue;
-					for (int r = 0; r < 4; r++)
-						for (int c = 0; c < 3; c++)
-							b[r][c] += cx->w[e] * cx->P[4 * e + r] *
-								   v[3 * a + c];
-				}
-				const double *Mi = cx->Mi + 16 * p;
-				for (int r = 0; r < 4; r++)
-					for (int c = 0; c < 3; c++)
-						cc[r][c] = Mi[4 * r] * b[0][c] +
-							   Mi[4 * r + 1] * b[1][c] +
-							   Mi[4 * r + 2] * b[2][c] +
-							   Mi[4 * r + 3] * b[3][c];
+				double cc[4][3];
+				corr_ip_fit(cx, p, v, cc);
 				double V = m->ipV[p];
 				for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
-					int64_t a = m->ipnode[e];
-					const double *pa = cx->P + 4 * e;
 					double *o = bb + 3 * loc[e];
-					for (int c = 0; c < 3; c++) {
-						double fit = pa[0] * cc[0][c] + pa[1] * cc[1][c] +
-							     pa[2] * cc[2][c] + pa[3] * cc[3][c];
-						double va = cx->con[a] ? v[3 * a + c] : 0;
-						o[c] += V * (cx->w[e] * (va - fit));
-					}
+					for (int c = 0; c < 3; c++)
+						o[c] += V * corr_entry_resid(cx, e, cc,
+									     v, c);
 				}
 			}
 		}
