@@ -195,10 +195,17 @@ int tled_solver_init(tled_solver_t *s, tled_model_t *m, char *err,
 
 /* ------------------------------------------------------------ relax */
 
-static void node_mm(const tled_solver_t *s, int64_t a, double out[3])
+/* where a node that blew up is: its reference position (world mm, the
+ * atlas's frame: a blown-up or non-finite u says nowhere) in out, and how
+ * far it moved (mm; NaN or Inf when u is) as the return value */
+static double node_mm(const tled_solver_t *s, int64_t a, double out[3])
 {
-	for (int i = 0; i < 3; i++)
-		out[i] = (s->m->X[3 * a + i] + s->u[3 * a + i]) / TLED_MM;
+	double d2 = 0;
+	for (int i = 0; i < 3; i++) {
+		out[i] = s->m->X[3 * a + i] / TLED_MM;
+		d2 += s->u[3 * a + i] * s->u[3 * a + i];
+	}
+	return sqrt(d2) / TLED_MM;
 }
 
 /* Host engine: the resident-step operations of tled_ops_t over the solver's
@@ -691,9 +698,9 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 			E.end(E.ctx, s);
 			node_mm(s, ci.node_nan, p);
 			return tled_errf(err, errsize, "%s, iteration %d: NaN/Inf "
-				    "displacement at node %lld (near %.2f, %.2f, "
-				    "%.2f mm): numerical blow-up (time step %.4g s, "
-				    "critical %.4g s)", tag, it,
+				    "displacement at node %lld (at %.2f, %.2f, "
+				    "%.2f mm in the atlas): numerical blow-up (time "
+				    "step %.4g s, critical %.4g s)", tag, it,
 				    (long long)ci.node_nan, p[0], p[1], p[2], dt,
 				    s->dt_crit);
 		}
@@ -701,17 +708,18 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		double Eref = E0 + (Wext > 0 ? Wext : 0) + Wfloor;
 		double umax = ci.vmax * dt; /* crude: increment size */
 		if (!isfinite(Etot) || Etot > blow * Eref || umax > L) {
-			double p[3] = { 0, 0, 0 };
+			double p[3] = { 0, 0, 0 }, moved = 0;
 			E.end(E.ctx, s);
 			if (ci.node_vmax >= 0)
-				node_mm(s, ci.node_vmax, p);
+				moved = node_mm(s, ci.node_vmax, p);
 			return tled_errf(err, errsize, "%s, iteration %d: energy "
 				    "blow-up: kinetic + strain energy %.3g J is "
 				    "%.3g x the energy supplied (%.3g J); fastest "
-				    "node %lld near (%.2f, %.2f, %.2f) mm at %.3g "
-				    "m/s; time step %.4g s vs critical %.4g s",
+				    "node %lld (at %.2f, %.2f, %.2f mm in the atlas, "
+				    "moved %.3g mm) at %.3g m/s; time step %.4g s vs "
+				    "critical %.4g s",
 				    tag, it, Etot, Etot / Eref, Eref,
-				    (long long)ci.node_vmax, p[0], p[1], p[2],
+				    (long long)ci.node_vmax, p[0], p[1], p[2], moved,
 				    ci.vmax, dt, s->dt_crit);
 		}
 		if (o->contact) {

@@ -688,6 +688,27 @@ static void test_dt_critical(void **state)
 		assert_non_null(strstr(err, "unstable run, iteration"));
 		assert_true(strstr(err, "blow-up") || strstr(err, "NaN"));
 		assert_non_null(strstr(err, "node"));
+		/* where: the node's place in the atlas (its reference
+		 * position, finite and inside the model), not where the
+		 * blown-up u took it */
+		{
+			const char *w = strstr(err, " mm in the atlas");
+			assert_non_null(w);
+			while (w > err && w[-1] != '(')
+				w--;
+			double q[3];
+			assert_int_equal(sscanf(w, "at %lf, %lf, %lf", &q[0],
+						&q[1], &q[2]), 3);
+			for (int i = 0; i < 3; i++) {
+				double lo = INFINITY, hi = -INFINITY;
+				for (int64_t a = 0; a < m.n; a++) {
+					lo = fmin(lo, m.X[3 * a + i] / TLED_MM);
+					hi = fmax(hi, m.X[3 * a + i] / TLED_MM);
+				}
+				assert_true(isfinite(q[i]) && q[i] >= lo - 1e-9 &&
+					    q[i] <= hi + 1e-9);
+			}
+		}
 		/* policies: refuse names both steps; reduce uses safety*crit */
 		memcpy(s.u, u0, (size_t)(3 * m.n) * sizeof *u0);
 		so.dt_policy = TLED_DT_REFUSE;
