@@ -7,21 +7,17 @@
 
 #include "testutil.h"
 
-static char dir[256];
-
+/* the scratch folder: testutil.h's tu_tmpdir() */
 static int setup(void **state)
 {
 	(void)state;
-	snprintf(dir, sizeof dir, "/tmp/armstg-h5sink-XXXXXX");
-	return mkdtemp(dir) ? 0 : -1;
+	return tu_tmpdir_make("h5sink");
 }
 
 static int teardown(void **state)
 {
 	(void)state;
-	char cmd[300];
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-	return system(cmd) ? -1 : 0;
+	return tu_tmpdir_remove();
 }
 
 
@@ -30,7 +26,8 @@ static const char *at(const char *sub, const char *name)
 	static char buf[2][600];
 	static int slot;
 	slot ^= 1;
-	snprintf(buf[slot], sizeof buf[slot], "%s/%s/%s", dir, sub, name);
+	snprintf(buf[slot], sizeof buf[slot], "%s/%s/%s", tu_tmpdir(), sub,
+		 name);
 	return buf[slot];
 }
 
@@ -53,7 +50,7 @@ static void test_points_and_table(void **state)
 	msg_freeze(&t->base);
 	const msg_t *in[2] = { &p->base, &t->base };
 	char err[1024], out[300];
-	snprintf(out, sizeof out, "%s/a", dir);
+	snprintf(out, sizeof out, "%s/a", tu_tmpdir());
 	const char *pr[] = { "path=nodes.h5", "table_path=stats.tsv", NULL };
 	int rc = tu_run_in(TU_PLUGIN(), pr, in, NULL, out, err, sizeof err);
 	if (rc)
@@ -72,7 +69,7 @@ static void test_points_and_table(void **state)
 
 	/* only a table: it goes to path, HDF5 by its name */
 	in[0] = NULL;
-	snprintf(out, sizeof out, "%s/b", dir);
+	snprintf(out, sizeof out, "%s/b", tu_tmpdir());
 	const char *pt[] = { "path=stats.h5", NULL };
 	rc = tu_run_in(TU_PLUGIN(), pt, in, NULL, out, err, sizeof err);
 	if (rc)
@@ -93,7 +90,7 @@ static void test_refusals(void **state)
 	msg_freeze(&p->base);
 	msg_freeze(&t->base);
 	char err[1024], out[300];
-	snprintf(out, sizeof out, "%s/r", dir);
+	snprintf(out, sizeof out, "%s/r", tu_tmpdir());
 	assert_int_equal(mkdir(out, 0777), 0);
 
 	const msg_t *both[2] = { &p->base, &t->base };

@@ -5,21 +5,17 @@
 
 #include "testutil.h"
 
-static char dir[256];
-
+/* the scratch folder: testutil.h's tu_tmpdir() */
 static int setup(void **state)
 {
 	(void)state;
-	snprintf(dir, sizeof dir, "/tmp/armstg-h5src-XXXXXX");
-	return mkdtemp(dir) ? 0 : -1;
+	return tu_tmpdir_make("h5src");
 }
 
 static int teardown(void **state)
 {
 	(void)state;
-	char cmd[300];
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-	return system(cmd) ? -1 : 0;
+	return tu_tmpdir_remove();
 }
 
 static ps_t *sample_ps(void)
@@ -56,7 +52,7 @@ static void test_read_both_kinds(void **state)
 	msg_t *out[2];
 
 	ps_t *p = sample_ps();
-	snprintf(path, sizeof path, "%s/nodes.h5", dir);
+	snprintf(path, sizeof path, "%s/nodes.h5", tu_tmpdir());
 	assert_int_equal(ps_write_h5(path, p, err, sizeof err), 0);
 	snprintf(arg, sizeof arg, "path=%s", path);
 	const char *pp[] = { arg, NULL };
@@ -71,7 +67,7 @@ static void test_read_both_kinds(void **state)
 	tab_t *t = sample_tab();
 	const char *names[] = { "metrics.tsv", "metrics.h5" };
 	for (int f = 0; f < 2; f++) {
-		snprintf(path, sizeof path, "%s/%s", dir, names[f]);
+		snprintf(path, sizeof path, "%s/%s", tu_tmpdir(), names[f]);
 		assert_int_equal(tab_write_file(path, t, err, sizeof err), 0);
 		snprintf(arg, sizeof arg, "path=%s", path);
 		const char *pt[] = { arg, "kind=table", NULL };
@@ -90,14 +86,14 @@ static void test_refusals(void **state)
 	(void)state;
 	char arg[600], err[1024];
 	msg_t *out[2] = { NULL, NULL };
-	snprintf(arg, sizeof arg, "path=%s/metrics.tsv", dir);
+	snprintf(arg, sizeof arg, "path=%s/metrics.tsv", tu_tmpdir());
 	const char *p1[] = { arg, NULL };
 	assert_int_equal(tu_run(TU_PLUGIN(), p1, NULL, out, err, sizeof err),
 			 ARMSTG_EINVAL);
 	assert_non_null(strstr(err, "kind=pointset reads HDF5"));
 	assert_non_null(strstr(err, "set kind=table"));
 
-	snprintf(arg, sizeof arg, "path=%s/none.h5", dir);
+	snprintf(arg, sizeof arg, "path=%s/none.h5", tu_tmpdir());
 	const char *p2[] = { arg, NULL };
 	assert_int_equal(tu_run(TU_PLUGIN(), p2, NULL, out, err, sizeof err),
 			 ARMSTG_EIO);
@@ -106,7 +102,7 @@ static void test_refusals(void **state)
 
 	/* a table file read as a point set */
 	char path[512];
-	snprintf(path, sizeof path, "%s/tab.h5", dir);
+	snprintf(path, sizeof path, "%s/tab.h5", tu_tmpdir());
 	tab_t *t = sample_tab();
 	assert_int_equal(tab_write_file(path, t, err, sizeof err), 0);
 	msg_unref(&t->base);

@@ -9,21 +9,17 @@
 
 #include "testutil.h"
 
-static char dir[256];
-
+/* the scratch folder: testutil.h's tu_tmpdir() */
 static int setup(void **state)
 {
 	(void)state;
-	snprintf(dir, sizeof dir, "/tmp/armstg-nsink-XXXXXX");
-	return mkdtemp(dir) ? 0 : -1;
+	return tu_tmpdir_make("nsink");
 }
 
 static int teardown(void **state)
 {
 	(void)state;
-	char cmd[300];
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-	return system(cmd) ? -1 : 0;
+	return tu_tmpdir_remove();
 }
 
 /* number of entries in a folder (recursively), temporaries counted apart */
@@ -65,17 +61,18 @@ static void test_write_volume_and_field(void **state)
 	const msg_t *in[1] = { &v->base };
 	char err[1024];
 	const char *p[] = { "path=sub/t1.nii.gz", NULL };
-	int rc = tu_run_in(TU_PLUGIN(), p, in, NULL, dir, err, sizeof err);
+	int rc = tu_run_in(TU_PLUGIN(), p, in, NULL, tu_tmpdir(), err,
+			   sizeof err);
 	if (rc)
 		fail_msg("%s", err);
 	char path[512];
-	snprintf(path, sizeof path, "%s/sub/t1.nii.gz", dir);
+	snprintf(path, sizeof path, "%s/sub/t1.nii.gz", tu_tmpdir());
 	vol_t *r = NULL;
 	assert_int_equal(vol_read_nifti(path, &r, err, sizeof err), 0);
 	assert_true(msg_equal(&v->base, &r->base));
 	msg_unref(&r->base);
 	int tmps = 0;
-	assert_int_equal(count_files(dir, &tmps), 1);
+	assert_int_equal(count_files(tu_tmpdir(), &tmps), 1);
 	assert_int_equal(tmps, 0);
 
 	/* a displacement field: 5-D, intent vector, LPS on disk */
@@ -87,10 +84,10 @@ static void test_write_volume_and_field(void **state)
 	msg_freeze(&f->base);
 	in[0] = &f->base;
 	const char *pf[] = { "path=warp.nii.gz", NULL };
-	rc = tu_run_in(TU_PLUGIN(), pf, in, NULL, dir, err, sizeof err);
+	rc = tu_run_in(TU_PLUGIN(), pf, in, NULL, tu_tmpdir(), err, sizeof err);
 	if (rc)
 		fail_msg("%s", err);
-	snprintf(path, sizeof path, "%s/warp.nii.gz", dir);
+	snprintf(path, sizeof path, "%s/warp.nii.gz", tu_tmpdir());
 	nifti_set_debug_level(0);
 	nifti_image *nim = nifti_image_read(path, 1);
 	assert_non_null(nim);
@@ -111,7 +108,7 @@ static void test_refusals_leave_nothing(void **state)
 {
 	(void)state;
 	char sub[300];
-	snprintf(sub, sizeof sub, "%s/refuse", dir);
+	snprintf(sub, sizeof sub, "%s/refuse", tu_tmpdir());
 	assert_int_equal(mkdir(sub, 0777), 0);
 	vol_t *v = vol_new(2, 2, 2, 1, DT_U8, NULL);
 	msg_freeze(&v->base);

@@ -5,21 +5,17 @@
 
 #include "testutil.h"
 
-static char dir[256];
-
+/* the scratch folder: testutil.h's tu_tmpdir() */
 static int setup(void **state)
 {
 	(void)state;
-	snprintf(dir, sizeof dir, "/tmp/armstg-nsrc-XXXXXX");
-	return mkdtemp(dir) ? 0 : -1;
+	return tu_tmpdir_make("nsrc");
 }
 
 static int teardown(void **state)
 {
 	(void)state;
-	char cmd[300];
-	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-	return system(cmd) ? -1 : 0;
+	return tu_tmpdir_remove();
 }
 
 static const double LPS[16] = { -1, 0, 0, 0, 0, -1, 0, 239, 0, 0, 1.5, 0,
@@ -32,7 +28,7 @@ static void test_read_and_convert(void **state)
 	for (int64_t e = 0; e < vol_nvox(v); e++)
 		((float *)v->data)[e] = (float)(e % 5); /* labels as floats */
 	char path[512], arg[600], err[1024];
-	snprintf(path, sizeof path, "%s/labels.nii.gz", dir);
+	snprintf(path, sizeof path, "%s/labels.nii.gz", tu_tmpdir());
 	assert_int_equal(vol_write_nifti(path, v, err, sizeof err), 0);
 	snprintf(arg, sizeof arg, "path=%s", path);
 
@@ -62,7 +58,7 @@ static void test_refusals(void **state)
 {
 	(void)state;
 	char arg[600], err[1024];
-	snprintf(arg, sizeof arg, "path=%s/absent.nii.gz", dir);
+	snprintf(arg, sizeof arg, "path=%s/absent.nii.gz", tu_tmpdir());
 	const char *p1[] = { arg, NULL };
 	msg_t *out[1] = { NULL };
 	assert_int_equal(tu_run(TU_PLUGIN(), p1, NULL, out, err, sizeof err),
@@ -98,14 +94,14 @@ static void test_optional(void **state)
 	assert_true(tu_run(TU_PLUGIN(), p2, NULL, out, err, sizeof err) < 0);
 	assert_null(out[0]);
 	char arg[600];
-	snprintf(arg, sizeof arg, "path=%s/absent.nii.gz", dir);
+	snprintf(arg, sizeof arg, "path=%s/absent.nii.gz", tu_tmpdir());
 	const char *p3[] = { arg, "optional=true", NULL };
 	assert_int_equal(tu_run(TU_PLUGIN(), p3, NULL, out, err, sizeof err),
 			 ARMSTG_EIO);
 	assert_non_null(strstr(err, "absent.nii.gz"));
 	vol_t *v = vol_new(3, 3, 3, 1, DT_F32, LPS);
 	((float *)v->data)[13] = 7.5f;
-	snprintf(arg, sizeof arg, "path=%s/given.nii.gz", dir);
+	snprintf(arg, sizeof arg, "path=%s/given.nii.gz", tu_tmpdir());
 	assert_int_equal(vol_write_nifti(arg + 5, v, err, sizeof err), 0);
 	const char *p4[] = { arg, "optional=true", NULL };
 	assert_int_equal(tu_run(TU_PLUGIN(), p4, NULL, out, err, sizeof err),
@@ -170,7 +166,7 @@ static void test_conversion_never_silent(void **state)
 			vol_set(v, e, (double)(e % 5));
 		vol_set(v, vol_idx(v, 3, 2, 1), cases[c].x);
 		char path[512], arg[600], err[1024];
-		snprintf(path, sizeof path, "%s/bad%zu.nii.gz", dir, c);
+		snprintf(path, sizeof path, "%s/bad%zu.nii.gz", tu_tmpdir(), c);
 		assert_int_equal(vol_write_nifti(path, v, err, sizeof err), 0);
 		snprintf(arg, sizeof arg, "path=%s", path);
 		const char *p[] = { arg, dn[cases[c].dtype], NULL };
@@ -192,7 +188,7 @@ static void test_conversion_never_silent(void **state)
 	vol_t *v = vol_new(2, 2, 2, 1, DT_F64, LPS);
 	vol_set(v, 0, 0.1);
 	char path[512], arg[600], err[1024];
-	snprintf(path, sizeof path, "%s/tenth.nii", dir);
+	snprintf(path, sizeof path, "%s/tenth.nii", tu_tmpdir());
 	assert_int_equal(vol_write_nifti(path, v, err, sizeof err), 0);
 	snprintf(arg, sizeof arg, "path=%s", path);
 	const char *p[] = { arg, "dtype=f32", NULL };
