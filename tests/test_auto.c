@@ -35,8 +35,7 @@
  */
 #include <math.h>
 
-#include "testutil.h"
-#include "graph.h"
+#include "graphutil.h"
 
 #define PH_PARAMS "plugin = phantom\nspacing = 3\nnx = 64\nny = 64\nnz = 48\n"
 
@@ -102,27 +101,6 @@ static int ran_auto = -1, ran_eval = -1, ran_direct = -1, ran_fail = -1,
 	   ran_zero = -1;
 static char run_err[4096], fail_err[4096], zero_err[4096];
 
-static void set_plugin_path(void)
-{
-	if (getenv("ARMSTG_PLUGIN_PATH"))
-		return;
-	char p[1024];
-	snprintf(p, sizeof p, "%s/plugins", tu_build_dir());
-	setenv("ARMSTG_PLUGIN_PATH", p, 1);
-}
-
-static int run_file(const char *path, const char *const *sets, int nsets,
-		    const char *out, char *err, size_t errsize)
-{
-	graph_t *g = graph_load(path, sets, nsets, err, errsize);
-	if (!g)
-		return -1000;
-	run_opts_t o = { .outdir = out, .jobs = 2, .quiet = 1 };
-	int rc = graph_run(g, &o, err, errsize);
-	graph_free(g);
-	return rc;
-}
-
 static int run_string(const char *text, const char *out, char *err,
 		      size_t errsize)
 {
@@ -134,7 +112,7 @@ static int run_string(const char *text, const char *out, char *err,
 	FILE *f = fdopen(fd, "w");
 	fputs(text, f);
 	fclose(f);
-	int rc = run_file(gp, NULL, 0, out, err, errsize);
+	int rc = tu_run_graph(gp, NULL, 0, out, err, errsize);
 	unlink(gp);
 	return rc;
 }
@@ -152,7 +130,7 @@ static void set_env(const char *k, const char *file)
 static int setup(void **state)
 {
 	(void)state;
-	set_plugin_path();
+	tu_plugin_path();
 	if (!mkdtemp(dir))
 		return -1;
 	snprintf(ph, sizeof ph, "%s/phantom", dir);
@@ -179,8 +157,8 @@ static int setup(void **state)
 	unsetenv("PATIENT_IMAGE");
 	unsetenv("GROW");
 	const char *sets[] = { "tune.values=4.5" };
-	ran_auto = run_file("graphs/armstg_auto.ini", sets, 1, out_auto,
-			    run_err, sizeof run_err);
+	ran_auto = tu_run_graph("graphs/armstg_auto.ini", sets, 1, out_auto,
+				run_err, sizeof run_err);
 	if (ran_auto)
 		fprintf(stderr, "armstg_auto.ini failed: %s\n", run_err);
 	else {
@@ -194,12 +172,12 @@ static int setup(void **state)
 	if (ran_direct)
 		fprintf(stderr, "direct demons failed: %s\n", err);
 	const char *zero[] = { "tune.values=0" };
-	ran_zero = run_file("graphs/armstg_auto.ini", zero, 1, out_zero,
-			    zero_err, sizeof zero_err);
+	ran_zero = tu_run_graph("graphs/armstg_auto.ini", zero, 1, out_zero,
+				zero_err, sizeof zero_err);
 	/* no FLAIR, no T2: sts makes no tumour */
 	setenv("PATIENT_FLAIR", "none", 1);
-	ran_fail = run_file("graphs/armstg_auto.ini", sets, 1, out_fail,
-			    fail_err, sizeof fail_err);
+	ran_fail = tu_run_graph("graphs/armstg_auto.ini", sets, 1, out_fail,
+				fail_err, sizeof fail_err);
 	set_env("PATIENT_FLAIR", "flair.nii.gz");
 	return 0;
 }

@@ -30,8 +30,7 @@
 #include <dirent.h>
 #include <math.h>
 
-#include "testutil.h"
-#include "graph.h"
+#include "graphutil.h"
 
 /* the graph's [tune] tries two push depths instead of six: the growth
  * is the cost (6 mm nodes over the same brain as the full demo, about 50 s
@@ -74,35 +73,14 @@ static char out_direct[] = "/tmp/armstg-direct-XXXXXX";
 static int ran_armstg = -1, ran_direct = -1;
 static char run_err[4096];
 
-static void set_plugin_path(void)
-{
-	if (getenv("ARMSTG_PLUGIN_PATH"))
-		return;
-	char p[1024];
-	snprintf(p, sizeof p, "%s/plugins", tu_build_dir());
-	setenv("ARMSTG_PLUGIN_PATH", p, 1);
-}
-
-static int run_file(const char *path, const char *const *sets, int nsets,
-		    const char *out, char *err, size_t errsize)
-{
-	graph_t *g = graph_load(path, sets, nsets, err, errsize);
-	if (!g)
-		return -1000;
-	run_opts_t o = { .outdir = out, .jobs = 2, .quiet = 1 };
-	int rc = graph_run(g, &o, err, errsize);
-	graph_free(g);
-	return rc;
-}
-
 static int setup(void **state)
 {
 	(void)state;
-	set_plugin_path();
+	tu_plugin_path();
 	if (!mkdtemp(out_armstg) || !mkdtemp(out_direct))
 		return -1;
-	ran_armstg = run_file("graphs/demo.ini", small, NSMALL, out_armstg,
-			      run_err, sizeof run_err);
+	ran_armstg = tu_run_graph("graphs/demo.ini", small, NSMALL, out_armstg,
+				  run_err, sizeof run_err);
 	if (ran_armstg)
 		fprintf(stderr, "demo.ini failed: %s\n", run_err);
 	char gp[] = "/tmp/armstg-direct-graph-XXXXXX.ini";
@@ -113,7 +91,7 @@ static int setup(void **state)
 	fputs(direct_graph, f);
 	fclose(f);
 	char err[4096];
-	ran_direct = run_file(gp, NULL, 0, out_direct, err, sizeof err);
+	ran_direct = tu_run_graph(gp, NULL, 0, out_direct, err, sizeof err);
 	if (ran_direct)
 		fprintf(stderr, "direct graph failed: %s\n", err);
 	unlink(gp);
@@ -350,8 +328,8 @@ static void test_no_tumour_fails_cleanly(void **state)
 		sets[i] = small[i];
 	sets[NSMALL] = "phantom.tumour_radius=0";
 	sets[NSMALL + 1] = "phantom.mass_effect=0";
-	int rc = run_file("graphs/demo.ini", sets, NSMALL + 2, out, err,
-			  sizeof err);
+	int rc = tu_run_graph("graphs/demo.ini", sets, NSMALL + 2, out, err,
+			      sizeof err);
 	print_message("no tumour: rc %d: %s\n", rc, err);
 	assert_true(rc < 0 && rc != -1000);
 	assert_non_null(strcasestr(err, "empty"));

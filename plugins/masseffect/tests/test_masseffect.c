@@ -29,8 +29,7 @@
 #include <math.h>
 #include <sys/stat.h>
 
-#include "testutil.h"
-#include "graph.h"
+#include "graphutil.h"
 
 static char dir[] = "/tmp/armstg-masseffect-XXXXXX";
 
@@ -82,23 +81,13 @@ static int run(double mass, const char *grown, const char *tag, char *err,
 		return -1;
 	fputs(text, f);
 	fclose(f);
-	graph_t *g = graph_load(gp, NULL, 0, err, errsize);
-	if (!g)
-		return -1000;
-	run_opts_t o = { .outdir = out, .jobs = 2, .quiet = 1 };
-	int rc = graph_run(g, &o, err, errsize);
-	graph_free(g);
-	return rc;
+	return tu_run_graph(gp, NULL, 0, out, err, errsize);
 }
 
 static int setup(void **state)
 {
 	(void)state;
-	if (!getenv("ARMSTG_PLUGIN_PATH")) {
-		char p[1024];
-		snprintf(p, sizeof p, "%s/plugins", tu_build_dir());
-		setenv("ARMSTG_PLUGIN_PATH", p, 1);
-	}
+	tu_plugin_path();
 	return mkdtemp(dir) ? 0 : -1;
 }
 
@@ -326,13 +315,7 @@ static void test_real_anatomy(void **state)
 	assert_non_null(f);
 	fputs(text, f);
 	fclose(f);
-	graph_t *g = graph_load(gp, NULL, 0, err, sizeof err);
-	if (!g)
-		fail_msg("%s", err);
-	run_opts_t o = { .outdir = out, .jobs = 2, .quiet = 1 };
-	int rc = graph_run(g, &o, err, sizeof err);
-	graph_free(g);
-	if (rc)
+	if (tu_run_graph(gp, NULL, 0, out, err, sizeof err))
 		fail_msg("%s", err);
 	double sg = value(out, "shift", "grown");
 	double sp = value(out, "shift", "patient");
