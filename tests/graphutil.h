@@ -1,7 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * Helpers of the tests that run whole graph files through the runtime
- * (test_auto.c, test_pipeline.c, plugins/masseffect/tests):
+ * (test_auto.c, test_pipeline.c, test_remote.c, plugins/masseffect/tests):
  *
  *   tu_plugin_path()      ARMSTG_PLUGIN_PATH = $BUILD/plugins, unless set
  *   tu_run_graph(path, sets, nsets, out, err, errsize)

@@ -35,7 +35,7 @@
 #include <pthread.h>
 
 #include "distutil.h"
-#include "graph.h"
+#include "graphutil.h"
 #include "remote.h"
 #include "wire.h"
 
@@ -88,18 +88,6 @@ static int teardown(void **state)
 	return a || b ? -1 : 0;
 }
 
-static int run_graph(const char *path, const char *const *sets, int nsets,
-		     const char *out, char *err, size_t errsize)
-{
-	graph_t *g = graph_load(path, sets, nsets, err, errsize);
-	if (!g)
-		return -1000;
-	run_opts_t o = { .outdir = out, .jobs = 2, .quiet = 1 };
-	int rc = graph_run(g, &o, err, errsize);
-	graph_free(g);
-	return rc;
-}
-
 static void write_text(const char *path, const char *text)
 {
 	FILE *f = fopen(path, "w");
@@ -128,13 +116,14 @@ static void test_distributed_equals_local(void **state)
 	local_sets[n] = "grow.node=local";
 	local_sets[n + 1] = "register.node=local";
 	local_sets[n + 2] = "to_atlas.node=local";
-	int rc = run_graph("graphs/distributed.ini", local_sets, n + 3, loc,
-			   err, sizeof err);
+	int rc = tu_run_graph("graphs/distributed.ini", local_sets, n + 3, loc,
+			      err, sizeof err);
 	if (rc)
 		print_message("local: %s\n", err);
 	assert_int_equal(rc, 0);
 	double t0 = dt_now();
-	rc = run_graph("graphs/distributed.ini", sets, n, rem, err, sizeof err);
+	rc = tu_run_graph("graphs/distributed.ini", sets, n, rem, err,
+			  sizeof err);
 	if (rc) {
 		print_message("remote: %s\n", err);
 		dt_print_log(wa.log);
@@ -301,7 +290,7 @@ static void test_worker_hung(void **state)
 		_exit(0);
 	}
 	double t0 = dt_now();
-	int rc = run_graph(g, NULL, 0, out, err, sizeof err);
+	int rc = tu_run_graph(g, NULL, 0, out, err, sizeof err);
 	double dt = dt_now() - t0;
 	int st;
 	waitpid(pid, &st, 0);
@@ -334,10 +323,10 @@ static void test_remote_sink_file(void **state)
 	snprintf(o1, sizeof o1, "%s/sink-local", tu_tmpdir());
 	snprintf(o2, sizeof o2, "%s/sink-remote", tu_tmpdir());
 	setenv("SINK_NODE", "local", 1);
-	assert_int_equal(run_graph(g, NULL, 0, o1, err, sizeof err), 0);
+	assert_int_equal(tu_run_graph(g, NULL, 0, o1, err, sizeof err), 0);
 	setenv("SINK_NODE", "a", 1);
 	int before = dt_log_count(wa.log, "stage 'sink' (tp_sink");
-	int rc = run_graph(g, NULL, 0, o2, err, sizeof err);
+	int rc = tu_run_graph(g, NULL, 0, o2, err, sizeof err);
 	if (rc)
 		print_message("%s\n", err);
 	assert_int_equal(rc, 0);
@@ -368,7 +357,7 @@ static void test_remote_stage_error(void **state)
 	write_text(g, text);
 	snprintf(out, sizeof out, "%s/fail-out", tu_tmpdir());
 	int b_lines = dt_log_count(wb.log, "stage '");
-	int rc = run_graph(g, NULL, 0, out, err, sizeof err);
+	int rc = tu_run_graph(g, NULL, 0, out, err, sizeof err);
 	assert_int_not_equal(rc, 0);
 	print_message("error: %s\n", err);
 	assert_non_null(strstr(err, "stage 'add' (plugin tp_add) failed"));
@@ -391,7 +380,7 @@ static void test_node_down(void **state)
 		      "[node far]\nendpoint = tcp://127.0.0.1:1\ntimeout = 1\n");
 	snprintf(out, sizeof out, "%s/down-out", tu_tmpdir());
 	double t0 = dt_now();
-	int rc = run_graph(g, NULL, 0, out, err, sizeof err);
+	int rc = tu_run_graph(g, NULL, 0, out, err, sizeof err);
 	double dt = dt_now() - t0;
 	print_message("failed after %.2f s: %s\n", dt, err);
 	assert_int_equal(rc, ARMSTG_EIO);
@@ -696,7 +685,7 @@ static int curve_run(const char *ep, const char *skey, const char *ckey,
 			 "server_key = %s\nclient_key = %s\n", skey, ckey);
 	write_text(g, text);
 	snprintf(out, sizeof out, "%s/curve-%s", tu_tmpdir(), tag);
-	return run_graph(g, NULL, 0, out, err, errsize);
+	return tu_run_graph(g, NULL, 0, out, err, errsize);
 }
 
 static void test_curve(void **state)
