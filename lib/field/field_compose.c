@@ -88,37 +88,120 @@ int fimg_compose(const fimg_t *outer, const fimg_t *inner, fimg_t *out,
 	} while (0)
 
 /*
+ * Where the update is zero (the voxels outside the fixed mask's reach, in a
+ * registration most of the grid): with the grid's voxel -> voxel map M the
+ * identity to the bit (aff3_mul of an axis-aligned grid's w2v and v2w), a
+ * zero displacement lands exactly on voxel p, where the trilinear stencil
+ * has the weights 1, 0, ..., 0 (t = 0 on every axis) and the corners
+ * {p, up(p)} per axis (img_lin_axis's clamp rule at a face: up(p) = p
+ * there).  When x is zero (+0 or -0, all three components) at every corner
+ * of p, x o x at p is +0 (0 + 1 * (+-0) + 0 * (+-0) ..., then d + v with
+ * d = +-0): the same floats as the stencil's, without it.  And s sampled at
+ * p + 0 reads s's corners at p with those weights: v = 0 + 1 s_0 + 0 s_1
+ * + ... + 0 s_7, in that order, as img_linf_f32 adds them (a NaN or an
+ * infinity at a corner gives NaN as before).
+ */
+static inline int up_of(int p, int n)
+{
+	return p > 0 && p < n - 1 ? p + 1 : p;
+}
+
+/* 1 when the first 12 entries of M are those of the identity */
+static int aff_is_identity(const double M[16])
+{
+	for (int r = 0; r < 3; r++)
+		for (int c = 0; c < 4; c++)
+			if (M[r * 4 + c] != (r == c ? 1.0 : 0.0))
+				return 0;
+	return 1;
+}
+
+/* the stencil at voxel (i, j, k) of a grid of n[3] voxels, as img_linf_at
+ * builds it for c = (i, j, k) exactly */
+static inline void lin_at_voxel(const int n[3], int i, int j, int k,
+				img_linf_t *s)
+{
+	const int ii[2] = { i, up_of(i, n[0]) }, jj[2] = { j, up_of(j, n[1]) },
+		  kk[2] = { k, up_of(k, n[2]) };
+	const int64_t nx = n[0], nxy = (int64_t)n[0] * n[1];
+	for (int q = 0; q < 8; q++) {
+		s->o[q] = (int64_t)kk[(q >> 2) & 1] * nxy +
+			  (int64_t)jj[(q >> 1) & 1] * nx + ii[q & 1];
+		s->w[q] = q ? 0.0f : 1.0f;
+	}
+}
+
+/* zc[i] = 1 when x is zero in its three components at (i, j, k),
+ * (i, up(j), k), (i, j, up(k)) and (i, up(j), up(k)) */
+static void zero_columns(const fimg_t *x, int j, int k, uint8_t *zc)
+{
+	const fgrid_t *g = &x->g;
+	const int64_t nv = fgrid_nvox(g), nx = g->nx;
+	const int ju = up_of(j, g->ny), ku = up_of(k, g->nz);
+	const int64_t r[4] = { ((int64_t)k * g->ny + j) * nx,
+			       ((int64_t)k * g->ny + ju) * nx,
+			       ((int64_t)ku * g->ny + j) * nx,
+			       ((int64_t)ku * g->ny + ju) * nx };
+	for (int i = 0; i < nx; i++)
+		zc[i] = 1;
+	for (int q = 0; q < 3; q++)
+		for (int m = 0; m < 4; m++) {
+			const float *a = x->d + q * nv + r[m];
+			for (int i = 0; i < nx; i++)
+				zc[i] &= a[i] == 0;
+		}
+}
+
+/*
  * y = x o x (x read times xs when SCALED), and, with S, y = s o (x o x)
  * row by row: the row of x o x in a buffer of the thread (never written
  * as a field), then the row of the composition (two plain loops per row;
- * one loop holding both stencils ran 25 % slower on one thread).
+ * one loop holding both stencils ran 25 % slower on one thread).  ID: M
+ * (and Ms with S) is the identity: the voxels where x is zero take the
+ * shortcut above.
  */
 #define SQUARE_ROWS(NAME, SCALED, S)                                         \
 static int NAME(const double M[16], const double Ms[16], const fimg_t *x,    \
-		const fimg_t *s, fimg_t *y, float xs, int nthreads)          \
+		const fimg_t *s, fimg_t *y, float xs, int id, int nthreads)  \
 {                                                                            \
 	const fgrid_t *g = &x->g;                                            \
 	const int64_t nv = fgrid_nvox(g);                                    \
 	const int64_t nvs = (S) ? fgrid_nvox(&s->g) : 0;                     \
 	const int nx = g->nx;                                                \
+	const int dims[3] = { g->nx, g->ny, g->nz };                         \
 	int fail = 0;                                                        \
 	_Pragma("omp parallel num_threads(NT(nthreads))")                    \
 	{                                                                    \
 		float *eb = (S) ? malloc(sizeof(float) * 3 * (size_t)nx)     \
 				: NULL;                                      \
-		if ((S) && !eb) {                                            \
+		/* zc: zero_columns; fz: x is zero at every corner */       \
+		uint8_t *zc = id ? malloc(2 * (size_t)nx) : NULL;            \
+		if (((S) && !eb) || (id && !zc)) {                           \
 			_Pragma("omp atomic write")                          \
 			fail = 1;                                            \
 		}                                                            \
+		uint8_t *fz = zc ? zc + nx : NULL;                           \
 		_Pragma("omp for schedule(static)")                          \
 		for (int64_t r = 0; r < (int64_t)g->ny * g->nz; r++) {       \
-			if ((S) && !eb)                                      \
+			if (((S) && !eb) || (id && !zc))                     \
 				continue;                                    \
 			const int j = (int)(r % g->ny), k = (int)(r / g->ny);\
+			if (id) {                                            \
+				zero_columns(x, j, k, zc);                   \
+				for (int i = 0; i < nx; i++)                 \
+					fz[i] = zc[i] & zc[up_of(i, nx)];    \
+			}                                                    \
 			for (int i = 0; i < nx; i++) {                       \
 				const int64_t e = r * nx + i;                \
 				double d[3];                                 \
 				float o[3];                                  \
+				if (id && fz[i]) {                           \
+					/* x o x is +0 here */               \
+					if (!(S))                            \
+						for (int q = 0; q < 3; q++)  \
+							y->d[e + q * nv] = 0.0f; \
+					continue;                            \
+				}                                            \
 				for (int q = 0; q < 3; q++)                  \
 					d[q] = (SCALED) ? x->d[e + q * nv] * xs \
 							: x->d[e + q * nv];  \
@@ -137,9 +220,19 @@ static int NAME(const double M[16], const double Ms[16], const fimg_t *x,    \
 				continue;                                    \
 			for (int i = 0; i < nx; i++) {                       \
 				const int64_t e = r * nx + i;                \
+				float o[3];                                  \
+				if (id && fz[i]) {                           \
+					/* s at p + (+0): its stencil at p */ \
+					img_linf_t st_;                      \
+					lin_at_voxel(dims, i, j, k, &st_);   \
+					for (int q = 0; q < 3; q++)          \
+						y->d[e + q * nv] = (float)(  \
+							0.0 + img_linf_f32(  \
+							s->d + q * nvs, &st_)); \
+					continue;                            \
+				}                                            \
 				const double d[3] = { eb[i], eb[i + nx],     \
 						      eb[i + 2 * nx] };      \
-				float o[3];                                  \
 				COMPOSE_AT(0, Ms, &s->g, s->d, nvs, 1.0f, i, \
 					   j, k, d, o);                      \
 				for (int q = 0; q < 3; q++)                  \
@@ -147,6 +240,7 @@ static int NAME(const double M[16], const double Ms[16], const fimg_t *x,    \
 			}                                                    \
 		}                                                            \
 		free(eb);                                                    \
+		free(zc);                                                    \
 	}                                                                    \
 	return fail ? ARMSTG_ENOMEM : 0;                                     \
 }
@@ -174,13 +268,15 @@ int fimg_compose_exp(const fimg_t *s, fimg_t *a, fimg_t *b, int n,
 	double M[16], Ms[16];
 	aff3_mul(g->w2v, g->v2w, M);
 	aff3_mul(s->g.w2v, g->v2w, Ms);
+	/* the zero update's shortcut (above SQUARE_ROWS) */
+	const int id = aff_is_identity(M) && aff_is_identity(Ms);
 	fimg_t *x = a, *y = b; /* x: the current u_i, y: where u_{i+1} goes */
 	/* the first n - 1 squarings, the first one reading v scaled */
 	for (int it = 0; it < n - 1; it++) {
-		if (it == 0)
-			square_scaled(M, Ms, x, s, y, sc, nthreads);
-		else
-			square_plain(M, Ms, x, s, y, 1.0f, nthreads);
+		int rc = it == 0 ? square_scaled(M, Ms, x, s, y, sc, id, nthreads)
+				 : square_plain(M, Ms, x, s, y, 1.0f, id, nthreads);
+		if (rc)
+			return rc;
 		fimg_t *t = x;
 		x = y;
 		y = t;
@@ -188,8 +284,8 @@ int fimg_compose_exp(const fimg_t *s, fimg_t *a, fimg_t *b, int n,
 	/* the last squaring, e(x) = u(x) + u(x + u(x)), and s(x + e(x)) in
 	 * the same pass: e is never written */
 	*res = y;
-	return n == 1 ? square_compose_scaled(M, Ms, x, s, y, sc, nthreads)
-		      : square_compose_plain(M, Ms, x, s, y, 1.0f, nthreads);
+	return n == 1 ? square_compose_scaled(M, Ms, x, s, y, sc, id, nthreads)
+		      : square_compose_plain(M, Ms, x, s, y, 1.0f, id, nthreads);
 }
 
 void fimg_field_maxnorm(const fimg_t *u, double *max_mm, double *max_vox)

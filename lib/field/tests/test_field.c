@@ -457,6 +457,78 @@ static void test_compose_exp(void **state)
 	fimg_free(&s);
 }
 
+/*
+ * The zero update's shortcut of fimg_compose_exp (field_compose.c): on an
+ * axis-aligned grid (the voxel -> voxel map the identity to the bit, as
+ * the demons' levels have) with the update zero (+0 and -0) over most of
+ * the grid, s holding -0 and a NaN there: the floats of the unfused steps
+ * (fimg_compose, which takes no shortcut), bit for bit, n = 0-3, 1 and 3
+ * threads.
+ */
+static void test_compose_exp_zero(void **state)
+{
+	(void)state;
+	fgrid_t g;
+	const double A[16] = { -1, 0, 0, 30, 0, -2, 0, 20, 0, 0, 1, -7,
+			       0, 0, 0, 1 };
+	assert_int_equal(fgrid_make(&g, 21, 17, 15, A), 0);
+	const int64_t nv = fgrid_nvox(&g);
+	fimg_t v, s, a, b, r0, t0;
+	fimg_alloc(&v, &g, 3);
+	fimg_alloc(&s, &g, 3);
+	int64_t nzero = 0;
+	for (int64_t e = 0; e < nv; e++) {
+		const int i = (int)(e % g.nx), j = (int)(e / g.nx % g.ny),
+			  k = (int)(e / ((int64_t)g.nx * g.ny));
+		/* a ball of motion near one corner, zero elsewhere (-0 on
+		 * every third voxel) */
+		const double r2 = (i - 6.0) * (i - 6.0) + (j - 5.0) * (j - 5.0) +
+				  (k - 4.0) * (k - 4.0);
+		for (int c = 0; c < 3; c++) {
+			v.d[e + c * nv] = r2 < 20 ? (float)(1.7 * cos(0.4 * i + c) *
+							   (1 - r2 / 20))
+					  : e % 3 ? 0.0f : -0.0f;
+			s.d[e + c * nv] = (i + j) % 7 == 0 ? -0.0f
+					  : (float)(2.5 * sin(0.3 * j - 0.2 * k + c));
+		}
+		nzero += r2 >= 20;
+	}
+	s.d[(7 * g.ny + 9) * g.nx + 15] = NAN; /* in the zero region */
+	for (int n = 0; n <= 3; n++) {
+		fimg_alloc(&r0, &g, 3);
+		fimg_alloc(&t0, &g, 3);
+		memcpy(r0.d, v.d, sizeof(float) * (size_t)nv * 3);
+		const float sc = (float)ldexp(1.0, -n);
+		for (int64_t e = 0; e < nv * 3; e++)
+			r0.d[e] *= sc;
+		fimg_t *x = &r0, *y = &t0;
+		for (int i = 0; i < n; i++) {
+			assert_int_equal(fimg_compose(x, x, y, 1), 0);
+			fimg_t *t = x;
+			x = y;
+			y = t;
+		}
+		assert_int_equal(fimg_compose(&s, x, x, 1), 0);
+		for (int nt = 1; nt <= 3; nt += 2) {
+			fimg_t *res = NULL;
+			fimg_alloc(&a, &g, 3);
+			fimg_alloc(&b, &g, 3);
+			memcpy(a.d, v.d, sizeof(float) * (size_t)nv * 3);
+			assert_int_equal(fimg_compose_exp(&s, &a, &b, n, &res, nt), 0);
+			assert_memory_equal(res->d, x->d, sizeof(float) * (size_t)nv * 3);
+			fimg_free(&a);
+			fimg_free(&b);
+		}
+		fimg_free(&r0);
+		fimg_free(&t0);
+	}
+	print_message("compose_exp, update zero on %lld of %lld voxels: the "
+		      "unfused floats bit for bit (n = 0-3, 1 and 3 threads)\n",
+		      (long long)nzero, (long long)nv);
+	fimg_free(&v);
+	fimg_free(&s);
+}
+
 static void test_smooth(void **state)
 {
 	(void)state;
@@ -643,6 +715,7 @@ int main(void)
 		cmocka_unit_test(test_jacobian_linear),
 		cmocka_unit_test(test_exp),
 		cmocka_unit_test(test_compose_exp),
+		cmocka_unit_test(test_compose_exp_zero),
 		cmocka_unit_test(test_smooth),
 		cmocka_unit_test(test_labels),
 		cmocka_unit_test(test_parse_ints),
