@@ -69,9 +69,23 @@ static inline int clampi(int a, int lo, int hi)
 	return a < lo ? lo : a > hi ? hi : a;
 }
 
+/* 1 when the n floats at p are all zero (+0 or -0); stops at the first
+ * that is not */
+static inline int zero_run(const float *p, int64_t n)
+{
+	for (int64_t i = 0; i < n; i++)
+		if (p[i] != 0)
+			return 0;
+	return 1;
+}
+
 /*
  * The two passes, generated for sums in T (double, or float for the float
- * path), kernel ker in T:
+ * path), kernel ker in T.  An output whose inputs under the kernel are
+ * all zero is +0 (0 + w (+-0) + ... with w > 0): a row of zeros (pass_x),
+ * or an output row whose 2r + 1 input rows are zero (pass_rows), is
+ * written +0 without the taps, the same floats; an update that is zero
+ * outside a mask (demons) skips most of the work there.
  *  pass_x_T     along i: each row through a padded copy, tap by tap;
  *  pass_rows_T  along j (axis 1) or k (axis 2): whole rows of nx voxels at
  *               a time (the inner loop runs along i, contiguous).  For each
@@ -101,6 +115,11 @@ static int pass_x_##T(float *d, const int n[3], const T *ker, int r,        \
 			if (!ok)                                            \
 				continue;                                   \
 			float *p = d + row * nx;                            \
+			if (zero_run(p, nx)) {                              \
+				for (int i = 0; i < nx; i++)                \
+					p[i] = 0.0f;                        \
+				continue;                                   \
+			}                                                   \
 			for (int i = -r; i < nx + r; i++)                   \
 				buf[i + r] = p[clampi(i, 0, nx - 1)];       \
 			/* tap by tap over the row (the sums of each       \
@@ -137,7 +156,9 @@ static int pass_rows_##T(float *d, const int n[3], int axis, const T *ker,  \
 	{                                                                   \
 		float *buf = malloc(sizeof(float) * (size_t)nx * m);        \
 		T *acc = malloc(sizeof(T) * (size_t)nx);                    \
-		const int ok = buf && acc;                                  \
+		/* nzr[q]: input rows 0..q-1 that hold a nonzero value */  \
+		int *nzr = malloc(sizeof(int) * ((size_t)m + 1));           \
+		const int ok = buf && acc && nzr;                           \
 		if (!ok) {                                                  \
 			_Pragma("omp atomic write")                         \
 			fail = 1;                                           \
@@ -148,10 +169,22 @@ static int pass_rows_##T(float *d, const int n[3], int axis, const T *ker,  \
 				continue;                                   \
 			float *base = d + (axis == 1 ? (int64_t)l * nxy     \
 						     : (int64_t)l * nx);    \
-			for (int q = 0; q < m; q++)                         \
+			nzr[0] = 0;                                         \
+			for (int q = 0; q < m; q++) {                       \
 				memcpy(buf + (int64_t)q * nx,               \
 				       base + q * step, sizeof(float) * nx);\
+				nzr[q + 1] = nzr[q] +                       \
+					!zero_run(buf + (int64_t)q * nx, nx);\
+			}                                                   \
 			for (int q = 0; q < m; q++) {                       \
+				float *o = base + q * step;                 \
+				const int q0 = clampi(q - r, 0, m - 1),     \
+					  q1 = clampi(q + r, 0, m - 1);     \
+				if (nzr[q1 + 1] == nzr[q0]) {               \
+					for (int i = 0; i < nx; i++)        \
+						o[i] = 0.0f;                \
+					continue;                           \
+				}                                           \
 				for (int i = 0; i < nx; i++)                \
 					acc[i] = 0;                         \
 				for (int t = -r; t <= r; t++) {             \
@@ -162,13 +195,13 @@ static int pass_rows_##T(float *d, const int n[3], int axis, const T *ker,  \
 					for (int i = 0; i < nx; i++)        \
 						acc[i] += w * s[i];         \
 				}                                           \
-				float *o = base + q * step;                 \
 				for (int i = 0; i < nx; i++)                \
 					o[i] = (float)acc[i];               \
 			}                                                   \
 		}                                                           \
 		free(buf);                                                  \
 		free(acc);                                                  \
+		free(nzr);                                                  \
 	}                                                                   \
 	return fail;                                                        \
 }
