@@ -7,7 +7,19 @@
 
 #include "armstg/plugin.h"
 
-/* along x: row by row, through a copy of the row */
+/* 1 when the n floats at p are all zero (+0 or -0); stops at the first
+ * that is not */
+static int zero_run(const float *p, int64_t n)
+{
+	for (int64_t i = 0; i < n; i++)
+		if (p[i] != 0)
+			return 0;
+	return 1;
+}
+
+/* along x: row by row, through a copy of the row.  A row of zeros sums to
+ * +0 everywhere (its running sum never leaves 0): written so without the
+ * sums, the same floats */
 static int pass_x(float *d, int64_t nrows, int nx, int r, int threads)
 {
 	int fail = 0;
@@ -23,6 +35,11 @@ static int pass_x(float *d, int64_t nrows, int nx, int r, int threads)
 			if (!line)
 				continue;
 			float *p = d + row * nx;
+			if (zero_run(p, nx)) {
+				for (int i = 0; i < nx; i++)
+					p[i] = 0.0f;
+				continue;
+			}
 			memcpy(line, p, sizeof(float) * (size_t)nx);
 			double acc = 0;
 			for (int i = 0; i < r && i < nx; i++)
@@ -43,7 +60,9 @@ static int pass_x(float *d, int64_t nrows, int nx, int r, int threads)
 /*
  * along y (step nx, m = ny lines per plane, planes k) or z (step nx*ny,
  * m = nz, planes j): for each plane, the m input rows are copied to buf
- * and nx running sums advance together, one row at a time
+ * and nx running sums advance together, one row at a time.  A plane of
+ * zeros gives +0 everywhere (as a row along x); a zero row inside a plane
+ * does not (the running sums carry their rounding from the rows before)
  */
 static int pass_rows(float *d, int64_t nimg_planes, int64_t plane_off,
 		     int64_t img_planes, int64_t nv, int nx, int m,
@@ -65,9 +84,18 @@ static int pass_rows(float *d, int64_t nimg_planes, int64_t plane_off,
 				continue;
 			const int64_t c = pl / img_planes, l = pl % img_planes;
 			float *base = d + c * nv + l * plane_off;
-			for (int q = 0; q < m; q++)
+			int zero = 1;
+			for (int q = 0; q < m; q++) {
 				memcpy(buf + (int64_t)q * nx, base + q * step,
 				       sizeof(float) * (size_t)nx);
+				zero = zero && zero_run(buf + (int64_t)q * nx, nx);
+			}
+			if (zero) {
+				for (int q = 0; q < m; q++)
+					for (int i = 0; i < nx; i++)
+						base[q * step + i] = 0.0f;
+				continue;
+			}
 			for (int i = 0; i < nx; i++)
 				acc[i] = 0;
 			for (int q = 0; q < r && q < m; q++) {
