@@ -447,6 +447,15 @@ int fimg_resample_block(const fimg_t *src, const fimg_t *u, int interp,
 			float outside, fimg_t *dst, const int lo[3],
 			const int hi[3], int nthreads)
 {
+	return fimg_resample_block_where(src, u, interp, outside, dst, lo, hi,
+					 NULL, nthreads);
+}
+
+int fimg_resample_block_where(const fimg_t *src, const fimg_t *u, int interp,
+			      float outside, fimg_t *dst, const int lo[3],
+			      const int hi[3], const uint8_t *where,
+			      int nthreads)
+{
 	if (!src || !dst || !src->d || !dst->d || dst->nc != src->nc)
 		return ARMSTG_EINVAL;
 	if (u && (u->nc != 3 || !u->d))
@@ -470,6 +479,8 @@ int fimg_resample_block(const fimg_t *src, const fimg_t *u, int interp,
 		for (int j = lo[1]; j <= hi[1]; j++) {
 			for (int i = lo[0]; i <= hi[0]; i++) {
 				int64_t e = ((int64_t)k * dg->ny + j) * dg->nx + i;
+				if (where && !where[e])
+					continue;
 				double p[3] = { i, j, k }, c[3];
 				aff_apply(M, p, c);
 				if (u) {

@@ -166,6 +166,16 @@ int fimg_resample_block(const fimg_t *src, const fimg_t *u, int interp,
 			const int hi[3], int nthreads);
 
 /*
+ * fimg_resample_block at the voxels e of the block where where[e] != 0
+ * only (where: one byte per voxel of dst; NULL: the whole block); the
+ * others are left as they are.  The same value at every voxel it writes.
+ */
+int fimg_resample_block_where(const fimg_t *src, const fimg_t *u, int interp,
+			      float outside, fimg_t *dst, const int lo[3],
+			      const int hi[3], const uint8_t *where,
+			      int nthreads);
+
+/*
  * Separable Gaussian smoothing in place, sigma in mm (per axis
  * sigma/spacing voxels; lib/img's discrete Gaussian kernel e^-t I_n(t),
  * t = sigma^2,

@@ -523,6 +523,11 @@ static int demons_process(armstg_stage_t *st)
 			L.whi[1] = g.ny - 1;
 			L.whi[2] = g.nz - 1;
 		}
+		/* and within the block, where they are read (needw, needm) */
+		if ((rc = dm_level_need(&L, nt))) {
+			rc = FAIL(rc, "out of memory (level %d)", l + 1);
+			goto out;
+		}
 		{
 			const int64_t nvl = fgrid_nvox(&g);
 #pragma omp parallel for num_threads(nt) schedule(static)
@@ -591,11 +596,12 @@ static int demons_process(armstg_stage_t *st)
 			nt = h->threads ? h->threads(st) : 1;
 			if (nt < 1)
 				nt = 1;
-			fimg_resample_block(&L.M, &S, FIELD_LINEAR, NAN, &L.W,
-					    L.wlo, L.whi, nt);
+			fimg_resample_block_where(&L.M, &S, FIELD_LINEAR, NAN,
+						  &L.W, L.wlo, L.whi, L.needw, nt);
 			if (L.WM.d)
-				fimg_resample_block(&MM0, &S, FIELD_NEAREST, 0, &L.WM,
-						    L.wlo, L.whi, nt);
+				fimg_resample_block_where(&MM0, &S, FIELD_NEAREST, 0,
+							  &L.WM, L.wlo, L.whi,
+							  L.needm, nt);
 			double ssd;
 			int64_t nused;
 			const int lncc = p->metric == METRIC_LNCC;

@@ -45,6 +45,47 @@ void dm_level_free(level_t *L)
 	L->rsum = NULL;
 	free(L->rcnt);
 	L->rcnt = NULL;
+	free(L->needw);
+	L->needw = NULL;
+	free(L->needm);
+	L->needm = NULL;
+}
+
+/* L->needw and L->needm from the fixed mask L->FM (demons_int.h); 0, or
+ * ARMSTG_ENOMEM */
+int dm_level_need(level_t *L, int nt)
+{
+	if (!L->FM.d)
+		return 0;
+	const fgrid_t *g = &L->g;
+	const int nx = g->nx, ny = g->ny, nz = g->nz;
+	const int64_t nv = fgrid_nvox(g);
+	const int64_t st[3] = { 1, nx, (int64_t)nx * ny };
+	const int dims[3] = { nx, ny, nz };
+	L->needw = malloc((size_t)nv);
+	L->needm = malloc((size_t)nv);
+	if (!L->needw || !L->needm)
+		return ARMSTG_ENOMEM;
+	const float *FM = L->FM.d;
+	uint8_t *nm = L->needm, *nw = L->needw;
+	/* the same test as the forces' (FM[e] <= 0: outside) */
+#pragma omp parallel for num_threads(nt) schedule(static)
+	for (int64_t e = 0; e < nv; e++)
+		nm[e] = !(FM[e] <= 0);
+#pragma omp parallel for num_threads(nt) schedule(static)
+	for (int64_t r = 0; r < (int64_t)ny * nz; r++) {
+		const int j = (int)(r % ny), k = (int)(r / ny);
+		for (int i = 0; i < nx; i++) {
+			const int64_t e = r * nx + i;
+			const int idx[3] = { i, j, k };
+			int v = nm[e];
+			for (int a = 0; a < 3 && !v; a++)
+				v = (idx[a] > 0 && nm[e - st[a]]) ||
+				    (idx[a] < dims[a] - 1 && nm[e + st[a]]);
+			nw[e] = (uint8_t)v;
+		}
+	}
+	return 0;
 }
 
 /*

@@ -69,6 +69,13 @@ typedef struct level {
 	 * mask, its bounding box grown by the one voxel of the gradients'
 	 * stencil (no force, no window sum reads W outside the mask) */
 	int wlo[3], whi[3];
+	/* with a fixed mask, the voxels of the block where W (needw: the
+	 * mask's voxels and their 6 neighbours, the gradients' stencil) and
+	 * WM (needm: the mask's voxels) are read; elsewhere in the block the
+	 * forces and window sums never read them (a voxel outside the mask
+	 * is left out before W or WM is looked at), so they are not
+	 * resampled; NULL without a fixed mask */
+	uint8_t *needw, *needm;
 	float *sums; /* metric=lncc: the 6 window sums, one level's buffer */
 	/* per row (j, k) of the level grid: partial sums and counts, added
 	 * in row order afterwards, so that the costs and statistics are the
@@ -98,6 +105,7 @@ int dm_crop_img(fimg_t *f, const int lo[3], const fgrid_t *gs, int nt);
 /* demons_force.c */
 void dm_rows_total(const level_t *L, double *sum, int64_t *cnt);
 void dm_level_free(level_t *L);
+int dm_level_need(level_t *L, int nt);
 void dm_compute_force(const demons_priv_t *p, const level_t *L,
 			  fimg_t *U, double sx2, double *ssd, int64_t *nused,
 			  int nt);
