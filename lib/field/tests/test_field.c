@@ -141,6 +141,41 @@ static void test_resample_block(void **state)
 		assert_int_equal(nin, 28 * 33 * 20);
 		assert_int_equal(same, nin);
 		assert_int_equal(kept, fgrid_nvox(&gd) - nin);
+		/* where: a ball's voxels of the block only */
+		uint8_t *where = malloc((size_t)fgrid_nvox(&gd));
+		int64_t nw = 0, wsame = 0, wkept = 0;
+		for (int64_t e = 0; e < fgrid_nvox(&gd); e++) {
+			const int i = (int)(e % gd.nx), j = (int)(e / gd.nx % gd.ny),
+				  k = (int)(e / ((int64_t)gd.nx * gd.ny));
+			where[e] = (i - 15) * (i - 15) + (j - 20) * (j - 20) +
+					   (k - 12) * (k - 12) < 120;
+			blk.d[e] = 12345;
+		}
+		assert_int_equal(fimg_resample_block_where(&src, &u, mode, -1, &blk,
+							   lo, hi, where, 2), 0);
+		for (int k = 0; k < gd.nz; k++)
+			for (int j = 0; j < gd.ny; j++)
+				for (int i = 0; i < gd.nx; i++) {
+					int64_t e = ((int64_t)k * gd.ny + j) * gd.nx + i;
+					int in = where[e] && i >= lo[0] && i <= hi[0] &&
+						 j >= lo[1] && j <= hi[1] && k >= lo[2] &&
+						 k <= hi[2];
+					if (in) {
+						nw++;
+						wsame += memcmp(&blk.d[e], &whole.d[e],
+								sizeof(float)) == 0;
+					} else {
+						wkept += blk.d[e] == 12345;
+					}
+				}
+		print_message("resample block where (%s): %lld voxels, %lld "
+			      "identical, the other %lld untouched\n",
+			      interp ? "nearest" : "linear", (long long)nw,
+			      (long long)wsame, (long long)wkept);
+		assert_true(nw > 100 && nw < nin);
+		assert_int_equal(wsame, nw);
+		assert_int_equal(wkept, fgrid_nvox(&gd) - nw);
+		free(where);
 	}
 	const int bad_hi[3] = { 40, 39, 21 }, bad_lo[3] = { 5, 7, 22 };
 	assert_int_equal(fimg_resample_block(&src, &u, FIELD_LINEAR, -1, &blk, lo,
