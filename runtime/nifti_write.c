@@ -94,7 +94,7 @@ static int affine_orthogonal(const double A[16])
  * match search costs time for nothing.  On BraTS 2013 pat0002's outputs
  * (bench/pipeline/results.md, "The CPU stages' redundant work, pat0002")
  * the 107 MB total warp came to 98.46 MB instead of 98.58 MB and the atlas
- * T1 in patient space to 4.94 MB instead of 4.97 MB, in 35-40 % of the
+ * T1 in patient space to 4.94 MB instead of 4.97 MB, in 30-40 % of the
  * time; integer volumes (labels, masks) keep the default strategy (with
  * Z_RLE the labels came out 4-5 times larger).
  */
