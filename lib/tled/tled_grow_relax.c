@@ -44,12 +44,13 @@
 static int relax_sub(tled_solver_t *s, const tled_solver_opts_t *so,
 		     const double *tgt, const char *tag, tled_relax_stats_t *rs,
 		     char *err, size_t errsize, int depth, int *nsub,
-		     double *done, int *nwatch)
+		     double *done, int *nwatch, int *nretry)
 {
 	tled_iter_log_t *lg = so->itlog;
 	int64_t mark = lg ? lg->nrow : 0;
 	int r = tled_relax(s, so, tgt, tag, rs, err, errsize);
 	*nwatch += s->dt_watch;
+	*nretry += s->dt_retries;
 	if (!r)
 		*done += 1.0 / (double)(1 << depth);
 	/* the iteration log keeps the calls whose result stands (a failed
@@ -88,12 +89,12 @@ static int relax_sub(tled_solver_t *s, const tled_solver_opts_t *so,
 	tled_relax_stats_t r1;
 	(*nsub)++;
 	r = relax_sub(s, so, mid, tag2, &r1, err, errsize, depth + 1, nsub, done,
-		      nwatch);
+		      nwatch, nretry);
 	if (!r) {
 		snprintf(tag2, sizeof tag2, "%s, half %d/2 (depth %d)", tag, 2,
 			 depth + 1);
 		r = relax_sub(s, so, tgt, tag2, rs, err, errsize, depth + 1, nsub,
-			      done, nwatch);
+			      done, nwatch, nretry);
 		rs->iters += r1.iters;
 		rs->jmin = isnan(rs->jmin) ? r1.jmin : fmin(rs->jmin, r1.jmin);
 	} else {
@@ -111,12 +112,19 @@ int tled_grow_relax_step(armstg_stage_t *st, tled_solver_t *s,
 {
 	const armstg_host_t *H = st->host;
 	memset(rs, 0, sizeof *rs);
-	int nsub = 0, nwatch = 0;
+	int nsub = 0, nwatch = 0, nretry = 0;
 	double done = 0;
 	if (so->itlog)
 		so->itlog->it0 = 0;
 	int r = relax_sub(s, so, tgt, tag, rs, err, errsize, 0, &nsub, &done,
-			  &nwatch);
+			  &nwatch, &nretry);
+	/* tled_relax's restarts at half the time step after a blow-up */
+	if (nretry > 0 && !r)
+		H->log(st, LOG_WARN, "%s: the relaxation blew up (the tissue "
+		       "stiffened faster than the time step's estimates) and "
+		       "was restarted with half the time step %d time%s "
+		       "(now %.4g s)", tag, nretry, nretry > 1 ? "s" : "",
+		       rs->dt);
 	/* the step's watch (tled_relax): stiffening that no det F reported */
 	if (nwatch > 0)
 		H->log(st, LOG_INFO, "%s: the time step re-estimated %d time%s "

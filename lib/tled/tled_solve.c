@@ -54,6 +54,7 @@ void tled_solver_opts_default(tled_solver_opts_t *o)
 	o->contact = 1;
 	o->blowup = 100;
 	o->lanczos_iter = 80;
+	o->dt_retries = 2;
 }
 
 const char *const tled_itcol_name[TLED_IT_NCOL] = {
@@ -465,9 +466,59 @@ static void damp_update(const tled_solver_t *s, double rq, int it,
 		*c = 2 * sqrt(*lam);
 }
 
+static int relax_once(tled_solver_t *s, const tled_solver_opts_t *o,
+		      const double *target, const char *tag,
+		      tled_relax_stats_t *st, char *err, size_t errsize,
+		      int *unstable);
+
+/* tled_relax: relax_once, restarted at half the time step after an energy
+ * blow-up or a non-finite displacement (tled_solver_opts_t.dt_retries) */
 int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 	       const double *target, const char *tag, tled_relax_stats_t *st,
 	       char *err, size_t errsize)
+{
+	tled_solver_opts_t o2 = *o;
+	int64_t mark = o->itlog ? o->itlog->nrow : 0;
+	int grow = o->ipg_to && s->m->ipg;
+	int autodt = o->dt_estimate == TLED_DTE_EIGEN &&
+		     (o->dt <= 0 || o->dt_policy == TLED_DT_REDUCE);
+	for (int k = 0;; k++) {
+		int unstable = 0;
+		int r = relax_once(s, &o2, target, tag, st, err, errsize,
+				   &unstable);
+		s->dt_retries = k;
+		if (r != -1 || !unstable || k >= o->dt_retries ||
+		    (!autodt && !(o2.dt > 0))) {
+			size_t l = strlen(err);
+			if (r == -1 && unstable && k > 0 && l < errsize)
+				snprintf(err + l, errsize - l, " (also with the "
+					 "time step halved %d time%s)", k,
+					 k > 1 ? "s" : "");
+			return r;
+		}
+		/* back to the start state (relax_once kept it: u in ustart,
+		 * the growth stretches in ipg0), the failed call's log rows
+		 * dropped, half the step */
+		size_t n3 = (size_t)(3 * s->m->n);
+		memcpy(s->u, s->ustart, n3 * sizeof *s->u);
+		memset(s->v, 0, n3 * sizeof *s->v);
+		if (grow)
+			memcpy(s->m->ipg, s->ipg0,
+			       (size_t)s->m->nip * sizeof *s->m->ipg);
+		if (o->itlog)
+			o->itlog->nrow = mark;
+		if (autodt)
+			o2.dt_safety = 0.5 * (o2.dt_safety > 0 && o2.dt_safety <= 1
+						      ? o2.dt_safety : 0.8);
+		else
+			o2.dt *= 0.5;
+	}
+}
+
+static int relax_once(tled_solver_t *s, const tled_solver_opts_t *o,
+		      const double *target, const char *tag,
+		      tled_relax_stats_t *st, char *err, size_t errsize,
+		      int *unstable)
 {
 	tled_model_t *m = s->m;
 	const tled_ops_t *ops = o->ops ? o->ops : &tled_cpu_ops;
@@ -696,6 +747,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		if (ci.node_nan >= 0) {
 			double p[3];
 			E.end(E.ctx, s);
+			*unstable = 1;
 			node_mm(s, ci.node_nan, p);
 			return tled_errf(err, errsize, "%s, iteration %d: NaN/Inf "
 				    "displacement at node %lld (at %.2f, %.2f, "
@@ -710,6 +762,7 @@ int tled_relax(tled_solver_t *s, const tled_solver_opts_t *o,
 		if (!isfinite(Etot) || Etot > blow * Eref || umax > L) {
 			double p[3] = { 0, 0, 0 }, moved = 0;
 			E.end(E.ctx, s);
+			*unstable = 1;
 			if (ci.node_vmax >= 0)
 				moved = node_mm(s, ci.node_vmax, p);
 			return tled_errf(err, errsize, "%s, iteration %d: energy "

@@ -215,6 +215,13 @@ struct tled_solver_opts {
 	                       removed).  Nodal driving only. */
 	double blowup;      /* energy blow-up factor (default 100) */
 	int lanczos_iter;   /* max Lanczos steps (default 80) */
+	int dt_retries;     /* an energy blow-up or a non-finite displacement
+	                       (the step outran the stiffening: a point
+	                       squeezed within a few iterations of the last
+	                       estimate) restarts the call from its start
+	                       state with half the time step (dt_safety
+	                       halved, or dt when given), at most this many
+	                       times (default 2; 0: the error at once) */
 	/* optional hooks */
 	int (*cancelled)(void *ctx);
 	void (*progress)(void *ctx, int iter, int max_iter, double err_m);
@@ -267,6 +274,8 @@ struct tled_solver {
 	double dt_eigen;    /* s, 2/sqrt(lmax) */
 	int64_t nfree;
 	int64_t contacts;   /* projections in the last relax */
+	int dt_retries;     /* restarts of the last relax at half the step
+	                       (tled_solver_opts_t.dt_retries) */
 	int dt_watch;       /* re-estimates of the step the last relax made on
 	                       its Rayleigh-quotient watch (tled_relax) */
 	double *part;       /* chunked-reduction partials (tled_solve.c) */

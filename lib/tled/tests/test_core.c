@@ -678,9 +678,10 @@ static void test_dt_critical(void **state)
 		assert_true(st.ke + st.W < 5.3 * E0);
 		for (int64_t i = 0; i < 3 * m.n; i++)
 			assert_true(isfinite(s.u[i]));
-		/* 1.1x: blow-up detected */
+		/* 1.1x: blow-up detected (no restart at half the step) */
 		memcpy(s.u, u0, (size_t)(3 * m.n) * sizeof *u0);
 		so.dt = 1.1 * crit;
+		so.dt_retries = 0;
 		rc = tled_relax(&s, &so, NULL, "unstable run", &st, err,
 				sizeof err);
 		print_message("1.1x: %s\n", err);
@@ -709,6 +710,42 @@ static void test_dt_critical(void **state)
 					    q[i] <= hi + 1e-9);
 			}
 		}
+		/* the default restarts the call from its start state at half
+		 * the step after a blow-up: 0.55x critical is stable, and the
+		 * call ends as one run at that step from the start would */
+		so.dt_retries = 2;
+		so.max_iter = 2000;
+		memcpy(s.u, u0, (size_t)(3 * m.n) * sizeof *u0);
+		rc = tled_relax(&s, &so, NULL, "restarted run", &st, err,
+				sizeof err);
+		assert_int_equal(rc, 0);
+		assert_int_equal(s.dt_retries, 1);
+		assert_true(fabs(st.dt - 0.55 * crit) < 1e-12 * crit);
+		for (int64_t i = 0; i < 3 * m.n; i++)
+			assert_true(isfinite(s.u[i]));
+		double *ur = malloc((size_t)(3 * m.n) * sizeof *ur);
+		assert_non_null(ur);
+		memcpy(ur, s.u, (size_t)(3 * m.n) * sizeof *ur);
+		memcpy(s.u, u0, (size_t)(3 * m.n) * sizeof *u0);
+		so.dt = 0.55 * crit;
+		rc = tled_relax(&s, &so, NULL, "half-step run", &st, err,
+				sizeof err);
+		assert_int_equal(rc, 0);
+		assert_int_equal(s.dt_retries, 0);
+		/* the same run to the collocation's conjugate gradients,
+		 * which start from the failed call's multipliers */
+		double du = 0, um = 0;
+		for (int64_t i = 0; i < 3 * m.n; i++) {
+			du = fmax(du, fabs(ur[i] - s.u[i]));
+			um = fmax(um, fabs(s.u[i]));
+		}
+		print_message("nu %.3f: restarted at half the step vs run at it "
+			      "from the start: max |du| %.3g m (max |u| %.3g m)\n",
+			      nu, du, um);
+		assert_true(du <= 1e-9 * um);
+		free(ur);
+		so.dt = 1.1 * crit;
+		so.max_iter = nstep;
 		/* policies: refuse names both steps; reduce uses safety*crit */
 		memcpy(s.u, u0, (size_t)(3 * m.n) * sizeof *u0);
 		so.dt_policy = TLED_DT_REFUSE;

@@ -236,6 +236,7 @@ static void defer_relax(const cavity_cfg_t *c, double ua, double dt,
 		so.dt = dt;
 		so.dt_policy = TLED_DT_FORCE;
 	}
+	so.dt_retries = 0; /* the blow-up itself, not its restart */
 	memset(&r->lg, 0, sizeof r->lg);
 	r->lg.every = 1;
 	so.itlog = &r->lg;
