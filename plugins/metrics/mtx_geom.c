@@ -66,12 +66,17 @@ int mtx_labels_on(const vol_t *src, const vol_t *ref, const char *what,
 		    "%s: expected a label volume (1 component), got %d "
 		    "components", what, src->nc);
 	int64_t ns = vol_nvox(src);
+	/* integer volumes (u8, i16, i32: masks and labels) hold int32 values
+	 * already: no check, and lround of such a value is the value (the
+	 * libm call per voxel was most of this function's time) */
+	const int isint = src->dtype == DT_U8 || src->dtype == DT_I16 ||
+			  src->dtype == DT_I32;
 	/* check every source value once: NaN or out of int32 range (the
 	 * loops here run on the stage's threads, its OpenMP default; the
 	 * first bad voxel is the least index on any count) */
 	int64_t bad = INT64_MAX;
 #pragma omp parallel for schedule(static) reduction(min : bad)
-	for (int64_t e = 0; e < ns; e++) {
+	for (int64_t e = 0; e < (isint ? 0 : ns); e++) {
 		double x = vol_get(src, e);
 		if (e < bad && !(x > -2147483648.5 && x < 2147483647.5))
 			bad = e;
@@ -87,8 +92,10 @@ int mtx_labels_on(const vol_t *src, const vol_t *ref, const char *what,
 	*resampled = 0;
 	if (vol_same_grid(src, ref, 1e-6)) {
 #pragma omp parallel for schedule(static)
-		for (int64_t e = 0; e < ns; e++)
-			out[e] = (int32_t)lround(vol_get(src, e));
+		for (int64_t e = 0; e < ns; e++) {
+			const double x = vol_get(src, e);
+			out[e] = isint ? (int32_t)x : (int32_t)lround(x);
+		}
 		return 0;
 	}
 	double C[16];
@@ -108,7 +115,7 @@ int mtx_labels_on(const vol_t *src, const vol_t *ref, const char *what,
 				 * a hair outside (affine round-off) counts */
 				double x = img_vol_near(src, 0, p, 1e-9, &in);
 				out[vol_idx(ref, i, j, k)] =
-					(int32_t)lround(x);
+					isint ? (int32_t)x : (int32_t)lround(x);
 				inside += in;
 			}
 	if (!inside)
