@@ -119,7 +119,7 @@ int tled_grow_relax_step(armstg_stage_t *st, tled_solver_t *s,
 	int r = relax_sub(s, so, tgt, tag, rs, err, errsize, 0, &nsub, &done,
 			  &nwatch, &nretry);
 	/* tled_relax's restarts at half the time step after a blow-up */
-	if (nretry > 0 && !r)
+	if (nretry > 0 && r >= 0) /* converged, or saturated (below) */
 		H->log(st, LOG_WARN, "%s: the relaxation blew up (the tissue "
 		       "stiffened faster than the time step's estimates) and "
 		       "was restarted with half the time step %d time%s "
