@@ -424,6 +424,48 @@ static void test_exp(void **state)
 	fimg_free(&o);
 }
 
+/* s o exp(v) fused (fimg_compose_exp, n squarings, 1 and 3 threads)
+ * against the unfused steps (v / 2^n composed with itself n times, then
+ * s o that, by fimg_compose): the same floats, bit for bit.  Returns the
+ * largest |s o exp(v)| (mm). */
+static double exp_vs_unfused(const fgrid_t *g, fimg_t *s, const fimg_t *v,
+			     int n)
+{
+	const int64_t nv = fgrid_nvox(g);
+	fimg_t a, b, r0, t0;
+	fimg_alloc(&r0, g, 3);
+	fimg_alloc(&t0, g, 3);
+	memcpy(r0.d, v->d, sizeof(float) * (size_t)nv * 3);
+	const float sc = (float)ldexp(1.0, -n);
+	for (int64_t e = 0; e < nv * 3; e++)
+		r0.d[e] *= sc;
+	fimg_t *x = &r0, *y = &t0;
+	for (int i = 0; i < n; i++) {
+		assert_int_equal(fimg_compose(x, x, y, 1), 0);
+		fimg_t *t = x;
+		x = y;
+		y = t;
+	}
+	assert_int_equal(fimg_compose(s, x, x, 1), 0);
+	for (int nt = 1; nt <= 3; nt += 2) {
+		fimg_t *res = NULL;
+		fimg_alloc(&a, g, 3);
+		fimg_alloc(&b, g, 3);
+		memcpy(a.d, v->d, sizeof(float) * (size_t)nv * 3);
+		assert_int_equal(fimg_compose_exp(s, &a, &b, n, &res, nt), 0);
+		assert_true(res == &a || res == &b);
+		assert_memory_equal(res->d, x->d, sizeof(float) * (size_t)nv * 3);
+		fimg_free(&a);
+		fimg_free(&b);
+	}
+	double mx = 0;
+	for (int64_t e = 0; e < nv * 3; e++)
+		mx = fmax(mx, fabs(x->d[e]));
+	fimg_free(&r0);
+	fimg_free(&t0);
+	return mx;
+}
+
 /*
  * fimg_compose_exp against the unfused sequence it replaces in demons
  * (scale v in place by 2^-n, n x fimg_compose(u, u, next), then
@@ -437,7 +479,7 @@ static void test_compose_exp(void **state)
 	fgrid_t g;
 	grid_of(&g, 23, 19, 17, 1.5, 0.3);
 	const int64_t nv = fgrid_nvox(&g);
-	fimg_t v, s, a, b, r0, t0;
+	fimg_t v, s;
 	fimg_alloc(&v, &g, 3);
 	fimg_alloc(&s, &g, 3);
 	for (int64_t e = 0; e < nv; e++) {
@@ -450,39 +492,9 @@ static void test_compose_exp(void **state)
 		}
 	}
 	for (int n = 0; n <= 3; n++) {
-		/* the unfused sequence */
-		fimg_alloc(&r0, &g, 3);
-		fimg_alloc(&t0, &g, 3);
-		memcpy(r0.d, v.d, sizeof(float) * (size_t)nv * 3);
-		const float sc = (float)ldexp(1.0, -n);
-		for (int64_t e = 0; e < nv * 3; e++)
-			r0.d[e] *= sc;
-		fimg_t *x = &r0, *y = &t0;
-		for (int i = 0; i < n; i++) {
-			assert_int_equal(fimg_compose(x, x, y, 1), 0);
-			fimg_t *t = x;
-			x = y;
-			y = t;
-		}
-		assert_int_equal(fimg_compose(&s, x, x, 1), 0);
-		for (int nt = 1; nt <= 3; nt += 2) {
-			fimg_t *res = NULL;
-			fimg_alloc(&a, &g, 3);
-			fimg_alloc(&b, &g, 3);
-			memcpy(a.d, v.d, sizeof(float) * (size_t)nv * 3);
-			assert_int_equal(fimg_compose_exp(&s, &a, &b, n, &res, nt), 0);
-			assert_true(res == &a || res == &b);
-			assert_memory_equal(res->d, x->d, sizeof(float) * (size_t)nv * 3);
-			fimg_free(&a);
-			fimg_free(&b);
-		}
-		double mx = 0;
-		for (int64_t e = 0; e < nv * 3; e++)
-			mx = fmax(mx, fabs(x->d[e]));
+		double mx = exp_vs_unfused(&g, &s, &v, n);
 		print_message("compose_exp n=%d: the unfused floats bit for bit on "
 			      "1 and 3 threads (max |s o exp(v)| %.3f mm)\n", n, mx);
-		fimg_free(&r0);
-		fimg_free(&t0);
 	}
 	fimg_t *res = NULL;
 	assert_int_equal(fimg_compose_exp(&s, &v, &v, 1, &res, 1), ARMSTG_EINVAL);
@@ -508,7 +520,7 @@ static void test_compose_exp_zero(void **state)
 			       0, 0, 0, 1 };
 	assert_int_equal(fgrid_make(&g, 21, 17, 15, A), 0);
 	const int64_t nv = fgrid_nvox(&g);
-	fimg_t v, s, a, b, r0, t0;
+	fimg_t v, s;
 	fimg_alloc(&v, &g, 3);
 	fimg_alloc(&s, &g, 3);
 	int64_t nzero = 0;
@@ -529,34 +541,8 @@ static void test_compose_exp_zero(void **state)
 		nzero += r2 >= 20;
 	}
 	s.d[(7 * g.ny + 9) * g.nx + 15] = NAN; /* in the zero region */
-	for (int n = 0; n <= 3; n++) {
-		fimg_alloc(&r0, &g, 3);
-		fimg_alloc(&t0, &g, 3);
-		memcpy(r0.d, v.d, sizeof(float) * (size_t)nv * 3);
-		const float sc = (float)ldexp(1.0, -n);
-		for (int64_t e = 0; e < nv * 3; e++)
-			r0.d[e] *= sc;
-		fimg_t *x = &r0, *y = &t0;
-		for (int i = 0; i < n; i++) {
-			assert_int_equal(fimg_compose(x, x, y, 1), 0);
-			fimg_t *t = x;
-			x = y;
-			y = t;
-		}
-		assert_int_equal(fimg_compose(&s, x, x, 1), 0);
-		for (int nt = 1; nt <= 3; nt += 2) {
-			fimg_t *res = NULL;
-			fimg_alloc(&a, &g, 3);
-			fimg_alloc(&b, &g, 3);
-			memcpy(a.d, v.d, sizeof(float) * (size_t)nv * 3);
-			assert_int_equal(fimg_compose_exp(&s, &a, &b, n, &res, nt), 0);
-			assert_memory_equal(res->d, x->d, sizeof(float) * (size_t)nv * 3);
-			fimg_free(&a);
-			fimg_free(&b);
-		}
-		fimg_free(&r0);
-		fimg_free(&t0);
-	}
+	for (int n = 0; n <= 3; n++)
+		exp_vs_unfused(&g, &s, &v, n);
 	print_message("compose_exp, update zero on %lld of %lld voxels: the "
 		      "unfused floats bit for bit (n = 0-3, 1 and 3 threads)\n",
 		      (long long)nzero, (long long)nv);
