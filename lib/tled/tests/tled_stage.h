@@ -234,6 +234,21 @@ static void check_common(const grow_out_t *g, double Rb, int L)
 	check_iterations(g);
 }
 
+/* node i of the growth's output, if it is tissue (not the boundary, the
+ * tumour or a seed): 1 with its reference radius *r and radial
+ * displacement *ur (mm, about the origin); else 0 */
+static int tissue_ur(const grow_out_t *g, int64_t i, double *r, double *ur)
+{
+	const double *x = g->nodes->xyz + 3 * i, *d = g->u->data + 3 * i;
+	int32_t l = g->on->label[i];
+	if (l == TL_BOUNDARY || l == TL_TUMOUR || l == TL_TUMOUR_BND ||
+	    l == TL_SEED)
+		return 0;
+	*r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+	*ur = (d[0] * x[0] + d[1] * x[1] + d[2] * x[2]) / *r;
+	return 1;
+}
+
 /*
  * Lame check of the push.  Outside the tumour the tissue is a thick shell
  * with a fixed outer wall (r = Rb) pushed at its inner surface; the small-
@@ -254,13 +269,9 @@ static double lame_ratio(const grow_out_t *g, double Rb, double r0, double r1,
 	int nb = 0, nm = 0;
 	double b3 = Rb * Rb * Rb;
 	for (int64_t i = 0; i < g->on->n; i++) {
-		const double *x = g->nodes->xyz + 3 * i, *d = g->u->data + 3 * i;
-		int32_t l = g->on->label[i];
-		if (l == TL_BOUNDARY || l == TL_TUMOUR || l == TL_TUMOUR_BND ||
-		    l == TL_SEED)
+		double r, ur;
+		if (!tissue_ur(g, i, &r, &ur))
 			continue;
-		double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-		double ur = (d[0] * x[0] + d[1] * x[1] + d[2] * x[2]) / r;
 		double gr = 1 / (r * r) - r / b3;
 		if (r < r0) {
 			sb += ur / gr;
@@ -295,13 +306,9 @@ static void push_rings(const grow_out_t *g, double ring[4])
 	for (int k = 0; k < 4; k++)
 		ring[k] = 0;
 	for (int64_t i = 0; i < g->on->n; i++) {
-		const double *x = g->nodes->xyz + 3 * i, *d = g->u->data + 3 * i;
-		int32_t l = g->on->label[i];
-		if (l == TL_BOUNDARY || l == TL_TUMOUR || l == TL_TUMOUR_BND ||
-		    l == TL_SEED)
+		double r, ur;
+		if (!tissue_ur(g, i, &r, &ur))
 			continue;
-		double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-		double ur = (d[0] * x[0] + d[1] * x[1] + d[2] * x[2]) / r;
 		int k = r < 7 ? -1 : r < 10 ? 0 : r < 13 ? 1 : r < 16 ? 2 : 3;
 		if (k >= 0) {
 			ring[k] += ur;

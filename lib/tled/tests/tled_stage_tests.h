@@ -29,15 +29,12 @@ static void test_grow_sphere(void **state)
 	double rad_in = 0, rad_out = 0;
 	int nin = 0, nout = 0;
 	for (int64_t i = 0; i < g.on->n; i++) {
-		const double *x = g.nodes->xyz + 3 * i, *d = g.u->data + 3 * i;
-		int32_t l = g.on->label[i];
-		if (l == TL_BOUNDARY || l == TL_TUMOUR || l == TL_TUMOUR_BND ||
-		    l == TL_SEED)
+		double r, ur;
+		if (!tissue_ur(&g, i, &r, &ur))
 			continue;
-		double r = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+		const double *x = g.nodes->xyz + 3 * i, *d = g.u->data + 3 * i;
 		double y[3] = { x[0] + d[0], x[1] + d[1], x[2] + d[2] };
 		double ry = sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2]);
-		double ur = (d[0] * x[0] + d[1] * x[1] + d[2] * x[2]) / r;
 		/* no tissue left inside the tumour */
 		assert_true(ry > Rt - 0.5 * h);
 		if (r > 10 && r < 13) {
