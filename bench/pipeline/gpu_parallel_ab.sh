@@ -9,7 +9,8 @@
 # case each run of RUNS in order: B:N[:KEY=VALUE], B = n (build/) or m
 # (buildm/), N = TUNE_PARALLEL, KEY=VALUE an optional --set of that run
 # (e.g. n:2:grow.density_csf=0.2; several joined by +, e.g.
-# n:2:nodes.spacing=6+tune.tolerance=0.0003).  Every run's metrics.tsv and the chosen depth are compared
+# n:2:nodes.spacing=6+tune.tolerance=0.0003; jobs=8 among them sets that
+# run's --jobs instead of JOBS).  Every run's metrics.tsv and the chosen depth are compared
 # with the case's first run's.  STOP_S (default 540): no run starts after
 # that many seconds, so the summaries come back inside one 600 s call.
 # $OUT/r/summary.txt: one line per run; $OUT/logs.tgz: the logs, w-*.txt (the
@@ -32,10 +33,13 @@ run() { # case build parallel [KEY=VALUE]
   p=$1 b=$2 n=$3 tag=$1-$2$3${4:+-$(echo "$4" | tr -c 'A-Za-z0-9.\n' _)}
   d=/tmp/v-$tag; rm -rf $d
   bin=build; [ "$b" = m ] && bin=buildm
-  sets=; [ -z "${4:-}" ] || for kv in $(echo "$4" | tr + ' '); do sets="$sets --set $kv"; done
+  sets= jobs=$JOBS
+  [ -z "${4:-}" ] || for kv in $(echo "$4" | tr + ' '); do
+    case $kv in jobs=*) jobs=${kv#jobs=} ;; *) sets="$sets --set $kv" ;; esac
+  done
   t0=$(date +%s.%N)
   brats_run ${p#pat} $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/$bin/plugins TLED=tled_cuda \
-    TUNE_PARALLEL=$n $bin/armstg run graphs/armstg.ini --jobs $JOBS --out $d $sets -v > $R/v-$tag.log 2>&1
+    TUNE_PARALLEL=$n $bin/armstg run graphs/armstg.ini --jobs $jobs --out $d $sets -v > $R/v-$tag.log 2>&1
   rc=$?
   w=$(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{printf "%.1f", b-a}')
   ch=$(awk -F'\t' 'NR > 1 && $5 == 1 {print $1}' $d/tune.tsv 2>/dev/null)
