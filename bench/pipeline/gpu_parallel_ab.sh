@@ -38,9 +38,16 @@ run() { # case build parallel [KEY=VALUE]
     case $kv in jobs=*) jobs=${kv#jobs=} ;; *) sets="$sets --set $kv" ;; esac
   done
   t0=$(date +%s.%N)
-  brats_run ${p#pat} $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/$bin/plugins TLED=tled_cuda \
-    TUNE_PARALLEL=$n $bin/armstg run graphs/armstg.ini --jobs $jobs --out $d $sets -v > $R/v-$tag.log 2>&1
-  rc=$?
+  if [ "${STAMP:-0}" = 1 ]; then # each log line prefixed by CLOCK_MONOTONIC seconds
+    { brats_run ${p#pat} $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/$bin/plugins TLED=tled_cuda \
+        TUNE_PARALLEL=$n $bin/armstg run graphs/armstg.ini --jobs $jobs --out $d $sets -v 2>&1
+      echo $? > $R/rc-$tag; } | python3 bench/pipeline/perf_serial.py --stamp > $R/v-$tag.log
+    rc=$(cat $R/rc-$tag)
+  else
+    brats_run ${p#pat} $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/$bin/plugins TLED=tled_cuda \
+      TUNE_PARALLEL=$n $bin/armstg run graphs/armstg.ini --jobs $jobs --out $d $sets -v > $R/v-$tag.log 2>&1
+    rc=$?
+  fi
   w=$(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{printf "%.1f", b-a}')
   ch=$(awk -F'\t' 'NR > 1 && $5 == 1 {print $1}' $d/tune.tsv 2>/dev/null)
   tr=$(awk -F'\t' '$1 == "tune" {print $4}' $d/run.tsv 2>/dev/null)
