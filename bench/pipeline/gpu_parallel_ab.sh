@@ -13,6 +13,7 @@
 # run's --jobs instead of JOBS).  Every run's metrics.tsv and the chosen depth are compared
 # with the case's first run's.  STOP_S (default 540): no run starts after
 # that many seconds, so the summaries come back inside one 600 s call.
+# STAMP=1: each log line stamped with CLOCK_MONOTONIC seconds (python3).
 # $OUT/r/summary.txt: one line per run; $OUT/logs.tgz: the logs, w-*.txt (the
 # [tune] lines and the growths' times), each run's tune.tsv and metrics.tsv.
 cd "$(dirname "$0")/../.."
