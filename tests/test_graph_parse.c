@@ -280,23 +280,34 @@ static void test_composed_names(void **state)
 	graph_free(g);
 }
 
-/* every shipped graph with a growth: tled_cpu and 6 mm nodes unless told,
- * tled_cuda and 3 mm with TLED=tled_cuda, NODE_SPACING or --set
- * nodes.spacing over both */
+/* every shipped graph with a growth: tled_cpu and 6 mm nodes unless told;
+ * tled_cuda with the same 6 mm nodes; 3 mm with NODES=fine (environment or
+ * --set vars.NODES=fine) on either backend; NODE_SPACING or --set
+ * nodes.spacing over all of them; the [tune] tolerance follows the model
+ * (3e-4 coarse, 1.4e-3 fine) where a graph takes it from [vars] */
 static void test_shipped_graphs(void **state)
 {
 	(void)state;
 	const char *graphs[] = { "graphs/armstg.ini", "graphs/armstg_auto.ini",
 				 "graphs/demo.ini", "graphs/distributed.ini",
 				 "graphs/spherical.ini" };
-	struct { const char *tled, *spacing, *set; const char *plugin, *want;
-	} cases[] = {
-		{ NULL, NULL, NULL, "tled_cpu", "6.0" },
-		{ "tled_cpu", NULL, NULL, "tled_cpu", "6.0" },
-		{ "tled_cuda", NULL, NULL, "tled_cuda", "3.0" },
-		{ NULL, NULL, "vars.TLED=tled_cuda", "tled_cuda", "3.0" },
-		{ "tled_cuda", "4", NULL, "tled_cuda", "4" },
-		{ "tled_cuda", NULL, "nodes.spacing=6", "tled_cuda", "6" },
+	/* the graphs whose [tune] tolerance is [vars] TUNE_TOLERANCE (the
+	 * other two state 3e-4 in place) */
+	const int var_tol[] = { 1, 1, 1, 0, 0 };
+	struct { const char *tled, *nodes, *spacing, *set; const char *plugin,
+		*want, *tol; } cases[] = {
+		{ NULL, NULL, NULL, NULL, "tled_cpu", "6.0", "0.0003" },
+		{ "tled_cpu", NULL, NULL, NULL, "tled_cpu", "6.0", "0.0003" },
+		{ "tled_cuda", NULL, NULL, NULL, "tled_cuda", "6.0", "0.0003" },
+		{ NULL, NULL, NULL, "vars.TLED=tled_cuda", "tled_cuda", "6.0",
+		  "0.0003" },
+		{ "tled_cuda", "fine", NULL, NULL, "tled_cuda", "3.0", "0.0014" },
+		{ "tled_cuda", NULL, NULL, "vars.NODES=fine", "tled_cuda", "3.0",
+		  "0.0014" },
+		{ NULL, "fine", NULL, NULL, "tled_cpu", "3.0", "0.0014" },
+		{ "tled_cuda", "fine", "4", NULL, "tled_cuda", "4", "0.0014" },
+		{ "tled_cuda", NULL, NULL, "nodes.spacing=6", "tled_cuda", "6",
+		  "0.0003" },
 	};
 	char err[8192];
 	for (size_t k = 0; k < sizeof graphs / sizeof graphs[0]; k++)
@@ -305,6 +316,10 @@ static void test_shipped_graphs(void **state)
 				setenv("TLED", cases[i].tled, 1);
 			else
 				unsetenv("TLED");
+			if (cases[i].nodes)
+				setenv("NODES", cases[i].nodes, 1);
+			else
+				unsetenv("NODES");
 			if (cases[i].spacing)
 				setenv("NODE_SPACING", cases[i].spacing, 1);
 			else
@@ -324,9 +339,16 @@ static void test_shipped_graphs(void **state)
 					 "nodes.spacing %s", graphs[k], i,
 					 val(g, "grow", "plugin"),
 					 val(g, "nodes", "spacing"));
+			const g_kv_t *tol = g_kv_find(g->tune.kv, g->tune.nkv,
+						      "tolerance");
+			assert_non_null(tol);
+			if (strcmp(tol->val, var_tol[k] ? cases[i].tol : "0.0003"))
+				fail_msg("%s, case %zu: tune.tolerance %s",
+					 graphs[k], i, tol->val);
 			graph_free(g);
 		}
 	unsetenv("TLED");
+	unsetenv("NODES");
 	unsetenv("NODE_SPACING");
 }
 
