@@ -153,6 +153,11 @@ int tled_layer_index(tled_layer_t *L, double h)
 	L->A = malloc((size_t)(L->n > 0 ? L->n : 1) * sizeof(double));
 	if (!L->A)
 		return -1;
+	/* each point alone (a read of the grid, a write of A[q]): the same
+	 * bits on any thread count.  Serial, this loop was most of a growth's
+	 * "layer tests and bookkeeping" (83 000 contour points of BraTS
+	 * pat0001, 0.3-0.5 s a growth on the GPU host) */
+#pragma omp parallel for schedule(dynamic, 512)
 	for (int64_t q = 0; q < L->n; q++) {
 		int64_t ids[6];
 		double d2[6], sm = 0;
