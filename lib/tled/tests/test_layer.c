@@ -8,6 +8,7 @@
 #include "testutil.h"
 
 #include <math.h>
+#include <omp.h>
 
 #include "tled/tled_layer.h"
 
@@ -130,11 +131,41 @@ static void test_side(void **state)
 	tled_layer_free(&L); /* frees x, nrm and d too */
 }
 
+/* the areas per point (tled_layer_index, on the caller's threads): the
+ * same bits on 1 and 3 threads, and each the hexagonal area of the mean
+ * distance to the 6 nearest points, (sqrt 3 / 2) s^2, about 1 mm^2 on a
+ * sphere sampled at one point per mm^2 */
+static void test_areas_threads(void **state)
+{
+	(void)state;
+	const double c[3] = { 0, 0, 0 };
+	tled_layer_t L1, L3;
+	int nt = omp_get_max_threads();
+	omp_set_num_threads(1);
+	sphere(&L1, c);
+	omp_set_num_threads(3);
+	sphere(&L3, c);
+	omp_set_num_threads(nt);
+	assert_int_equal(L1.n, L3.n);
+	double amean = 0;
+	for (int64_t q = 0; q < L1.n; q++) {
+		if (memcmp(&L1.A[q], &L3.A[q], sizeof(double)))
+			fail_msg("point %lld: area %.17g on 1 thread, %.17g on 3",
+				 (long long)q, L1.A[q], L3.A[q]);
+		amean += L1.A[q] / (TLED_MM * TLED_MM) / (double)L1.n;
+	}
+	assert_true(amean > 0.9 && amean < 1.2);
+	assert_int_equal(L1.nclu, L3.nclu);
+	tled_layer_free(&L1);
+	tled_layer_free(&L3);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_winding),
 		cmocka_unit_test(test_side),
+		cmocka_unit_test(test_areas_threads),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
