@@ -33,6 +33,8 @@ cpb() { # worktree dest
 }
 cpb "$NEW" build
 [ -z "$REF" ] || cpb "$REF" buildm
+# the reference runs its own graphs (a newer graph may hold keys it does not know)
+[ -z "$REF" ] || { rm -rf "$C/graphs_ref"; cp -r "$REF/graphs" "$C/graphs_ref"; }
 L=$(mktemp -d); mkdir -p "$L/libs"
 find "$C/build" -type f | xargs ldd 2>/dev/null | awk '/=>/{print $3}' | sort -u |
 	grep -Ev '/(libc|libm|libdl|libpthread|ld-linux[^/]*)\.so' |

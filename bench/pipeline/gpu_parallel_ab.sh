@@ -33,7 +33,7 @@ fi
 run() { # case build parallel [KEY=VALUE]
   p=$1 b=$2 n=$3 tag=$1-$2$3${4:+-$(echo "$4" | tr -c 'A-Za-z0-9.\n' _)}
   d=/tmp/v-$tag; rm -rf $d
-  bin=build; [ "$b" = m ] && bin=buildm
+  bin=build gdir=graphs; [ "$b" = m ] && { bin=buildm; [ -d graphs_ref ] && gdir=graphs_ref; }
   sets= jobs=$JOBS
   [ -z "${4:-}" ] || for kv in $(echo "$4" | tr + ' '); do
     case $kv in jobs=*) jobs=${kv#jobs=} ;; *) sets="$sets --set $kv" ;; esac
@@ -41,12 +41,12 @@ run() { # case build parallel [KEY=VALUE]
   t0=$(date +%s.%N)
   if [ "${STAMP:-0}" = 1 ]; then # each log line prefixed by CLOCK_MONOTONIC seconds
     { brats_run ${p#pat} $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/$bin/plugins TLED=tled_cuda \
-        TUNE_PARALLEL=$n $bin/armstg run graphs/armstg.ini --jobs $jobs --out $d $sets -v 2>&1
+        TUNE_PARALLEL=$n $bin/armstg run $gdir/armstg.ini --jobs $jobs --out $d $sets -v 2>&1
       echo $? > $R/rc-$tag; } | python3 bench/pipeline/perf_serial.py --stamp > $R/v-$tag.log
     rc=$(cat $R/rc-$tag)
   else
     brats_run ${p#pat} $PWD/data env ARMSTG_PLUGIN_PATH=$PWD/$bin/plugins TLED=tled_cuda \
-      TUNE_PARALLEL=$n $bin/armstg run graphs/armstg.ini --jobs $jobs --out $d $sets -v > $R/v-$tag.log 2>&1
+      TUNE_PARALLEL=$n $bin/armstg run $gdir/armstg.ini --jobs $jobs --out $d $sets -v > $R/v-$tag.log 2>&1
     rc=$?
   fi
   w=$(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{printf "%.1f", b-a}')

@@ -30,11 +30,12 @@ PAIRS=$(lscpu -p=CPU,CORE 2>/dev/null | grep -v '^#' | awk -F, '!seen[$2]++ {pri
 [ -n "$PAIRS" ] || PAIRS="0,1"
 echo "core pairs: $PAIRS" >> $R/machine.txt
 one() { # case build cpus
-  p=$1 b=$2 cpus=$3 tag=$1-$2
+  p=$1 b=$2 cpus=$3 tag=$1-$2 gdir=graphs
+  [ "$b" = buildm ] && [ -d graphs_ref ] && gdir=graphs_ref
   d=/tmp/two-$tag; rm -rf $d
   t0=$(date +%s.%N)
   brats_run ${p#pat} $PWD/data /usr/bin/time -f '%U %S' -o $R/$tag.cpu env ARMSTG_PLUGIN_PATH=$PWD/$b/plugins \
-    OMP_NUM_THREADS=2 TLED=tled_cpu taskset -c $cpus $b/armstg run graphs/armstg.ini --jobs 2 --out $d -v > $R/$tag.log 2>&1
+    OMP_NUM_THREADS=2 TLED=tled_cpu taskset -c $cpus $b/armstg run $gdir/armstg.ini --jobs 2 --out $d -v > $R/$tag.log 2>&1
   rc=$?
   w=$(awk -v a=$t0 -v b=$(date +%s.%N) 'BEGIN{printf "%.1f", b-a}')
   ch=$(awk -F'\t' 'NR > 1 && $5 == 1 {print $1}' $d/tune.tsv 2>/dev/null)
