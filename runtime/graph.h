@@ -15,6 +15,9 @@
  *                       stop = require, past_peak (optional: skip the
  *                       values after the first failing require / the
  *                       first below the best so far by more than T),
+ *                       patience = N, margin = K (optional, with
+ *                       past_peak: after N in a row below it by more
+ *                       than K x T; default 1 and 1),
  *                       reuse = true (optional: the final run takes the
  *                       chosen candidate's stages from the search),
  *                       require_early = true (optional),

@@ -124,6 +124,15 @@ typedef struct g_tune {
 	 * that of the whole list when require fails from some value on and
 	 * the score rises to one peak and falls after it (tune.c). */
 	int stop_require, stop_peak;
+	/* past_peak's count and margin: the search stops after `patience`
+	 * scored candidates in a row (default 1) each worse than the best so
+	 * far by more than margin x tol (margin default 1; a candidate
+	 * nearer the best, or a new best, starts the count again; a failed
+	 * one neither counts nor breaks the run).  A dip of fewer
+	 * candidates, or one shallower than the margin, before a higher
+	 * peak does not stop the search (tune.c, tune_stop). */
+	int patience;
+	double margin;
 	/* reuse = true: the final run takes the chosen candidate's outputs
 	 * (and pending files) instead of running the stages that depend on
 	 * the tuned one again, when the search kept them (tune.c) */

@@ -25,10 +25,12 @@
  * earlier value; with a tolerance T the earliest candidate whose score is
  * within T of the best is chosen.  stop = require and/or past_peak skips
  * the candidates after the first that fails require, or after the first
- * that scores worse than the best so far by more than T (tune_stop: the
- * same choice when require fails from some value on and the score has one
- * peak).  reuse = true: the final run takes the chosen candidate's
- * stages instead of running them again (tune_keep_t).  require_early =
+ * that scores worse than the best so far by more than T (patience = N
+ * and margin = K: after the N-th scored candidate in a row that scores
+ * worse than it by more than K x T; tune_stop: the same choice when
+ * require fails from some value on and the score has one peak).
+ * reuse = true: the final run takes the chosen candidate's stages
+ * instead of running them again (tune_keep_t).  require_early =
  * true: the conditions read from tables that do not depend on the score's
  * stage (e.g. the growth's own measures) are checked first, after only the
  * stages they need, and a candidate that fails one is not run further (the
@@ -199,37 +201,65 @@ void tune_stop_mark(g_run_t *r, int k, const char *why)
 }
 
 /*
- * [tune] stop, after candidate k (not the last) has run; best is the best
- * so far (-1: none).  require: k failed a condition of require.
- * past_peak: k scored worse than the best so far by more than the
- * tolerance.  Then the count of the candidates after k is returned, the
- * reason in why (tune_stop_mark marks them skipped); else 0.
+ * [tune] stop, after candidate k has run (s->best: the best so far, -1
+ * none; s->ndecl: past_peak's count, advanced here for every candidate).
+ * require: k failed a condition of require.  past_peak: k is the
+ * patience-th scored candidate in a row that scores worse than the best
+ * so far by more than margin x tolerance (1 and 1 by default: k alone, by
+ * more than the tolerance).  Then, k not being the last, the count of the
+ * candidates after k is returned, the reason in why (tune_stop_mark marks
+ * them skipped); else 0.
  *
  * Why the choice is that of the whole list.  require: when a value fails
  * it, so does every later one (the deeper pushes fold more), so none of
  * them could be chosen.  past_peak: when the score rises to one peak and
  * falls after it (in the candidates' order; ties allowed), every later
  * candidate scores no better than k, so below the best so far by more than
- * the tolerance: none of them is the best nor within the tolerance of it,
- * and the rule (the best; the earliest within the tolerance) picks among
- * the candidates run.  Neither holds for a score with two peaks, or a
- * condition that later values meet again: the search then misses them.
+ * margin x tolerance; with margin >= 0 none of them is the best, and the
+ * earliest within the tolerance of the best is the best itself or comes
+ * before it: the rule (the best; the earliest within the tolerance) picks
+ * among the candidates run.  Neither holds for a score with two peaks, or
+ * a condition that later values meet again: the search then misses them,
+ * unless the dip before the higher peak is shorter than patience or
+ * shallower than the margin (bench/pipeline/tune_decline.py replays the
+ * recorded searches under both keys).
  */
-static int tune_stop(g_run_t *r, int k, int best, const char *sel,
-		     char *why, size_t whysize)
+static int tune_stop(g_run_t *r, int k, tstate_t *s, const char *sel)
 {
 	const g_tune_t *t = &r->g->tune;
 	const tune_row_t *row = &r->rows[k];
+	int best = s->best;
+	char *why = s->why;
+	size_t whysize = sizeof s->why;
+	int decl = 0;
+	if (t->stop_peak && row->ok) {
+		double lim = t->margin * t->tol;
+		decl = best >= 0 && best != k &&
+		       (t->goal_max ? row->score < r->rows[best].score - lim
+				    : row->score > r->rows[best].score + lim);
+		/* a candidate nearer the best (or the best) ends the run */
+		s->ndecl = decl ? s->ndecl + 1 : 0;
+	}
+	if (k + 1 >= t->nvalues)
+		return 0;
 	if (t->stop_require && row->req_failed) {
 		snprintf(why, whysize, "stop = require: %s failed it",
 			 t->values[k]);
-	} else if (t->stop_peak && row->ok && best >= 0 && best != k &&
-		   (t->goal_max ? row->score < r->rows[best].score - t->tol
-				: row->score > r->rows[best].score + t->tol)) {
-		snprintf(why, whysize, "stop = past_peak: %s scored %s "
-			 "%.6g, worse than the best so far (%s: %.6g) by more "
-			 "than the tolerance %g", t->values[k], sel, row->score,
-			 t->values[best], r->rows[best].score, t->tol);
+	} else if (decl && s->ndecl >= t->patience) {
+		if (t->patience == 1 && t->margin == 1)
+			snprintf(why, whysize, "stop = past_peak: %s scored %s "
+				 "%.6g, worse than the best so far (%s: %.6g) "
+				 "by more than the tolerance %g", t->values[k],
+				 sel, row->score, t->values[best],
+				 r->rows[best].score, t->tol);
+		else
+			snprintf(why, whysize, "stop = past_peak: %s scored %s "
+				 "%.6g, worse than the best so far (%s: %.6g) "
+				 "by more than %g x the tolerance %g, %d in a "
+				 "row (patience %d)", t->values[k], sel,
+				 row->score, t->values[best],
+				 r->rows[best].score, t->margin, t->tol,
+				 s->ndecl, t->patience);
 	} else {
 		return 0;
 	}
@@ -519,9 +549,7 @@ int tune_cand_commit(tctx_t *c, g_run_t *x, tune_keep_t *kp,
 		rt_log(NULL, LOG_WARN, "tune %s.%s = %s: failed (%.1f s): %s",
 		       ts->name, t->key, t->values[k], row->wall_s, row->err);
 	}
-	if (k + 1 < t->nvalues)
-		s->nskip = tune_stop(r, k, s->best, c->sel, s->why,
-				     sizeof s->why);
+	s->nskip = tune_stop(r, k, s, c->sel);
 	return 0;
 }
 

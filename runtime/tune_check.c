@@ -35,7 +35,8 @@ static const char *const tune_keys[] = { "param", "values", "score", "metric",
 					 "structure_column", "value_column",
 					 "stop", "reuse", "require_early",
 					 "search_set", "same_skip",
-					 "parallel", "same_from", "stagger" };
+					 "parallel", "same_from", "stagger",
+					 "patience", "margin" };
 
 /* Split the [tune] values on commas (blanks around each trimmed).  0, or -1
  * with an error reported when the list is empty or has an empty item. */
@@ -276,6 +277,48 @@ static void tune_stop_parse(graph_t *g, const g_kv_t *sk)
 		      "a require key (the conditions a value must meet)");
 }
 
+/* patience = N (a whole number 1..64) and margin = K (a number >= 0, in
+ * tolerances): how stop = past_peak reads a decline (graph_int.h); both
+ * only with it, default 1 and 1 (the first candidate worse than the best
+ * so far by more than the tolerance stops the search). */
+static void tune_patience_parse(graph_t *g)
+{
+	g_tune_t *t = &g->tune;
+	const g_kv_t *pk = g_kv_find(t->kv, t->nkv, "patience");
+	const g_kv_t *mk = g_kv_find(t->kv, t->nkv, "margin");
+	int nerr0 = g->nerr;
+	t->patience = 1;
+	t->margin = 1;
+	if (pk && pk->val[0]) {
+		char *end = NULL;
+		errno = 0;
+		long n = strtol(pk->val, &end, 10);
+		if (end == pk->val || *end || errno || n < 1 || n > 64)
+			g_err(g, pk->line, NULL, "patience", "[tune] patience "
+			      "must be a whole number from 1 to 64 (stop = "
+			      "past_peak: the scored candidates in a row worse "
+			      "than the best so far by more than the margin), "
+			      "got '%s'", pk->val);
+		else
+			t->patience = (int)n;
+	}
+	if (mk && mk->val[0]) {
+		if (!finite_number(mk->val, &t->margin) || t->margin < 0)
+			g_err(g, mk->line, NULL, "margin", "[tune] margin must "
+			      "be a number >= 0 in tolerances (stop = "
+			      "past_peak: a decline is a score worse than the "
+			      "best so far by more than margin x tolerance), "
+			      "got '%s'", mk->val);
+	}
+	const g_kv_t *k = pk && pk->val[0] ? pk : mk && mk->val[0] ? mk : NULL;
+	const g_kv_t *sk = g_kv_find(t->kv, t->nkv, "stop");
+	if (k && !t->stop_peak && g->nerr == nerr0)
+		g_err(g, k->line, NULL, k == pk ? "patience" : "margin",
+		      "[tune] %s is read by stop = past_peak only (stop = "
+		      "%s)", k == pk ? "patience" : "margin",
+		      sk && sk->val[0] ? sk->val : "none");
+}
+
 static const char set_syntax[] =
 	"[tune] search_set must read STAGE.KEY=VALUE, overrides separated by "
 	"';' (e.g. 'register.iterations=40,30,0; register.tol=0.01')";
@@ -498,7 +541,8 @@ void tune_check(graph_t *g)
 			     "structure, goal, require, tolerance, "
 			     "metric_column, structure_column, value_column, "
 			     "stop, reuse, require_early, search_set, "
-			     "same_skip, parallel, same_from, stagger)");
+			     "same_skip, parallel, same_from, stagger, "
+			     "patience, margin)");
 		else if (!kv->val[0] && strcmp(kv->key, "values"))
 			g_err(g, kv->line, NULL, kv->key, "empty value");
 	}
@@ -615,6 +659,7 @@ void tune_check(graph_t *g)
 	t->stop_require = t->stop_peak = 0;
 	if (sk2 && sk2->val[0])
 		tune_stop_parse(g, sk2);
+	tune_patience_parse(g);
 	const g_kv_t *uk = g_kv_find(t->kv, t->nkv, "reuse");
 	t->reuse = uk && !strcmp(uk->val, "true");
 	if (uk && uk->val[0] && strcmp(uk->val, "true") &&

@@ -52,6 +52,9 @@ typedef struct tctx {
 typedef struct tstate {
 	int best, nok, ncopy, nskip;
 	int nclamp;                 /* same_from: not run */
+	int ndecl;                  /* past_peak: scored candidates in a
+				       row worse than the best so far by
+				       more than the margin */
 	char why[512];              /* stop: the reason (nskip > 0) */
 } tstate_t;
 

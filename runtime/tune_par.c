@@ -19,8 +19,9 @@
  * the search may have started; they are cancelled (no further stage; the
  * running one is asked to stop through host->cancelled, which the growth
  * and the registration poll), what they ran is dropped and tune.tsv lists
- * them skipped as before.  same_from: a candidate is not started when a
- * committed one covers it; one that started before its source was
+ * them skipped as before (stagger: none starts between an earlier one's
+ * end and its commit, may_start).  same_from: a candidate is not started
+ * when a committed one covers it; one that started before its source was
  * committed runs, and its row is replaced by the copy when it is
  * committed (the rows of the search one after the other; its run only
  * cost time).  same_skip: a candidate whose tuned stage's outputs match
@@ -91,16 +92,20 @@ void tune_ph1_done(tctx_t *c, int k, int efail)
 
 /* stagger (under c->mu): may candidate n start, k being the earliest not
  * committed?  Without stagger, always.  With it: once n - 1 has passed
- * its phase one (or ended, or was not run), and unless a candidate j in
- * k..n-1 failed require_early under stop = require (the search may stop
- * there) or ran its tuned stage below its value (same_from: n >= its
- * value would be its copy); those wait for j's commit. */
+ * its phase one (or ended, or was not run), not while k has ended and
+ * awaits its commit (which may stop the search: stop = require, past_peak
+ * read its row), and unless a candidate j in k..n-1 failed require_early
+ * under stop = require (the search may stop there) or ran its tuned stage
+ * below its value (same_from: n >= its value would be its copy); those
+ * wait for j's commit. */
 static int may_start(const tctx_t *c, int n, int k)
 {
 	const g_run_t *r = c->r;
 	const g_tune_t *t = &r->g->tune;
 	if (!t->stagger || n == 0)
 		return 1;
+	if (n > k && c->phase[k] == 2 && (t->stop_require || t->stop_peak))
+		return 0;
 	if (c->phase[n - 1] != 2 && !c->ph1[n - 1])
 		return 0;
 	for (int j = k; j < n; j++) {

@@ -632,7 +632,7 @@ static void test_set_rules(void **state)
 		  "param, values, score, metric, structure, goal, require, "
 		  "tolerance, metric_column, structure_column, value_column, "
 		  "stop, reuse, require_early, search_set, same_skip, "
-		  "parallel, same_from, stagger)" },
+		  "parallel, same_from, stagger, patience, margin)" },
 		/* parallel: a whole number 1..64 */
 		{ "tune.parallel=0", "key 'parallel': [tune] parallel must be "
 		  "a whole number from 1 to 64 (the candidates run at once; "
@@ -649,6 +649,36 @@ static void test_set_rules(void **state)
 		{ "tune.parallel=65", "key 'parallel': [tune] parallel must "
 		  "be a whole number from 1 to 64 (the candidates run at "
 		  "once; 1: one after the other), got '65'" },
+		/* patience: a whole number 1..64; margin: a number >= 0;
+		 * both only with stop = past_peak */
+		{ "tune.patience=0", "key 'patience': [tune] patience must be "
+		  "a whole number from 1 to 64 (stop = past_peak: the scored "
+		  "candidates in a row worse than the best so far by more "
+		  "than the margin), got '0'" },
+		{ "tune.patience=1.5", "key 'patience': [tune] patience must "
+		  "be a whole number from 1 to 64 (stop = past_peak: the "
+		  "scored candidates in a row worse than the best so far by "
+		  "more than the margin), got '1.5'" },
+		{ "tune.patience=65", "key 'patience': [tune] patience must "
+		  "be a whole number from 1 to 64 (stop = past_peak: the "
+		  "scored candidates in a row worse than the best so far by "
+		  "more than the margin), got '65'" },
+		{ "tune.margin=-1", "key 'margin': [tune] margin must be a "
+		  "number >= 0 in tolerances (stop = past_peak: a decline is "
+		  "a score worse than the best so far by more than margin x "
+		  "tolerance), got '-1'" },
+		{ "tune.margin=inf", "key 'margin': [tune] margin must be a "
+		  "number >= 0 in tolerances (stop = past_peak: a decline is "
+		  "a score worse than the best so far by more than margin x "
+		  "tolerance), got 'inf'" },
+		{ "tune.margin=three", "key 'margin': [tune] margin must be a "
+		  "number >= 0 in tolerances (stop = past_peak: a decline is "
+		  "a score worse than the best so far by more than margin x "
+		  "tolerance), got 'three'" },
+		{ "tune.patience=2", "key 'patience': [tune] patience is read "
+		  "by stop = past_peak only (stop = none)" },
+		{ "tune.margin=3", "key 'margin': [tune] margin is read by "
+		  "stop = past_peak only (stop = none)" },
 		{ "tune.same_skip=yes", "key 'same_skip': [tune] same_skip "
 		  "must be true or false, got 'yes'" },
 		{ "tune.reuse=yes", "key 'reuse': [tune] reuse must be true "
@@ -711,7 +741,7 @@ static void test_set_rules(void **state)
  * per run of the tuned stage, the final run's included), which tune.tsv
  * lists as ok / failed / skipped, and the value chosen */
 typedef struct stopcase {
-	const char *sets[4];
+	const char *sets[6];
 	const char *status;  /* per candidate: o ok, f failed, s skipped */
 	double chosen;
 } stopcase_t;
@@ -719,7 +749,7 @@ typedef struct stopcase {
 static void expect_stop(const stopcase_t *c, const char *skip_err)
 {
 	int ns = 0, nrun = 0, n = (int)strlen(c->status);
-	while (ns < 4 && c->sets[ns])
+	while (ns < 6 && c->sets[ns])
 		ns++;
 	trun_t r;
 	run_sets(&r, c->sets, ns);
@@ -785,6 +815,76 @@ static void test_stop_past_peak(void **state)
 	const stopcase_t t = { { "tune.stop=past_peak", "tune.tolerance=1.5" },
 			       "ooooo", 2 };
 	expect_stop(&t, NULL);
+}
+
+/* stop = past_peak with patience = N and margin = K: the search stops
+ * after the N-th scored candidate in a row that scores worse than the best
+ * so far by more than K x tolerance.  sq near (target 3.2) of 1..7: 4.84
+ * 1.44 0.04 0.64 3.24 7.84 12.96, one minimum at 3 */
+static void test_stop_patience_margin(void **state)
+{
+	(void)state;
+	const char *pp = "tune.stop=past_peak", *v7 = "tune.values=1,2,3,4,5,6,7";
+	const stopcase_t c[] = {
+		/* patience 1 (the default): 4 stops, 5-7 skipped */
+		{ { pp, v7 }, "oooosss", 3 },
+		{ { pp, v7, "tune.patience=1", "tune.margin=1" }, "oooosss", 3 },
+		/* patience 2: 4 and 5 in a row, 6 and 7 skipped */
+		{ { pp, v7, "tune.patience=2" }, "oooooss", 3 },
+		/* patience 3: 4, 5 and 6, 7 skipped */
+		{ { pp, v7, "tune.patience=3" }, "oooooos", 3 },
+		/* margin: tolerance 0.5, margin 2 (1.0): 4 (0.6 above 3's
+		 * 0.04) is no decline, 5 (3.2 above) is: 6, 7 skipped; with
+		 * margin 1 (0.5), 4 stops */
+		{ { pp, v7, "tune.tolerance=0.5", "tune.margin=2" }, "ooooo" "ss",
+		  3 },
+		{ { pp, v7, "tune.tolerance=0.5", "tune.margin=1" }, "oooosss",
+		  3 },
+		/* margin 0: any worse score is a decline, whatever the
+		 * tolerance (0.7: 4's 0.6 does not stop with margin 1) */
+		{ { pp, v7, "tune.tolerance=0.7", "tune.margin=0" }, "oooosss",
+		  3 },
+		{ { pp, v7, "tune.tolerance=0.7" }, "ooooo" "ss", 3 },
+		/* a failed candidate neither counts nor breaks the run: 5
+		 * fails, 4 and 6 are two in a row, 7 skipped */
+		{ { pp, v7, "tune.patience=2", "sim.fail_at=5" }, "oooofos", 3 },
+		/* a candidate within the margin ends the run: 1, 2, 3, 4,
+		 * 3.5, 5, 6, 7 score 4.84 1.44 0.04 0.64 0.09 3.24 7.84
+		 * 12.96, tolerance 0.1: 4 is one decline, 3.5 (0.05 above
+		 * the best) none, 5 and 6 two: 7 skipped (counting 4 too
+		 * would stop at 5) */
+		{ { pp, "tune.values=1,2,3,4,3.5,5,6,7", "tune.patience=2",
+		    "tune.tolerance=0.1" }, "oooooo" "os", 3 },
+		/* goal max of -(x - 3.2)^2: the same */
+		{ { pp, v7, "tune.patience=2", "tune.metric=neg" , "tune.goal=max" },
+		  "ooooo" "ss", 3 },
+	};
+	for (int i = 0; i < ARMSTG_COUNT(c); i++)
+		expect_stop(&c[i], NULL);
+	expect_stop(&c[2], "stop = past_peak: 5 scored sq 3.24, worse than "
+		    "the best so far (3: 0.04) by more than 1 x the tolerance "
+		    "0, 2 in a row (patience 2)");
+	expect_stop(&c[4], "stop = past_peak: 5 scored sq 3.24, worse than "
+		    "the best so far (3: 0.04) by more than 2 x the tolerance "
+		    "0.5, 1 in a row (patience 1)");
+	/* two minima: 1, 3, 4, 3.3, 5, 6, 7 score 4.84 0.04 0.64 0.01 3.24
+	 * 7.84 12.96.  The whole list (and patience 2) chooses 3.3; patience
+	 * 1 stops at 4, one candidate before the deeper minimum, and
+	 * chooses 3 */
+	const char *v2 = "tune.values=1,3,4,3.3,5,6,7";
+	const stopcase_t d[] = {
+		{ { v2 }, "ooooooo", 3.3 },
+		{ { pp, v2 }, "ooosss" "s", 3 },
+		{ { pp, v2, "tune.patience=2" }, "oooooos", 3.3 },
+		/* margin 20 with tolerance 0.1 (2.0): 4's 0.6 is no decline,
+		 * 5 (3.23 above 3.3's 0.01) and 6 are; the tolerance
+		 * chooses 3 (0.04, within 0.1 of 0.01) as the whole list
+		 * does */
+		{ { pp, v2, "tune.patience=2", "tune.margin=20",
+		    "tune.tolerance=0.1" }, "oooooos", 3 },
+	};
+	for (int i = 0; i < ARMSTG_COUNT(d); i++)
+		expect_stop(&d[i], NULL);
 }
 
 /* stop = require.  sq far of 1..5 is 148.84 125.44 104.04 84.64 67.24:
@@ -1245,7 +1345,7 @@ static void expect_set(const setcase_t *c)
 {
 	trun_t r;
 	int ns = 0;
-	while (ns < 4 && c->sets[ns])
+	while (ns < 6 && c->sets[ns])
 		ns++;
 	run_with(&r, c->sets, ns, c->jobs, NULL, 0);
 	if (r.rc)
@@ -1852,6 +1952,17 @@ static void test_parallel_same_choice(void **state)
 		{ { sl, "tune.stop=past_peak" } },
 		{ { sl, "tune.stop=past_peak", "tune.goal=max" } },
 		{ { sl, "tune.stop=past_peak", "sim.fail_at=2" } },
+		/* patience and margin: the stop after two in a row (6, 7
+		 * skipped), across a deeper second minimum (3.3), with a
+		 * failed candidate inside the run, with a margin */
+		{ { sl, "tune.stop=past_peak", "tune.values=1,2,3,4,5,6,7",
+		    "tune.patience=2" } },
+		{ { sl, "tune.stop=past_peak", "tune.values=1,3,4,3.3,5,6,7",
+		    "tune.patience=2", "tune.reuse=true" } },
+		{ { sl, "tune.stop=past_peak", "tune.values=1,2,3,4,5,6,7",
+		    "tune.patience=2", "sim.fail_at=5", "tune.reuse=true" } },
+		{ { sl, "tune.stop=past_peak", "tune.values=1,2,3,4,5,6,7",
+		    "tune.margin=2", "tune.tolerance=0.5" } },
 		{ { sl, "tune.require=sq far > 100", "tune.stop=require" } },
 		{ { sl, "tune.require=sq far > 110",
 		    "tune.stop=require past_peak", "tune.reuse=true" } },
@@ -1910,6 +2021,38 @@ static void test_parallel_same_choice(void **state)
 				"tune.require_early=true", "tune.stop=require",
 				"tune.stagger=true" };
 	expect_parallel_same(stag2, ARMSTG_COUNT(stag2), 1, 3);
+	/* every key of the shipped graphs, past_peak with patience 2 and
+	 * margin 3 among them, over seven values (7 the copy of 6 by
+	 * same_from): with search_set the score is (x + 1 - 3.2)^2, 1.44
+	 * 0.04 0.64 3.24 7.84 ...; 4 and 5 are more than 3 x 0.5 above 2's
+	 * 0.04, so 6 and 7 are skipped */
+	const char *stag3[] = { sl, "tune.values=1,2,3,4,5,6,7", "sim.cap=6",
+				"tune.require=sq far <= 150, alt.table: sq "
+				"near < 20", "tune.tolerance=0.5",
+				"tune.stop=require, past_peak",
+				"tune.patience=2", "tune.margin=3",
+				"tune.reuse=true", "tune.require_early=true",
+				"tune.search_set=fit.offset=1",
+				"tune.same_skip=true", "tune.stagger=true",
+				"tune.same_from=sim.table: offset_used" };
+	expect_parallel_same(stag3, ARMSTG_COUNT(stag3), 1, 3);
+	expect_parallel_same(stag3, ARMSTG_COUNT(stag3), 2, 2);
+	trun_t r;
+	run_sets(&r, stag3, ARMSTG_COUNT(stag3));
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 7);
+	for (int k = 0; k < 7; k++)
+		assert_string_equal(tt.status->str[k], k < 5 ? "ok" : "skipped");
+	assert_string_equal(tt.error->str[5], "stop = past_peak: 5 scored sq "
+			    "7.84, worse than the best so far (2: 0.04) by "
+			    "more than 3 x the tolerance 0.5, 2 in a row "
+			    "(patience 2)");
+	assert_float_equal(chosen_value(&tt), 2, 0);
+	ttab_free(&tt);
+	done(&r);
 }
 
 static double runtab_num(const char *out, const char *row);
@@ -2061,6 +2204,46 @@ static void test_parallel_stop_cancels(void **state)
 	done(&r);
 }
 
+/* stop = past_peak with patience 2 cancels a candidate started before
+ * the decline that stops the search is committed: two at once, sq near of
+ * 1..7, 4 and 5 in a row worse than 3; 5 and 6 start together (the lanes
+ * of 3 and 4 free), 6's sim would sleep 20 s but polls host->cancelled;
+ * the rows and files of the search one after the other (which never
+ * starts 6) */
+static void test_parallel_decline_cancels(void **state)
+{
+	(void)state;
+	const char *sets[] = { "tune.stop=past_peak", "tune.patience=2",
+			       "tune.values=1,2,3,4,5,6,7", "sim.slow_at=6",
+			       "sim.slow_ms=20000", "sim.sleep_ms=500" };
+	expect_parallel_same(sets, 6, 1, 2);
+	const char *par[] = { sets[0], sets[1], sets[2], sets[3], sets[4],
+			      sets[5], "tune.parallel=2" };
+	trun_t r;
+	double t0 = sched_now();
+	run_sets(&r, par, 7);
+	double wall = sched_now() - t0;
+	if (r.rc)
+		fail_msg("rc %d: %s", r.rc, r.err);
+	if (wall > 10)
+		fail_msg("the cancelled candidate ran on: %.1f s", wall);
+	ttab_t tt;
+	tune_tsv(r.out, &tt);
+	assert_int_equal(tt.t->nrows, 7);
+	assert_string_equal(tt.status->str[4], "ok");
+	assert_string_equal(tt.status->str[5], "skipped");
+	assert_string_equal(tt.status->str[6], "skipped");
+	assert_string_equal(tt.error->str[5], "stop = past_peak: 5 scored sq "
+			    "3.24, worse than the best so far (3: 0.04) by "
+			    "more than 1 x the tolerance 0, 2 in a row "
+			    "(patience 2)");
+	assert_float_equal(chosen_value(&tt), 3, 0);
+	ttab_free(&tt);
+	/* 1-6 started (6 cancelled), and the final run's */
+	assert_int_equal(count_lines(in(r.cnt, "sim.count")), 7);
+	done(&r);
+}
+
 /* the running stages of every candidate share the threads: 8 threads,
  * parallel = 2, sim sleeping 300 ms: the chosen candidate's sim (3, with
  * 4's beside it), kept by reuse, ran with half of them (3 when a third
@@ -2122,6 +2305,7 @@ int main(void)
 		cmocka_unit_test(test_require),
 		cmocka_unit_test(test_require_other_table),
 		cmocka_unit_test(test_stop_past_peak),
+		cmocka_unit_test(test_stop_patience_margin),
 		cmocka_unit_test(test_stop_require),
 		cmocka_unit_test(test_require_keeps_zero),
 		cmocka_unit_test(test_shipped_push_rule),
@@ -2141,6 +2325,7 @@ int main(void)
 		cmocka_unit_test(test_parallel_stagger),
 		cmocka_unit_test(test_parallel_interrupt),
 		cmocka_unit_test(test_parallel_stop_cancels),
+		cmocka_unit_test(test_parallel_decline_cancels),
 		cmocka_unit_test(test_parallel_thread_share),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
