@@ -93,6 +93,12 @@
  * done, it corrects the field only where the fixed mask leaves the images
  * out, blended to zero towards the imaged voxels (dlabel_correct).
  *
+ * memo = true keeps the field after the coarse levels (all but the
+ * finest) for a later run of this process whose coarse levels are the same
+ * computation, which then starts at the finest level from it, the same
+ * bits (demons_memo.c: the final run of a [tune] search after its
+ * candidates, scored without the finest level).
+ *
  * Threads: every result (the field, the warped image, each figure of the
  * table but its seconds) is the same bits on any thread count: sums over
  * voxels (the cost, the mean update) are taken per row of the level grid,
@@ -115,6 +121,7 @@
 #include "img/sample.h"
 #include "demons_int.h"
 #include "demons_label.h"
+#include "demons_memo.h"
 #include "clock.h"
 
 static const armstg_port_t demons_inputs[] = {
@@ -249,6 +256,13 @@ static const armstg_param_t demons_params[] = {
 	  "label_where=after: the correction's steps at most (it stops "
 	  "earlier when its cost gains less than tol over tol_window steps)",
 	  NULL, OFF(label_iterations), 0 },
+	{ "memo", PT_BOOL, "false", 0, 0, "",
+	  "keep the field after the coarse levels (all but the finest) in "
+	  "this process, and start a later registration whose coarse levels "
+	  "are the same computation (the same inputs' bytes, the same "
+	  "parameters for those levels: a [tune] search's final run after its "
+	  "candidates) from it at the finest level: the same bits; at most 8 "
+	  "fields, 256 MB (demons_memo.c)", NULL, OFF(memo), 0 },
 };
 
 #define FAIL(code, ...) st->host->fail(st, code, __VA_ARGS__)
@@ -293,6 +307,13 @@ static int add_row(armstg_stage_t *st, tab_t *t, int level, int it,
 	return 0;
 }
 
+/* the label term acts at level l (0: the coarsest) of nlev */
+static int label_at(const demons_priv_t *p, int use_label, int l, int nlev)
+{
+	return use_label && p->label_where != WHERE_AFTER &&
+	       !(p->label_levels && l < nlev - p->label_levels);
+}
+
 static int demons_process(armstg_stage_t *st)
 {
 	demons_priv_t *p = st->priv;
@@ -332,6 +353,8 @@ static int demons_process(armstg_stage_t *st)
 	double *lbest = NULL; /* the same for the label term's cost */
 	tab_t *tab = NULL;
 	vol_t *ofield = NULL, *owarp = NULL;
+	dm_memo_row_t *mrows = NULL; /* memo: the rows of levels 1..nlev-1 */
+	int nmrows = 0;
 
 	if ((rc = fimg_from_vol_nt(&F0, vf, nt)) ||
 	    (rc = fimg_from_vol_nt(&M0, vm, nt))) {
@@ -430,7 +453,80 @@ static int demons_process(armstg_stage_t *st)
 	}
 
 	int done = 0, crop_now = 0, crop_lo[3] = { 0, 0, 0 }, margin = 0;
-	for (int l = 0; l < nlev; l++) {
+	/* memo = true: the field after levels 1..mk (all but the finest)
+	 * from an earlier run whose levels 1..mk were the same computation,
+	 * under the key of everything they read (demons_memo.c); l0: the
+	 * first level computed here */
+	const int mk = nlev - 1;
+	const int memo_on = p->memo && mk >= 1;
+	int l0 = 0;
+	dm_key_t mkey;
+	if (memo_on) {
+		int lprefix = 0, nrow = 0;
+		for (int l = 0; l < mk; l++) {
+			lprefix |= label_at(p, use_label, l, nlev);
+			nrow += iters[l];
+		}
+		const vol_t *const vin[7] = { vf, vm, vfm, vmm, vinit, vfl, vml };
+		const double tk = lib_now_s();
+		if ((rc = dm_memo_key(&mkey, demons_params,
+				      (int)(sizeof demons_params /
+					    sizeof demons_params[0]),
+				      p, vin, nlev, mk, iters, lprefix, nt)) ||
+		    !(mrows = malloc(sizeof *mrows * (size_t)(nrow > 0 ? nrow : 1)))) {
+			rc = FAIL(ARMSTG_ENOMEM, "out of memory (memo key)");
+			goto out;
+		}
+		fimg_t Sk = { 0 };
+		dm_memo_row_t *rows = NULL;
+		int nr = 0;
+		rc = dm_memo_get(&mkey, &Sk, &rows, &nr);
+		if (rc < 0) {
+			rc = FAIL(rc, "out of memory (memo)");
+			goto out;
+		}
+		rc = 0;
+		const uint8_t *kb = mkey.b;
+		if (Sk.d) {
+			/* the rows as the run that computed them wrote them, at
+			 * this run's time */
+			const double secs = lib_now_s() - t0;
+			for (int i = 0; i < nr && !rc; i++) {
+				const dm_memo_row_t *w = &rows[i];
+				rc = add_row(st, tab, w->level, w->it, w->cost,
+					     w->mean_u, w->max_u, secs,
+					     p->metric == METRIC_LNCC);
+				if (!rc && use_label) {
+					h->tab_set_num(tab, tab->nrows - 1,
+						       "label_dice", w->ldice);
+					h->tab_set_num(tab, tab->nrows - 1,
+						       "label_mm", w->lcost);
+				}
+			}
+			free(rows);
+			if (rc) {
+				fimg_free(&Sk);
+				rc = FAIL(rc, "out of memory (table)");
+				goto out;
+			}
+			S = Sk;
+			l0 = mk;
+			done = nrow;
+			h->log(st, LOG_DEBUG, "memo: levels 1-%d taken from an "
+			       "earlier run (key %02x%02x%02x%02x..., %d rows, "
+			       "%.2f s for the key): starting at level %d",
+			       mk, kb[0], kb[1], kb[2], kb[3], nr,
+			       lib_now_s() - tk, l0 + 1);
+			h->progress(st, total ? (double)done / total : 1,
+				    "levels 1-%d from the memo", mk);
+		} else {
+			h->log(st, LOG_DEBUG, "memo: no field kept for levels "
+			       "1-%d (key %02x%02x%02x%02x..., %.2f s): computing "
+			       "them", mk, kb[0], kb[1], kb[2], kb[3],
+			       lib_now_s() - tk);
+		}
+	}
+	for (int l = l0; l < nlev; l++) {
 		const int f = 1 << (nlev - 1 - l);
 		fgrid_t g;
 		fgrid_shrink(&F0.g, f, &g);
@@ -691,6 +787,10 @@ static int demons_process(armstg_stage_t *st)
 				h->tab_set_num(tab, tab->nrows - 1, "label_dice", ldice);
 				h->tab_set_num(tab, tab->nrows - 1, "label_mm", lcost);
 			}
+			if (memo_on && l < mk)
+				mrows[nmrows++] = (dm_memo_row_t){
+					l + 1, it + 1, mse, mu, mx, ldice, lcost
+				};
 			done++;
 			h->progress(st, total ? (double)done / total : 1,
 				    "level %d/%d iter %d/%d %s %.5g mean update "
@@ -728,6 +828,23 @@ static int demons_process(armstg_stage_t *st)
 			fimg_free(&S);
 			S = Sfull;
 			Sfull = (fimg_t){ 0 };
+		}
+		/* memo: S is now all that level mk + 1 takes from the levels
+		 * before it (demons_memo.c) */
+		if (memo_on && l == mk - 1) {
+			if (dm_memo_put(&mkey, &S, mrows, nmrows)) {
+				h->log(st, LOG_WARN, "memo: out of memory keeping "
+				       "the field after level %d (not kept)", mk);
+			} else {
+				int ne;
+				size_t nb;
+				dm_memo_usage(&ne, &nb);
+				h->log(st, LOG_DEBUG, "memo: the field after level "
+				       "%d kept (key %02x%02x%02x%02x...; the memo "
+				       "holds %d of %d fields, %.1f MB)", mk,
+				       mkey.b[0], mkey.b[1], mkey.b[2], mkey.b[3],
+				       ne, DM_MEMO_ENTRIES, nb / 1048576.0);
+			}
 		}
 	}
 
@@ -820,6 +937,7 @@ out:
 		h->msg_unref(&tab->base);
 	dm_level_free(&L);
 	dlabel_free(&DL);
+	free(mrows);
 	free(best);
 	free(lbest);
 	fimg_free(&F0);

@@ -5,7 +5,8 @@
  * (demons_process); demons_img.c: the images before the levels (intensity
  * normalisation, the masks' box and the crops); demons_force.c: one
  * level's buffers and the forces of each iteration (SSD demons, LNCC);
- * demons_label.c: the label term.  The equations are in demons.c's header.
+ * demons_label.c: the label term; demons_memo.c: the coarse levels' field
+ * kept for a later run (memo).  The equations are in demons.c's header.
  */
 #ifndef DEMONS_INT_H
 #define DEMONS_INT_H
@@ -53,6 +54,7 @@ typedef struct demons_priv {
 	double label_blend;  /* mm */
 	double label_jmin;
 	int label_iterations;
+	int memo;            /* keep / resume the coarse levels (demons_memo.c) */
 	/* parsed in init */
 	int niter[MAX_LEVELS];
 	int nlist;
