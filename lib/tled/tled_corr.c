@@ -61,10 +61,14 @@ static inline void corr_ip_fit(const corr_ctx_t *cx, int64_t p,
 		int64_t a = m->ipnode[e];
 		if (!cx->con[a])
 			continue;
-		for (int r = 0; r < 4; r++)
-			for (int c = 0; c < 3; c++)
-				b[r][c] += cx->w[e] * cx->P[4 * e + r] *
-					   v[3 * a + c];
+		const double *pe = cx->P + 4 * e, *va = v + 3 * a;
+		double we = cx->w[e], v0 = va[0], v1 = va[1], v2 = va[2];
+		for (int r = 0; r < 4; r++) {
+			double t = we * pe[r];
+			b[r][0] += t * v0;
+			b[r][1] += t * v1;
+			b[r][2] += t * v2;
+		}
 	}
 	const double *Mi = cx->Mi + 16 * p;
 	for (int r = 0; r < 4; r++)
@@ -74,18 +78,23 @@ static inline void corr_ip_fit(const corr_ctx_t *cx, int64_t p,
 				   Mi[4 * r + 3] * b[3][c];
 }
 
-/* entry e's residual, component c: w_a (v_a - p_a^T c), v_a = 0 on a node
- * not constrained */
-static inline double corr_entry_resid(const corr_ctx_t *cx, int64_t e,
-				      const double cc[4][3], const double *v,
-				      int c)
+/* entry e's residual, 3 components: w_a (v_a - p_a^T c), v_a = 0 on a node
+ * not constrained (each operand read once, into locals: the callers' stores
+ * then cannot make the compiler read them again) */
+static inline void corr_entry_resid(const corr_ctx_t *cx, int64_t e,
+				    const double cc[4][3], const double *v,
+				    double res[3])
 {
 	int64_t a = cx->m->ipnode[e];
 	const double *pa = cx->P + 4 * e;
-	double fit = pa[0] * cc[0][c] + pa[1] * cc[1][c] + pa[2] * cc[2][c] +
-		     pa[3] * cc[3][c];
-	double va = cx->con[a] ? v[3 * a + c] : 0;
-	return cx->w[e] * (va - fit);
+	double p0 = pa[0], p1 = pa[1], p2 = pa[2], p3 = pa[3], we = cx->w[e];
+	int on = cx->con[a];
+	for (int c = 0; c < 3; c++) {
+		double fit = p0 * cc[0][c] + p1 * cc[1][c] + p2 * cc[2][c] +
+			     p3 * cc[3][c];
+		double va = on ? v[3 * a + c] : 0;
+		res[c] = we * (va - fit);
+	}
 }
 
 /* per-entry residual values  e = w_a (v_a - p_a^T c), c = M^-1 sum w p v */
@@ -97,8 +106,7 @@ static void corr_resid(const corr_ctx_t *cx, const double *v, double *ev)
 		double cc[4][3];
 		corr_ip_fit(cx, p, v, cc);
 		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++)
-			for (int c = 0; c < 3; c++)
-				ev[3 * e + c] = corr_entry_resid(cx, e, cc, v, c);
+			corr_entry_resid(cx, e, cc, v, ev + 3 * e);
 	}
 }
 
@@ -130,10 +138,11 @@ static void corr_apply_fused(const corr_ctx_t *cx, const double *v,
 				corr_ip_fit(cx, p, v, cc);
 				double V = m->ipV[p];
 				for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+					double res[3];
+					corr_entry_resid(cx, e, cc, v, res);
 					double *o = bb + 3 * loc[e];
 					for (int c = 0; c < 3; c++)
-						o[c] += V * corr_entry_resid(cx, e, cc,
-									     v, c);
+						o[c] += V * res[c];
 				}
 			}
 		}
