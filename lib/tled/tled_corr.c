@@ -251,7 +251,8 @@ static void null_project(const tled_model_t *m, const uint8_t *con, double *v)
  * spacings, so that it has at most about TLED_COARSE_TARGET points) with
  * trilinear prolongation R (which reproduces linear fields, the null
  * space), the Galerkin operator A_c = R^T Q R assembled ip by ip, and
- * A_c factored once by LAPACK (dpotrf).  The preconditioner is additive:
+ * A_c factored once by LAPACK as a band matrix (dpbtrf, below).  The
+ * preconditioner is additive:
  *     B r = D^-1 r + R A_c^-1 R^T r,
  * symmetric positive definite, so CG keeps its guarantees (Toselli &
  * Widlund 2005, Domain Decomposition Methods, ch. 2: the two-level
@@ -265,21 +266,34 @@ static void null_project(const tled_model_t *m, const uint8_t *con, double *v)
  * (y, z) columns, four colours of blocks whose coarse rows never overlap,
  * each block in ip order: the sum has the same order on any thread count
  * (deterministic).
+ *
+ * A_c is a band matrix: an ip couples only the coarse points around its
+ * support (R_a about 2 node spacings, H 3 or more), so A_c(c, c') = 0
+ * unless c and c' lie within about 3 grid steps of each other.  The
+ * coarse points are numbered with the grid's longest axis slowest, so
+ * that the half-bandwidth kd (the largest index distance of two coarse
+ * points of one ip) is about 3 grid planes of the two shorter axes: at a
+ * 3 mm pat0001 model (nc = 2 668) the dense factor was 57 MB and n^3/3 =
+ * 6.3 GFlop on one thread; the band's Cholesky (LAPACK dpbtrf: nc kd^2
+ * flops) and its storage nc (kd + 1) doubles are what the band holds
+ * (bench/tled/results.md, "The consistency correction's coarse level as
+ * a band").
  */
 #define TLED_COARSE_TARGET 2000.0
 
 typedef struct coarse {
 	int64_t nc;       /* coarse unknowns (0: no coarse level) */
+	int64_t kd;       /* half-bandwidth of A_c (A_c(r, c) = 0 for
+			   * |r - c| > kd) */
 	int32_t *cid;     /* 8 per node: compact coarse index, -1 = none */
 	double *cw;       /* 8 per node: trilinear weights */
 	int64_t *rptr;    /* nc + 1: R^T in CSR, coarse point c's entries */
 	int64_t *rent;    /*   rptr[c] .. rptr[c+1]-1, each 8 a + k (an index
 			   *   of cid / cw), in increasing node a */
-	double *A;        /* nc * nc: Cholesky factor L, lower, column-major
-			   * (A[c nc + r] = L_rc, r >= c), mirrored into the
-			   * upper part (A[r nc + c] = L_rc too): row r of L
-			   * and row r of L^T are both contiguous
-			   * (tled_chol_solve3) */
+	double *A;        /* (kd + 1) nc: Cholesky factor L of A_c in
+			   * LAPACK's lower band storage, column-major:
+			   * A[c (kd + 1) + r - c] = L_rc, c <= r <= c + kd
+			   * (column c of L contiguous, tled_band_solve3) */
 	double *rc;       /* 3 * nc: coarse right-hand sides (column-major) */
 } coarse_t;
 
@@ -401,10 +415,27 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 			map[q] = 0;
 		}
 	}
+	/* compact indices with the longest grid axis slowest, the shortest
+	 * fastest: the band of A_c is then about 3 planes of the two shorter
+	 * axes wide (the numbering only; the grid index q stays x fastest) */
+	int ax[3] = { 0, 1, 2 };
+	for (int i = 0; i < 2; i++)
+		for (int j = i + 1; j < 3; j++)
+			if (g[ax[j]] < g[ax[i]]) {
+				int t = ax[i];
+				ax[i] = ax[j];
+				ax[j] = t;
+			}
+	int64_t st[3] = { 1, g[0], (int64_t)g[0] * g[1] }; /* q strides */
 	int64_t nc = 0;
-	for (int64_t q = 0; q < ng; q++)
-		if (map[q] == 0)
-			map[q] = nc++;
+	for (int i2 = 0; i2 < g[ax[2]]; i2++)
+		for (int i1 = 0; i1 < g[ax[1]]; i1++)
+			for (int i0 = 0; i0 < g[ax[0]]; i0++) {
+				int64_t q = i0 * st[ax[0]] + i1 * st[ax[1]] +
+					    i2 * st[ax[2]];
+				if (map[q] == 0)
+					map[q] = nc++;
+			}
 	/* each ip's (y, z) range of grid rows, in grid coordinates */
 	ipblk = malloc((size_t)(nip > 0 ? nip : 1) * sizeof *ipblk);
 	yz = malloc((size_t)(2 * (nip > 0 ? nip : 1)) * sizeof *yz);
@@ -467,7 +498,30 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 	C->nc = nc;
 	if (coarse_transpose(n, C))
 		goto oom;
-	C->A = calloc((size_t)(nc * nc), sizeof *C->A);
+	/* the half-bandwidth: the largest index distance between two coarse
+	 * points of one ip (a max: the same on any thread count) */
+	int64_t kd = 0;
+#pragma omp parallel for schedule(static) reduction(max : kd) num_threads(m->nthreads)
+	for (int64_t p = 0; p < nip; p++) {
+		int32_t c0 = INT32_MAX, c1 = -1;
+		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+			int64_t a = m->ipnode[e];
+			if (!cx->con[a])
+				continue;
+			for (int k = 0; k < 8; k++) {
+				int32_t c = C->cid[8 * a + k];
+				c0 = c < c0 ? c : c0;
+				c1 = c > c1 ? c : c1;
+			}
+		}
+		if (c1 >= 0 && c1 - c0 > kd)
+			kd = c1 - c0;
+	}
+	if (kd > nc - 1)
+		kd = nc - 1;
+	C->kd = kd;
+	int64_t ld = kd + 1;
+	C->A = calloc((size_t)(ld * nc), sizeof *C->A);
 	C->rc = malloc((size_t)(3 * nc) * sizeof *C->rc);
 	if (!C->A || !C->rc)
 		goto oom;
@@ -541,15 +595,20 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 									Mp[4 * r + 1] * Bv[4 * i + 1] +
 									Mp[4 * r + 2] * Bv[4 * i + 2] +
 									Mp[4 * r + 3] * Bv[4 * i + 3];
+					/* the lower band: (r, c) = (list[i],
+					 * list[l]), c <= r <= c + kd */
 					for (int i = 0; i < nl; i++) {
 						const double *bi = Bv + 4 * i;
-						double *Ai = A + (int64_t)list[i] * nc;
+						int64_t r = list[i];
 						for (int l = 0; l < nl; l++) {
+							int64_t c = list[l];
+							if (c > r)
+								continue;
 							const double *cl = Cv + 4 * l;
 							double v = D[(size_t)i * nl + l] -
 								   (bi[0] * cl[0] + bi[1] * cl[1] +
 								    bi[2] * cl[2] + bi[3] * cl[3]);
-							Ai[list[l]] += V * v;
+							A[c * ld + r - c] += V * v;
 						}
 					}
 					for (int i = 0; i < nl; i++)
@@ -569,58 +628,40 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 		goto oom;
 	/* A_c is singular when every node is constrained (the linear fields);
 	 * a shift of 1e-10 of the largest diagonal keeps the factor defined,
-	 * raised tenfold until dpotrf succeeds (at most 1e-6) */
+	 * raised tenfold until dpbtrf succeeds (at most 1e-6) */
 	double dmax = 0;
 	for (int64_t c = 0; c < nc; c++)
-		dmax = fmax(dmax, A[c * nc + c]);
+		dmax = fmax(dmax, A[c * ld]);
 	if (!(dmax > 0)) {
 		coarse_free(C);
 		goto out;
 	}
-	A0 = malloc((size_t)nc * sizeof *A0);
+	/* the band as assembled, for a retry with a larger shift (dpbtrf
+	 * overwrites it) */
+	A0 = malloc((size_t)(ld * nc) * sizeof *A0);
 	if (!A0)
 		goto oom;
-	for (int64_t c = 0; c < nc; c++)
-		A0[c] = A[c * nc + c];
+	memcpy(A0, A, (size_t)(ld * nc) * sizeof *A0);
 	/* OpenBLAS factors on one thread and on several by different blockings
-	 * (other bits: 1 thread differs from 2, 3, 4 and 8, measured at nc =
-	 * 125); one thread always, so that the factor, and the model, do not
-	 * depend on the thread count.  At most about 0.12 s (nc = 2 000, one
-	 * core), once per model build. */
+	 * (other bits: 1 thread differs from 2, 3, 4 and 8, measured with
+	 * dpotrf at nc = 125); one thread always, so that the factor, and the
+	 * model, do not depend on the thread count. */
 	int blas_nt = openblas_get_num_threads();
 	openblas_set_num_threads(1);
 	lapack_int info = 1;
 	for (double sh = 1e-10; sh <= 1.01e-6 && info; sh *= 10) {
-		if (sh > 1e-10) /* restore the lower triangle from the upper */
-			for (int64_t i = 0; i < nc; i++)
-				for (int64_t j = i + 1; j < nc; j++)
-					A[i * nc + j] = A[j * nc + i];
+		if (sh > 1e-10)
+			memcpy(A, A0, (size_t)(ld * nc) * sizeof *A);
 		for (int64_t c = 0; c < nc; c++)
-			A[c * nc + c] = A0[c] + sh * dmax;
-		/* column-major lower = row-major upper: A is symmetric */
-		info = LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', (lapack_int)nc, A,
-				      (lapack_int)nc);
+			A[c * ld] = A0[c * ld] + sh * dmax;
+		info = LAPACKE_dpbtrf(LAPACK_COL_MAJOR, 'L', (lapack_int)nc,
+				      (lapack_int)kd, A, (lapack_int)ld);
 	}
 	openblas_set_num_threads(blas_nt);
 	if (info) {
 		coarse_free(C);
 		goto out;
 	}
-	/* the factor's rows for the forward solve: A[r nc + c] = L_rc, c < r
-	 * (the upper part, which dpotrf 'L' leaves alone) */
-	/* by 64 x 64 tiles: row by row, the strided reads missed the cache
-	 * on every element (0.2-0.4 s at nc = 2 665) */
-	int64_t nt64 = (nc + 63) / 64;
-#pragma omp parallel for schedule(dynamic, 1) num_threads(m->nthreads)
-	for (int64_t tr = 0; tr < nt64; tr++)
-		for (int64_t tc = 0; tc <= tr; tc++) {
-			int64_t r1 = (tr + 1) * 64 < nc ? (tr + 1) * 64 : nc;
-			int64_t c1 = (tc + 1) * 64 < nc ? (tc + 1) * 64 : nc;
-			for (int64_t c = tc * 64; c < c1; c++)
-				for (int64_t r = tr * 64 > c + 1 ? tr * 64 : c + 1;
-				     r < r1; r++)
-					A[r * nc + c] = A[c * nc + r];
-		}
 	goto out;
 oom:
 	coarse_free(C);
@@ -636,79 +677,90 @@ out:
 	return rc;
 }
 
-/*
- * C->rc = A_c^-1 C->rc for its 3 right-hand sides (column-major, nc each),
- * in place: L y = b, then L^T x = y (A_c = L L^T, coarse_build), by blocks
- * of CS_B rows.  Per block, each row's sum over the rows already solved
- * runs in parallel (a row per thread), then the block's own triangle in
- * order; a row's sum always runs over j in the same order, so x has the
- * same bits on any thread count.  It replaces LAPACK's dpotrs, whose
- * level-2 triangular solves OpenBLAS runs on one thread: 22 ms a solve at
- * nc = 2 665 (a 3 mm pat0001 model, 35 672 nodes, on the 16-core H100
- * host: 1.68 s of its 3.92 s build, 2026-11-26), memory-bound on the
- * 57 MB factor, which every thread now streams a share of.
- */
-#define CS_B 128
-void tled_chol_solve3(int64_t nc, const double *A, double *b, int nt)
+/* one right-hand side x (nc) through the band factor: forward, backward */
+static void band_solve1(int64_t nc, int64_t kd, const double *A, double *x)
 {
-	/* forward: y_i = (b_i - sum_{j<i} L_ij y_j) / L_ii, L_ij = A[i nc + j] */
-	for (int64_t k0 = 0; k0 < nc; k0 += CS_B) {
-		int64_t k1 = k0 + CS_B < nc ? k0 + CS_B : nc;
-		if (k0 > 0) {
-#pragma omp parallel for schedule(static) num_threads(nt)
-			for (int64_t i = k0; i < k1; i++) {
-				const double *row = A + i * nc;
-				double s0 = 0, s1 = 0, s2 = 0;
-				for (int64_t j = 0; j < k0; j++) {
-					s0 += row[j] * b[j];
-					s1 += row[j] * b[nc + j];
-					s2 += row[j] * b[2 * nc + j];
-				}
-				b[i] -= s0;
-				b[nc + i] -= s1;
-				b[2 * nc + i] -= s2;
-			}
-		}
-		for (int64_t i = k0; i < k1; i++) {
-			const double *row = A + i * nc;
-			for (int d = 0; d < 3; d++) {
-				double *bd = b + d * nc, s = bd[i];
-				for (int64_t j = k0; j < i; j++)
-					s -= row[j] * bd[j];
-				bd[i] = s / row[i];
-			}
+	int64_t ld = kd + 1;
+	/* forward: y_j = b_j / L_jj; b_i -= L_ij y_j, j < i <= j + kd */
+	for (int64_t j = 0; j < nc; j++) {
+		const double *col = A + j * ld;
+		double y = x[j] / col[0];
+		x[j] = y;
+		int64_t m = nc - 1 - j < kd ? nc - 1 - j : kd;
+		double *xb = x + j;
+		for (int64_t t = 1; t <= m; t++)
+			xb[t] -= col[t] * y;
+	}
+	/* backward: x_i = (y_i - sum_{j=i+1}^{i+kd} L_ji x_j) / L_ii */
+	for (int64_t i = nc - 1; i >= 0; i--) {
+		const double *col = A + i * ld;
+		int64_t m = nc - 1 - i < kd ? nc - 1 - i : kd;
+		const double *xb = x + i;
+		double s = 0;
+		for (int64_t t = 1; t <= m; t++)
+			s += col[t] * xb[t];
+		x[i] = (x[i] - s) / col[0];
+	}
+}
+
+/* the three right-hand sides b, b + nc, b + 2 nc in one pass over the
+ * band: for each one the operations of band_solve1, in its order */
+static void band_solve3_fused(int64_t nc, int64_t kd, const double *A,
+			      double *b)
+{
+	int64_t ld = kd + 1;
+	double *x0 = b, *x1 = b + nc, *x2 = b + 2 * nc;
+	for (int64_t j = 0; j < nc; j++) {
+		const double *col = A + j * ld;
+		double y0 = x0[j] / col[0], y1 = x1[j] / col[0],
+		       y2 = x2[j] / col[0];
+		x0[j] = y0;
+		x1[j] = y1;
+		x2[j] = y2;
+		int64_t m = nc - 1 - j < kd ? nc - 1 - j : kd;
+		for (int64_t t = 1; t <= m; t++) {
+			x0[j + t] -= col[t] * y0;
+			x1[j + t] -= col[t] * y1;
+			x2[j + t] -= col[t] * y2;
 		}
 	}
-	/* backward: x_i = (y_i - sum_{j>i} L_ji x_j) / L_ii, L_ji = A[i nc + j],
-	 * the same blocks from the last */
-	int64_t nb = (nc + CS_B - 1) / CS_B;
-	for (int64_t kb = nb - 1; kb >= 0; kb--) {
-		int64_t k0 = kb * CS_B, k1 = k0 + CS_B < nc ? k0 + CS_B : nc;
-		if (k1 < nc) {
-#pragma omp parallel for schedule(static) num_threads(nt)
-			for (int64_t i = k0; i < k1; i++) {
-				const double *row = A + i * nc;
-				double s0 = 0, s1 = 0, s2 = 0;
-				for (int64_t j = k1; j < nc; j++) {
-					s0 += row[j] * b[j];
-					s1 += row[j] * b[nc + j];
-					s2 += row[j] * b[2 * nc + j];
-				}
-				b[i] -= s0;
-				b[nc + i] -= s1;
-				b[2 * nc + i] -= s2;
-			}
+	for (int64_t i = nc - 1; i >= 0; i--) {
+		const double *col = A + i * ld;
+		int64_t m = nc - 1 - i < kd ? nc - 1 - i : kd;
+		double s0 = 0, s1 = 0, s2 = 0;
+		for (int64_t t = 1; t <= m; t++) {
+			s0 += col[t] * x0[i + t];
+			s1 += col[t] * x1[i + t];
+			s2 += col[t] * x2[i + t];
 		}
-		for (int64_t i = k1 - 1; i >= k0; i--) {
-			const double *row = A + i * nc;
-			for (int d = 0; d < 3; d++) {
-				double *bd = b + d * nc, s = bd[i];
-				for (int64_t j = i + 1; j < k1; j++)
-					s -= row[j] * bd[j];
-				bd[i] = s / row[i];
-			}
-		}
+		x0[i] = (x0[i] - s0) / col[0];
+		x1[i] = (x1[i] - s1) / col[0];
+		x2[i] = (x2[i] - s2) / col[0];
 	}
+}
+
+/*
+ * b = A_c^-1 b for 3 right-hand sides (column-major, nc each), A_c = L L^T
+ * in LAPACK's lower band storage (coarse_t.A): L y = b by columns (each
+ * y_j, then its column's kd terms off the rows below), then L^T x = y by
+ * rows of L^T (column i of L dotted with x below i).  The right-hand
+ * sides are independent: on 3 or more threads one per thread, on fewer
+ * all three in one pass over the band; each gets the same operations in
+ * the same order either way, so x has the same bits on any thread count.
+ * It replaces a dense factor's blocked substitution, which read 2 x 57 MB
+ * per solve at nc = 2 668 (12-13 ms on one core and on 16); the band is
+ * nc (kd + 1) doubles (13 MB there).
+ */
+void tled_band_solve3(int64_t nc, int64_t kd, const double *A, double *b,
+		      int nt)
+{
+	if (nt < 3) {
+		band_solve3_fused(nc, kd, A, b);
+		return;
+	}
+#pragma omp parallel for schedule(static, 1) num_threads(3)
+	for (int d = 0; d < 3; d++)
+		band_solve1(nc, kd, A, b + d * nc);
 }
 
 /* z = D^-1 r + R A_c^-1 R^T r (3 components); in the singular case the
@@ -734,7 +786,7 @@ static void precond(const corr_ctx_t *cx, const coarse_t *C, const double *dg,
 			for (int d = 0; d < 3; d++)
 				C->rc[d * nc + c] = s[d];
 		}
-		tled_chol_solve3(nc, C->A, C->rc, m->nthreads);
+		tled_band_solve3(nc, C->kd, C->A, C->rc, m->nthreads);
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
 		for (int64_t a = 0; a < n; a++) {
 			double s[3] = { 0, 0, 0 };
@@ -783,6 +835,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 	 * operator goes through ev and nent) */
 	if (!m->fb_loc && ent_ip == m->entip)
 		tled_model_fb_build(m);
+
 	tled_model_gradsum(m, g);
 	double g0[3] = { 0, 0, 0 }, rr[3] = { 0, 0, 0 };
 	for (int64_t a = 0; a < n; a++)
@@ -857,7 +910,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 			  "correction");
 		goto out;
 	}
-	/* (the coarse solves are tled_chol_solve3's, on the OpenMP team: with
+	/* (the coarse solves are tled_band_solve3's, on the OpenMP team: with
 	 * dpotrs, OpenBLAS's own threads waiting beside the team made them
 	 * 13 ms each at nc = 400 on 2 loaded cores) */
 	/* z = B r, rz = r . z per component */
@@ -939,6 +992,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 	for (int c = 0; c < 3; c++)
 		before += g0[c] * g0[c];
 	m->corr_rel = before > 0 ? sqrt(after / before) : 0;
+
 out:
 	free(g);
 	free(x);

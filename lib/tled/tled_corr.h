@@ -31,10 +31,12 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 
 /*
  * b = A^-1 b for 3 right-hand sides (b column-major, nc each), A = L L^T
- * factored by LAPACK dpotrf 'L' column-major (A[c nc + r] = L_rc, r >= c)
- * and mirrored (A[r nc + c] = L_rc for c < r too), on nt OpenMP threads:
- * the same bits on any nt (tled_corr.c, the coarse level's solve).
+ * factored by LAPACK dpbtrf 'L' (lower band storage, column-major,
+ * half-bandwidth kd: A[c (kd + 1) + r - c] = L_rc, c <= r <= c + kd), on
+ * up to 3 OpenMP threads (one right-hand side each): the same bits on any
+ * nt (tled_corr.c, the coarse level's solve).
  */
-void tled_chol_solve3(int64_t nc, const double *A, double *b, int nt);
+void tled_band_solve3(int64_t nc, int64_t kd, const double *A, double *b,
+		      int nt);
 
 #endif
