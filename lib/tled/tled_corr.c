@@ -442,6 +442,8 @@ static int coarse_build(const corr_ctx_t *cx, const int64_t *ent_ip,
 	if (!ipblk || !yz)
 		goto oom;
 	int span = 1, kmax = 1;
+	/* (maxima: the same on any thread count) */
+#pragma omp parallel for schedule(static) reduction(max : span, kmax) num_threads(m->nthreads)
 	for (int64_t p = 0; p < nip; p++) {
 		int y0 = INT32_MAX, y1 = -1, z0 = INT32_MAX, z1 = -1, k = 0;
 		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
