@@ -928,7 +928,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
 	for (it = 0; it < 5000; it++) {
 		int done = 1;
 		for (int c = 0; c < 3; c++)
-			if (sqrt(rr[c]) > 1e-13 * (g0[c] > 0 ? g0[c] : 1) &&
+			if (sqrt(rr[c]) > TLED_CORR_RTOL * (g0[c] > 0 ? g0[c] : 1) &&
 			    g0[c] > 0)
 				done = 0;
 		if (done)

@@ -16,6 +16,25 @@
 int tled_inv4(const double A[16], double Ai[16]);
 
 /*
+ * The correction's stopping rule: the conjugate gradients stop once every
+ * Cartesian component's constraint residual |sum_ip V dN_a - G_a| (2-norm
+ * over the constrained nodes) is below TLED_CORR_RTOL times its value
+ * before the correction.  What is left acts as a spurious nodal force
+ * r_a . S under a uniform stress S (the patch test's error), so it scales
+ * the uncorrected integration error by TLED_CORR_RTOL.  Grown nodes against
+ * a solve to 1e-13 (BraTS 2013 pat0001, 6 mm nodes, tled_cpu, push 6 mm,
+ * max |u| 6.8 mm): 2.0e-6 mm at 1e-9, 2.8e-6 at 1e-10, 1.3e-6 from the
+ * solve's round-off alone (the band factor at 1e-13), all at one sensitive
+ * node; at 1e-8 that node moved 1.2e-3 mm in one of two builds that differ
+ * in round-off only (2.5e-6 in the other), as much as the relaxation's
+ * equilibrium tolerance (grow.tol, 1e-3 mm), so 1e-8 is too loose.  Until
+ * 2026-11-27 the rule was 1e-13: 76 iterations at a 3 mm pat0001 model, 52
+ * at 1e-9 (bench/tled/results.md, "The consistency correction's coarse
+ * level as a band").
+ */
+#define TLED_CORR_RTOL 1e-9
+
+/*
  * Correct m->dN (per support entry) so that the discrete divergence theorem
  * holds at every node with con[a] set (target G, 3n, or 0 when NULL) while
  * linear fields stay exact.  w: MLS weight per entry; P: 4 per entry (the

@@ -19,8 +19,9 @@
  *     reproduced exactly;
  *   - the shape-function derivatives at the ips are corrected once so that the
  *     discrete integration constraint  sum_ip V_ip dN_a(x_ip) = G_a  holds for
- *     every node whose force is used (the linear patch test then passes to
- *     round-off; cf. variationally consistent integration, Chen, Hillman &
+ *     every node whose force is used, to TLED_CORR_RTOL (1e-9) of its
+ *     uncorrected residual (tled_corr.h; the linear patch test then passes
+ *     to 9.8e-10 relative in test_patch; cf. variationally consistent integration, Chen, Hillman &
  *     Rueter 2013, IJNME 95:387; G_a: see enum tled_corr).  The correction is the least-norm one that
  *     keeps linear reproduction at every ip, and the SAME derivatives give F
  *     and the forces, so forces stay the exact gradient of a discrete strain

@@ -226,7 +226,8 @@ static void test_patch(void **state)
 	tled_model_t m;
 	char err[512];
 	cube_build(&m, &c, L, &mo);
-	assert_true(m.corr_rel < 1e-10);
+	/* the correction stops at its tolerance (tled_corr.h) */
+	assert_true(m.corr_rel <= TLED_CORR_RTOL);
 	tled_solver_t s;
 	assert_int_equal(tled_solver_init(&s, &m, err, sizeof err), 0);
 	const double A[9] = { 0.01, 0.02, -0.005, 0.003, -0.01, 0.004,
@@ -283,8 +284,9 @@ static void test_patch(void **state)
 			umax = fmax(umax, fabs(v));
 		}
 	print_message("patch: %lld nodes, %lld ips, %d iterations, max error "
-		      "%.3g relative\n", (long long)m.n, (long long)m.nip,
-		      st.iters, emax / umax);
+		      "%.3g relative (correction: %d CG iterations, residual "
+		      "%.3g)\n", (long long)m.n, (long long)m.nip, st.iters,
+		      emax / umax, m.corr_iters, m.corr_rel);
 	assert_true(emax / umax < 1e-6);
 	free(tgt);
 	tled_solver_free(&s);
@@ -357,7 +359,16 @@ static void test_corr_coarse(void **state)
 			double t0 = omp_get_wtime();
 			cube_build(&m[k], &c, L, &mo);
 			t[k] = omp_get_wtime() - t0;
-			assert_true(m[k].corr_rel < 1e-10);
+			/* the conjugate gradients stop at TLED_CORR_RTOL, not
+			 * far below it (the residual falls by 0.3-0.7 an
+			 * iteration: a solve on to round-off, 1e-14 before
+			 * 2026-11-27, fails the lower bound) */
+			print_message("  %s, %s: %d CG iterations, residual "
+				      "%.3g\n", mode ? "free nodes" : "all nodes",
+				      k ? "two-level" : "Jacobi",
+				      m[k].corr_iters, m[k].corr_rel);
+			assert_true(m[k].corr_rel <= TLED_CORR_RTOL);
+			assert_true(m[k].corr_rel > 1e-2 * TLED_CORR_RTOL);
 		}
 		assert_int_equal(m[0].corr_nc, 0);
 		assert_true(m[1].corr_nc > 8);
@@ -377,9 +388,9 @@ static void test_corr_coarse(void **state)
 			      m[1].corr_iters, (long long)m[1].corr_nc, t[1],
 			      dmax / gmax);
 		assert_true(dmax / gmax < 1e-8);
-		/* the singular system is the hard one (311 -> 56 iterations
-		 * at 1 331 nodes, 641 -> 68 at 4 096); the definite one has
-		 * fixed nodes all round (109 -> 58) */
+		/* the singular system is the hard one (250 -> 39 iterations
+		 * at 1 331 nodes to TLED_CORR_RTOL; 311 -> 56 to 1e-13); the
+		 * definite one has fixed nodes all round (83 -> 41) */
 		if (mode == 0)
 			assert_true(2 * m[1].corr_iters < m[0].corr_iters);
 		else
