@@ -267,17 +267,15 @@ static void null_project(const tled_model_t *m, const uint8_t *con, double *v)
  * each block in ip order: the sum has the same order on any thread count
  * (deterministic).
  *
- * A_c is a band matrix: an ip couples only the coarse points around its
- * support (R_a about 2 node spacings, H 3 or more), so A_c(c, c') = 0
- * unless c and c' lie within about 3 grid steps of each other.  The
- * coarse points are numbered with the grid's longest axis slowest, so
- * that the half-bandwidth kd (the largest index distance of two coarse
- * points of one ip) is about 3 grid planes of the two shorter axes: at a
- * 3 mm pat0001 model (nc = 2 668) the dense factor was 57 MB and n^3/3 =
- * 6.3 GFlop on one thread; the band's Cholesky (LAPACK dpbtrf: nc kd^2
- * flops) and its storage nc (kd + 1) doubles are what the band holds
- * (bench/tled/results.md, "The consistency correction's coarse level as
- * a band").
+ * A_c is a band matrix: an ip couples only the coarse points of its
+ * support's cells, so A_c(c, c') = 0 unless c and c' lie within a few grid
+ * steps.  The coarse points are numbered with the grid's longest axis
+ * slowest, so that the half-bandwidth kd (the largest index distance of two
+ * coarse points of one ip) spans a few grid planes of the two shorter
+ * axes: at a 3 mm pat0001 model nc = 2 668, kd = 622, and the band's factor
+ * (LAPACK dpbtrf, nc kd^2 = 1.0 GFlop) is 13 MB where the dense one (nc^3/3
+ * = 6.3 GFlop) was 57 MB (bench/tled/results.md, "The consistency
+ * correction's coarse level as a band").
  */
 #define TLED_COARSE_TARGET 2000.0
 
@@ -679,6 +677,26 @@ out:
 	return rc;
 }
 
+/* sum_{t=1}^{m} col[t] xb[t] in four partial sums (t mod 4), joined as
+ * (s0 + s1) + (s2 + s3): four independent chains of additions instead of
+ * one (a chain's latency bound the backward solve: 3.4 ms a right-hand
+ * side at nc = 2 668, kd = 622), the same order on every call */
+static inline double band_dot(const double *col, const double *xb,
+			      int64_t m)
+{
+	double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+	int64_t t = 1;
+	for (; t + 3 <= m; t += 4) {
+		s0 += col[t] * xb[t];
+		s1 += col[t + 1] * xb[t + 1];
+		s2 += col[t + 2] * xb[t + 2];
+		s3 += col[t + 3] * xb[t + 3];
+	}
+	for (; t <= m; t++)
+		s0 += col[t] * xb[t];
+	return (s0 + s1) + (s2 + s3);
+}
+
 /* one right-hand side x (nc) through the band factor: forward, backward */
 static void band_solve1(int64_t nc, int64_t kd, const double *A, double *x)
 {
@@ -697,11 +715,7 @@ static void band_solve1(int64_t nc, int64_t kd, const double *A, double *x)
 	for (int64_t i = nc - 1; i >= 0; i--) {
 		const double *col = A + i * ld;
 		int64_t m = nc - 1 - i < kd ? nc - 1 - i : kd;
-		const double *xb = x + i;
-		double s = 0;
-		for (int64_t t = 1; t <= m; t++)
-			s += col[t] * xb[t];
-		x[i] = (x[i] - s) / col[0];
+		x[i] = (x[i] - band_dot(col, x + i, m)) / col[0];
 	}
 }
 
@@ -729,15 +743,9 @@ static void band_solve3_fused(int64_t nc, int64_t kd, const double *A,
 	for (int64_t i = nc - 1; i >= 0; i--) {
 		const double *col = A + i * ld;
 		int64_t m = nc - 1 - i < kd ? nc - 1 - i : kd;
-		double s0 = 0, s1 = 0, s2 = 0;
-		for (int64_t t = 1; t <= m; t++) {
-			s0 += col[t] * x0[i + t];
-			s1 += col[t] * x1[i + t];
-			s2 += col[t] * x2[i + t];
-		}
-		x0[i] = (x0[i] - s0) / col[0];
-		x1[i] = (x1[i] - s1) / col[0];
-		x2[i] = (x2[i] - s2) / col[0];
+		x0[i] = (x0[i] - band_dot(col, x0 + i, m)) / col[0];
+		x1[i] = (x1[i] - band_dot(col, x1 + i, m)) / col[0];
+		x2[i] = (x2[i] - band_dot(col, x2 + i, m)) / col[0];
 	}
 }
 
