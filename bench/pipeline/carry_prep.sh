@@ -18,7 +18,9 @@ C=$PWD/carry/tled
 DATA=${ARMSTG_DATA:-$PWD/../shared/data}
 PATS=${PATS:-"pat0001 pat0002 pat0003"}
 rm -rf "$C"; mkdir -p "$C"
-(cd "$NEW" && git ls-files -z | tar --null -T - -cf -) | tar -xf - -C "$C"
+# the tracked tree without what a run never reads (the runs' logs, the pictures)
+(cd "$NEW" && git ls-files -z -- . ':!bench/*/runs/*' ':!*.png' ':!docs/*' |
+	tar --null -T - -cf -) | tar -xf - -C "$C"
 (cd "$NEW" && git rev-parse --short HEAD) > "$C/.commit"
 cpb() { # worktree dest
 	mkdir -p "$C/$2/plugins"
