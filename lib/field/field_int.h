@@ -26,6 +26,18 @@ static inline int omp_default_threads(void)
 {
 	return 1;
 }
+/*
+ * field_from_points (field.h) with its evaluation chosen: blocks 1 (what
+ * field_from_points runs) queries the k-d tree once per block of the
+ * evaluation grid and computes the refinement only where a coarse value is
+ * non-zero; blocks 0 queries it at every point and refines every voxel
+ * (the former code, kept as the reference the tests compare bit for bit).
+ */
+int field_points_dense(const double *xyz, const double *vec, int64_t n,
+		       double sigma_mm, double taper_mm, int passes,
+		       fimg_t *out, int64_t *n_unsupported, int blocks,
+		       int nthreads);
+
 #endif
 
 /* lib/img's float stencil on grid g at continuous voxel index c (the
@@ -49,5 +61,17 @@ static inline void aff3_mul(const double A[16], const double B[16], double M[16]
 {
 	aff_mul(A, B, M);
 }
+
+/*
+ * field_from_points (field.h) with its evaluation chosen: blocks 1 (what
+ * field_from_points runs) queries the k-d tree once per block of the
+ * evaluation grid and computes the refinement only where a coarse value is
+ * non-zero; blocks 0 queries it at every point and refines every voxel
+ * (the former code, kept as the reference the tests compare bit for bit).
+ */
+int field_points_dense(const double *xyz, const double *vec, int64_t n,
+		       double sigma_mm, double taper_mm, int passes,
+		       fimg_t *out, int64_t *n_unsupported, int blocks,
+		       int nthreads);
 
 #endif

@@ -112,27 +112,12 @@ static void mls_sum(const double *xyz, const double *vec, const int64_t *idx,
 	}
 }
 
-/* 1 with out set, 0 (out = 0) when no node is within Rs, ENOMEM */
-static int mls_at(const kdtree_t *t, const double *xyz, const double *vec,
-		  const double y[3], double sigma, double taper,
-		  mls_buf_t *B, double out[3])
+/* the fit at y from the moments A of the nodes within the search radius
+ * (A.S0 > 0), dmin the distance to the nearest node (mm): out (mm) */
+static void mls_fit(const mls_acc_t *acc, double sigma, double taper,
+		    double dmin, double out[3])
 {
-	const double Rs = fmax(3 * sigma, sigma + taper),
-		     is2 = 0.5 / (sigma * sigma);
-	out[0] = out[1] = out[2] = 0;
-	/* the nearest node within Rs (inclusive) */
-	double rmin2 = nextafter(Rs * Rs, INFINITY);
-	if (kd_nearest(t, y, &rmin2) < 0)
-		return 0;
-	const double dmin = sqrt(rmin2);
-	mls_acc_t A;
-	memset(&A, 0, sizeof A);
-	int64_t nnear;
-	if (mls_near(t, y, fmin(Rs, dmin + 3 * sigma), B, &nnear))
-		return ARMSTG_ENOMEM;
-	mls_sum(xyz, vec, B->idx, nnear, y, is2, rmin2, &A);
-	if (!(A.S0 > 0))
-		return 0;
+	const mls_acc_t A = *acc;
 	double m[3], md[3], C[3][3], X[3][3];
 	for (int a = 0; a < 3; a++) {
 		m[a] = A.S1[a] / A.S0;
@@ -189,12 +174,417 @@ static int mls_at(const kdtree_t *t, const double *xyz, const double *vec,
 	sc *= 1 - smoothstep(dmin, sigma, sigma + taper);
 	for (int c = 0; c < 3; c++)
 		out[c] = v[c] * sc;
+}
+
+/* the search radius Rs (mm) */
+static double mls_rs(double sigma, double taper)
+{
+	return fmax(3 * sigma, sigma + taper);
+}
+
+/* 1 with out set, 0 (out = 0) when no node is within Rs, ENOMEM: the
+ * k-d tree's two queries (the nearest node, then the nodes within
+ * min(Rs, dmin + 3 sigma)) */
+static int mls_at(const kdtree_t *t, const double *xyz, const double *vec,
+		  const double y[3], double sigma, double taper,
+		  mls_buf_t *B, double out[3])
+{
+	const double Rs = mls_rs(sigma, taper),
+		     is2 = 0.5 / (sigma * sigma);
+	out[0] = out[1] = out[2] = 0;
+	/* the nearest node within Rs (inclusive) */
+	double rmin2 = nextafter(Rs * Rs, INFINITY);
+	if (kd_nearest(t, y, &rmin2) < 0)
+		return 0;
+	const double dmin = sqrt(rmin2);
+	mls_acc_t A;
+	memset(&A, 0, sizeof A);
+	int64_t nnear;
+	if (mls_near(t, y, fmin(Rs, dmin + 3 * sigma), B, &nnear))
+		return ARMSTG_ENOMEM;
+	mls_sum(xyz, vec, B->idx, nnear, y, is2, rmin2, &A);
+	if (!(A.S0 > 0))
+		return 0;
+	mls_fit(&A, sigma, taper, dmin, out);
 	return 1;
+}
+
+/*
+ * The same at every point of a block of the evaluation grid, with one k-d
+ * tree query for the block: the nodes within Rs + h of the block's centre
+ * (h: the farthest block point from it, plus a margin far above rounding),
+ * a superset of each point's nodes within Rs.  Why the same bits: the
+ * tree's radius query lists its nodes in the tree's pre-order (each node
+ * before its left, then its right subtree: kdtree.c cnt_rec), whatever the
+ * query, so the block's list filtered by a point's own radius is the list
+ * mls_near gives that point, in the same order; the squared distances are
+ * the same expressions (p - y per axis, x^2 + y^2 + z^2 in that order) as
+ * the tree's and mls_sum's; the nearest distance is a minimum, exact in
+ * any order.  So the moments are summed in the same order from the same
+ * terms.  Candidates are copied per block (positions, values), so the
+ * per-point loops read contiguous memory.
+ */
+typedef struct mls_blk {
+	int64_t *idx, cap;   /* the block's nodes (k-d tree query) */
+	double *p, *d, *r2;  /* their positions, values, squared distances */
+	int64_t pcap;
+} mls_blk_t;
+
+static void blk_free(mls_blk_t *K)
+{
+	free(K->idx);
+	free(K->p);
+	free(K->d);
+	free(K->r2);
+}
+
+/* the candidates of the block around world point c within R: 0, ENOMEM */
+static int blk_gather(const kdtree_t *t, const double *xyz, const double *vec,
+		      const double c[3], double R, mls_blk_t *K, int64_t *m)
+{
+	mls_buf_t B = { K->idx, K->cap };
+	int rc = mls_near(t, c, R, &B, m);
+	K->idx = B.idx;
+	K->cap = B.cap;
+	if (rc)
+		return rc;
+	if (*m > K->pcap) {
+		int64_t cap = *m + *m / 2 + 64;
+		double *p = realloc(K->p, sizeof(double) * 3 * (size_t)cap),
+		       *d = p ? realloc(K->d, sizeof(double) * 3 * (size_t)cap)
+			      : NULL,
+		       *r2 = d ? realloc(K->r2, sizeof(double) * (size_t)cap)
+			       : NULL;
+		if (p)
+			K->p = p;
+		if (d)
+			K->d = d;
+		if (!r2)
+			return ARMSTG_ENOMEM;
+		K->r2 = r2;
+		K->pcap = cap;
+	}
+	for (int64_t k = 0; k < *m; k++) {
+		int64_t q = K->idx[k];
+		for (int a = 0; a < 3; a++) {
+			K->p[3 * k + a] = xyz[3 * q + a];
+			K->d[3 * k + a] = vec[3 * q + a];
+		}
+	}
+	return 0;
+}
+
+/* mls_at at y from the block's m candidates (K->p, K->d): 1, 0 */
+static int blk_at(mls_blk_t *K, int64_t m, const double y[3], double sigma,
+		  double taper, double out[3])
+{
+	const double Rs = mls_rs(sigma, taper),
+		     is2 = 0.5 / (sigma * sigma);
+	const double *P = K->p;
+	double *r2 = K->r2;
+	out[0] = out[1] = out[2] = 0;
+	/* kd_nearest's bound and test: the least r2 < nextafter(Rs^2) */
+	const double bound = nextafter(Rs * Rs, INFINITY);
+	double rmin2 = bound;
+	for (int64_t k = 0; k < m; k++) {
+		double dx = P[3 * k] - y[0], dy = P[3 * k + 1] - y[1],
+		       dz = P[3 * k + 2] - y[2];
+		double d2 = dx * dx + dy * dy + dz * dz;
+		r2[k] = d2;
+		if (d2 < rmin2)
+			rmin2 = d2;
+	}
+	if (!(rmin2 < bound))
+		return 0;
+	const double dmin = sqrt(rmin2), R = fmin(Rs, dmin + 3 * sigma),
+		     R2 = R * R;
+	mls_acc_t A;
+	memset(&A, 0, sizeof A);
+	for (int64_t k = 0; k < m; k++) {
+		if (!(r2[k] <= R2))
+			continue;
+		/* mls_sum's term, the same operations */
+		double q[3] = { P[3 * k] - y[0], P[3 * k + 1] - y[1],
+				P[3 * k + 2] - y[2] };
+		double w = exp(-(r2[k] - rmin2) * is2);
+		const double *d = K->d + 3 * k;
+		double dn2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+		if (dn2 > A.dmax2)
+			A.dmax2 = dn2;
+		A.S0 += w;
+		for (int a = 0; a < 3; a++) {
+			A.S1[a] += w * q[a];
+			A.R0[a] += w * d[a];
+			for (int bb = 0; bb < 3; bb++) {
+				A.S2[a][bb] += w * q[a] * q[bb];
+				A.R1[a][bb] += w * q[a] * d[bb];
+			}
+		}
+	}
+	if (!(A.S0 > 0))
+		return 0;
+	mls_fit(&A, sigma, taper, dmin, out);
+	return 1;
+}
+
+/* block edge of the evaluation grid, in its points: one k-d tree query per
+ * BLK^3 points (the candidates grow by about ((Rs + h) / Rs)^3) */
+#define BLK 3
+
+/*
+ * Evaluate the fit of (xyz, vk) at every point of the evaluation grid cg
+ * (cn its dims) into dst (3 per point); ok[e] (when not NULL) = 1 where a
+ * node is within Rs.  blocks: 1 = by blocks (blk_at), 0 = point by point
+ * (mls_at: the reference, field_int.h).  0, ENOMEM.
+ */
+static int field_points_grid(const kdtree_t *t, const double *xyz, const double *vk,
+			     const fgrid_t *cg, double sigma, double taper,
+			     int blocks, double *dst, uint8_t *ok,
+			     int nthreads)
+{
+	const int cn[3] = { cg->nx, cg->ny, cg->nz };
+	const int64_t cnv = fgrid_nvox(cg);
+	int fail = 0;
+	if (!blocks) {
+#pragma omp parallel num_threads(NT(nthreads))
+		{
+			mls_buf_t B = { NULL, 0 };
+#pragma omp for schedule(dynamic, 64)
+			for (int64_t e = 0; e < cnv; e++) {
+				double p[3] = { (double)(e % cn[0]),
+						(double)(e / cn[0] % cn[1]),
+						(double)(e / ((int64_t)cn[0] * cn[1])) },
+				       y[3];
+				aff_apply(cg->v2w, p, y);
+				int o = mls_at(t, xyz, vk, y, sigma, taper, &B,
+					       dst + 3 * e);
+				if (o < 0) {
+#pragma omp atomic write
+					fail = 1;
+				}
+				if (ok)
+					ok[e] = (uint8_t)(o > 0);
+			}
+			free(B.idx);
+		}
+		return fail ? ARMSTG_ENOMEM : 0;
+	}
+	const int nb[3] = { (cn[0] + BLK - 1) / BLK, (cn[1] + BLK - 1) / BLK,
+			    (cn[2] + BLK - 1) / BLK };
+	const int64_t nblk = (int64_t)nb[0] * nb[1] * nb[2];
+	const double Rs = mls_rs(sigma, taper);
+#pragma omp parallel num_threads(NT(nthreads))
+	{
+		mls_blk_t K = { 0 };
+#pragma omp for schedule(dynamic, 4)
+		for (int64_t b = 0; b < nblk; b++) {
+			int lo[3] = { (int)(b % nb[0]) * BLK,
+				      (int)(b / nb[0] % nb[1]) * BLK,
+				      (int)(b / ((int64_t)nb[0] * nb[1])) * BLK },
+			    hi[3];
+			double ci[3], c[3], h = 0;
+			for (int a = 0; a < 3; a++) {
+				hi[a] = lo[a] + BLK < cn[a] ? lo[a] + BLK : cn[a];
+				ci[a] = 0.5 * (lo[a] + hi[a] - 1);
+			}
+			aff_apply(cg->v2w, ci, c);
+			/* the farthest point of the block: a corner */
+			for (int q = 0; q < 8; q++) {
+				double pi[3] = { q & 1 ? hi[0] - 1 : lo[0],
+						 q & 2 ? hi[1] - 1 : lo[1],
+						 q & 4 ? hi[2] - 1 : lo[2] },
+				       pw[3];
+				aff_apply(cg->v2w, pi, pw);
+				double dd = sqrt((pw[0] - c[0]) * (pw[0] - c[0]) +
+						 (pw[1] - c[1]) * (pw[1] - c[1]) +
+						 (pw[2] - c[2]) * (pw[2] - c[2]));
+				h = fmax(h, dd);
+			}
+			/* margin: 1e-6 of the radius, many orders above the
+			 * rounding of the distances */
+			double R = (Rs + h) * (1 + 1e-6) + 1e-9;
+			int64_t m = 0;
+			if (blk_gather(t, xyz, vk, c, R, &K, &m)) {
+#pragma omp atomic write
+				fail = 1;
+				continue;
+			}
+			for (int k = lo[2]; k < hi[2]; k++)
+				for (int j = lo[1]; j < hi[1]; j++)
+					for (int i = lo[0]; i < hi[0]; i++) {
+						int64_t e = ((int64_t)k * cn[1] +
+							     j) * cn[0] + i;
+						double p[3] = { (double)i,
+								(double)j,
+								(double)k },
+						       y[3];
+						aff_apply(cg->v2w, p, y);
+						int o = m ? blk_at(&K, m, y, sigma,
+								   taper,
+								   dst + 3 * e)
+							  : 0;
+						if (!m)
+							dst[3 * e] =
+								dst[3 * e + 1] =
+									dst[3 * e + 2] = 0;
+						if (ok)
+							ok[e] = (uint8_t)o;
+					}
+		}
+		blk_free(&K);
+	}
+	return fail ? ARMSTG_ENOMEM : 0;
+}
+
+/* the trilinear refinement at voxel (i, j, k) of out (nv voxels) from the
+ * evaluation grid's values cv (cn, factor f) */
+static inline void refine_at(const double *cv, const int cn[3], int f,
+			     fimg_t *out, int64_t nv, int i, int j, int k)
+{
+	const fgrid_t *g = &out->g;
+	int64_t e = ((int64_t)k * g->ny + j) * g->nx + i;
+	double c[3] = { (double)i / f, (double)j / f, (double)k / f };
+	/* float weights, double sums (as measured) */
+	img_linf_t s;
+	img_linf_at(cn, c, IMG_EDGE_CLAMP, &s);
+	for (int q = 0; q < 3; q++) {
+		double v = 0;
+		for (int t = 0; t < 8; t++)
+			v += s.w[t] * cv[3 * s.o[t] + q];
+		out->d[e + q * nv] = (float)v;
+	}
+}
+
+/* the reference refinement (every voxel's stencil) and count */
+static void refine_ref(const double *cv, const int cn[3], int f,
+		       const uint8_t *ok, fimg_t *out, int64_t *n_unsupported,
+		       int nthreads)
+{
+	const fgrid_t *g = &out->g;
+	const int64_t nv = fgrid_nvox(g);
+	int64_t nuns = 0;
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static) \
+	reduction(+ : nuns)
+	for (int k = 0; k < g->nz; k++)
+		for (int j = 0; j < g->ny; j++)
+			for (int i = 0; i < g->nx; i++) {
+				refine_at(cv, cn, f, out, nv, i, j, k);
+				double c[3] = { (double)i / f, (double)j / f,
+						(double)k / f };
+				int64_t nn = ((int64_t)lround(c[2]) * cn[1] +
+					      lround(c[1])) * cn[0] + lround(c[0]);
+				if (!ok[nn])
+					nuns++;
+			}
+	if (n_unsupported)
+		*n_unsupported = nuns;
+}
+
+/*
+ * The refinement where it is not 0: a voxel whose 8 coarse corners are all
+ * 0 (+0 or -0 in every component: no node within Rs, or tapered to 0) is
+ * +0, which the stencil's sums from +0 give too (each weight w >= 0, so
+ * w * 0 is +0 or -0, and +0 + -0 = +0), and the caller's memset wrote: only
+ * the other voxels are computed, by the same stencil and sums (refine_ref).
+ * Per output row, a coarse column is live when one of the row's (up to 4)
+ * coarse rows is non-zero there; a voxel is computed when one of its two
+ * columns is live.
+ */
+static int refine(const double *cv, const int cn[3], int f, fimg_t *out,
+		  int nthreads)
+{
+	const fgrid_t *g = &out->g;
+	const int64_t nv = fgrid_nvox(g), cnv = (int64_t)cn[0] * cn[1] * cn[2];
+	uint8_t *nz = malloc((size_t)cnv);
+	if (!nz)
+		return ARMSTG_ENOMEM;
+#pragma omp parallel num_threads(NT(nthreads))
+	{
+#pragma omp for schedule(static)
+		for (int64_t e = 0; e < cnv; e++)
+			nz[e] = cv[3 * e] != 0 || cv[3 * e + 1] != 0 ||
+				cv[3 * e + 2] != 0;
+		/* without room for the columns, every voxel is computed */
+		uint8_t *col = malloc((size_t)cn[0]);
+#pragma omp for schedule(dynamic, 4) collapse(2)
+		for (int k = 0; k < g->nz; k++)
+			for (int j = 0; j < g->ny; j++) {
+				int iz[2], iy[2], live = !col;
+				double w2[2];
+				img_lin_axis((double)k / f, cn[2], IMG_EDGE_CLAMP,
+					     iz, w2);
+				img_lin_axis((double)j / f, cn[1], IMG_EDGE_CLAMP,
+					     iy, w2);
+				for (int I = 0; col && I < cn[0]; I++) {
+					uint8_t c = 0;
+					for (int b = 0; b < 4; b++)
+						c |= nz[((int64_t)iz[b >> 1] *
+							 cn[1] + iy[b & 1]) *
+							cn[0] + I];
+					col[I] = c;
+					live |= c;
+				}
+				if (!live)
+					continue;
+				for (int i = 0; i < g->nx; i++) {
+					int ix[2];
+					double w1[2];
+					img_lin_axis((double)i / f, cn[0],
+						     IMG_EDGE_CLAMP, ix, w1);
+					if (col && !col[ix[0]] && !col[ix[1]])
+						continue;
+					refine_at(cv, cn, f, out, nv, i, j, k);
+				}
+			}
+		free(col);
+	}
+	free(nz);
+	return 0;
+}
+
+/* the number of voxels whose nearest coarse point (lround of i / f per
+ * axis) has no node within Rs, as refine_ref counts them: per axis, how
+ * many voxels round to each coarse index, multiplied (exact integers);
+ * -1 out of memory */
+static int64_t unsupported(const uint8_t *ok, const int cn[3], int f,
+			   const fgrid_t *g, int nthreads)
+{
+	const int n[3] = { g->nx, g->ny, g->nz };
+	int64_t *cnt[3] = { NULL, NULL, NULL }, nuns = 0;
+	for (int a = 0; a < 3; a++) {
+		cnt[a] = calloc((size_t)cn[a], sizeof(int64_t));
+		if (!cnt[a]) {
+			nuns = -1;
+			goto out;
+		}
+		for (int i = 0; i < n[a]; i++)
+			cnt[a][lround((double)i / f)]++;
+	}
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static) \
+	reduction(+ : nuns)
+	for (int K = 0; K < cn[2]; K++)
+		for (int J = 0; J < cn[1]; J++)
+			for (int I = 0; I < cn[0]; I++)
+				if (!ok[((int64_t)K * cn[1] + J) * cn[0] + I])
+					nuns += cnt[2][K] * cnt[1][J] * cnt[0][I];
+out:
+	for (int a = 0; a < 3; a++)
+		free(cnt[a]);
+	return nuns;
 }
 
 int field_from_points(const double *xyz, const double *vec, int64_t n,
 		      double sigma_mm, double taper_mm, int passes,
 		      fimg_t *out, int64_t *n_unsupported, int nthreads)
+{
+	return field_points_dense(xyz, vec, n, sigma_mm, taper_mm, passes, out,
+				  n_unsupported, 1, nthreads);
+}
+
+int field_points_dense(const double *xyz, const double *vec, int64_t n,
+		       double sigma_mm, double taper_mm, int passes,
+		       fimg_t *out, int64_t *n_unsupported, int blocks,
+		       int nthreads)
 {
 	if (taper_mm == 0) {
 		/* auto: 2 sigma, and at least 3 x the largest nodal |d|, so the
@@ -261,27 +651,10 @@ int field_from_points(const double *xyz, const double *vec, int64_t n,
 		memcpy(res, vec, sizeof(double) * (size_t)n * 3);
 	for (int k = 0; k < passes && !fail; k++) {
 		double *dst = k ? pv : cv;
-#pragma omp parallel num_threads(NT(nthreads))
-		{
-			mls_buf_t B = { NULL, 0 };
-#pragma omp for schedule(dynamic, 64)
-			for (int64_t e = 0; e < cnv; e++) {
-				double p[3] = { (double)(e % cn[0]),
-						(double)(e / cn[0] % cn[1]),
-						(double)(e / ((int64_t)cn[0] * cn[1])) },
-				       y[3];
-				aff_apply(cg.v2w, p, y);
-				int o = mls_at(&t, xyz, vk, y, sigma_mm, taper_mm,
-					       &B, dst + 3 * e);
-				if (o < 0) {
-#pragma omp atomic write
-					fail = 1;
-				}
-				if (!k)
-					ok[e] = (uint8_t)(o > 0);
-			}
-			free(B.idx);
-		}
+		if (field_points_grid(&t, xyz, vk, &cg, sigma_mm, taper_mm,
+				      blocks, dst, k ? NULL : ok,
+				      nthreads))
+			fail = 1;
 		if (k)
 			for (int64_t e = 0; e < 3 * cnv; e++)
 				cv[e] += pv[e];
@@ -315,31 +688,16 @@ int field_from_points(const double *xyz, const double *vec, int64_t n,
 	}
 	/* trilinear refinement onto the output grid (exact for linear) */
 	int64_t nuns = 0;
-#pragma omp parallel for num_threads(NT(nthreads)) schedule(static) \
-	reduction(+ : nuns)
-	for (int k = 0; k < g->nz; k++)
-		for (int j = 0; j < g->ny; j++)
-			for (int i = 0; i < g->nx; i++) {
-				int64_t e = ((int64_t)k * g->ny + j) * g->nx + i;
-				double c[3] = { (double)i / f, (double)j / f,
-						(double)k / f };
-				/* float weights, double sums (as measured) */
-				img_linf_t s;
-				img_linf_at(cn, c, IMG_EDGE_CLAMP, &s);
-				for (int q = 0; q < 3; q++) {
-					double v = 0;
-					for (int t = 0; t < 8; t++)
-						v += s.w[t] * cv[3 * s.o[t] + q];
-					out->d[e + q * nv] = (float)v;
-				}
-				int64_t nn = ((int64_t)lround(c[2]) * cn[1] +
-					      lround(c[1])) * cn[0] + lround(c[0]);
-				if (!ok[nn])
-					nuns++;
-			}
-	if (n_unsupported)
-		*n_unsupported = nuns;
+	if (blocks) {
+		rc = refine(cv, cn, f, out, nthreads);
+		if (!rc && (nuns = unsupported(ok, cn, f, g, nthreads)) < 0)
+			rc = ARMSTG_ENOMEM;
+		if (!rc && n_unsupported)
+			*n_unsupported = nuns;
+	} else {
+		refine_ref(cv, cn, f, ok, out, n_unsupported, nthreads);
+	}
 	free(cv);
 	free(ok);
-	return 0;
+	return rc;
 }

@@ -44,9 +44,13 @@ int64_t kd_nearest_beyond(const kdtree_t *t, const double q[3], double min_d2,
 int64_t kd_count_within(const kdtree_t *t, const double q[3], double r,
 			int64_t max);
 
-/* Indices of the points within distance r of q (inclusive), in no
- * particular order: the first cap are stored in out; returns how many
- * there are (more than cap: call again with a larger out). */
+/* Indices of the points within distance r of q (inclusive), in the
+ * tree's pre-order (a node, then its left subtree, then its right): the
+ * same relative order whatever q and r, so one query's list filtered by
+ * distance is a smaller query's list (lib/field's evaluation by blocks
+ * relies on it; test_kdtree checks it).  The first cap are stored in out;
+ * returns how many there are (more than cap: call again with a larger
+ * out). */
 int64_t kd_within(const kdtree_t *t, const double q[3], double r,
 		  int64_t *out, int64_t cap);
 

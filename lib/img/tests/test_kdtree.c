@@ -70,6 +70,14 @@ static void test_random(void **state)
 	assert_int_equal(kd_build(&t, xyz, n), 0);
 	int64_t *out = malloc(sizeof(int64_t) * (size_t)n);
 	int64_t *ref = malloc(sizeof(int64_t) * (size_t)n);
+	/* every point's rank in the order of a query that finds them all:
+	 * the tree's pre-order, the relative order of every query's list
+	 * (lib/field's evaluation by blocks relies on it) */
+	int64_t *rank = malloc(sizeof(int64_t) * (size_t)n);
+	double q0[3] = { 50, 20, 2.5 };
+	assert_int_equal(kd_within(&t, q0, 1e9, out, n), n);
+	for (int64_t i = 0; i < n; i++)
+		rank[out[i]] = i;
 	for (int qi = 0; qi < 400; qi++) {
 		double q[3] = { 160 * urand() - 30, 100 * urand() - 30,
 				60 * urand() - 30 };
@@ -101,6 +109,8 @@ static void test_random(void **state)
 		assert_int_equal(kd_count_within(&t, q, r, 0), m);
 		assert_int_equal(kd_count_within(&t, q, r, 3), m < 3 ? m : 3);
 		assert_int_equal(kd_within(&t, q, r, out, n), m);
+		for (int64_t i = 1; i < m; i++)
+			assert_true(rank[out[i - 1]] < rank[out[i]]);
 		qsort(out, (size_t)m, sizeof *out, cmp_i64);
 		for (int64_t i = 0; i < m; i++)
 			assert_int_equal(out[i], ref[i]);
@@ -112,6 +122,7 @@ static void test_random(void **state)
 	assert_null(t.idx);
 	free(out);
 	free(ref);
+	free(rank);
 	free(xyz);
 }
 
