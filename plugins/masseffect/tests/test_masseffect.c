@@ -269,6 +269,109 @@ static void test_intrusion(void **state)
 	msg_unref(&away->base);
 }
 
+/* 1 in the box of a u8 volume, or value v + a pseudo-random 0..10 in a
+ * float one (the whole grid when i0 < 0) */
+static void fbox(vol_t *v, int i0, int i1, int j0, int j1, int k0, int k1,
+		 float val, unsigned *seed)
+{
+	if (i0 < 0) {
+		i0 = j0 = k0 = 0;
+		i1 = v->nx - 1, j1 = v->ny - 1, k1 = v->nz - 1;
+	}
+	for (int k = k0; k <= k1; k++)
+		for (int j = j0; j <= j1; j++)
+			for (int i = i0; i <= i1; i++) {
+				*seed = *seed * 1103515245u + 12345u;
+				((float *)v->data)[vol_idx(v, i, j, k)] =
+					val + (float)((*seed >> 8) % 1000) / 100;
+			}
+}
+
+/*
+ * The same table and patient ventricles, bit for bit, on 1, 2 and 3
+ * threads (the centroids' integer sums, the ordered gathers of the
+ * quantiles and of the seeds, the counts): a 64 x 60 x 50 grid, 3 chunks of
+ * the gathers, 1 mm LPS.  Atlas ventricles i 20-30, j 20-35, k 15-30; the
+ * patient's (dark in T1 and FLAIR, 20-30 against 100-110) i 17-28 over the
+ * same j, k: 12 x 16 x 16 = 3072 voxels, 3.072 ml, moved 2.5 mm away from
+ * the tumour (i 45-52); a dark blob within the search radius but not
+ * connected to them (j 40-43) is left out; the grown ventricles (i 18-28)
+ * moved 2 mm.
+ */
+static void test_threads(void **state)
+{
+	(void)state;
+	static const double LPS[16] = { -1, 0, 0, 40, 0, -1, 0, 35, 0, 0, 1,
+					-20, 0, 0, 0, 1 };
+	const int nx = 64, ny = 60, nz = 50;
+	vol_t *a = vol_new(nx, ny, nz, 1, DT_U8, LPS);
+	vol_t *t = vol_new(nx, ny, nz, 1, DT_U8, LPS);
+	vol_t *x = vol_new(nx, ny, nz, 1, DT_U8, LPS);
+	vol_t *b = vol_new(nx, ny, nz, 1, DT_U8, LPS);
+	vol_t *g = vol_new(nx, ny, nz, 1, DT_U8, LPS);
+	vol_t *t1 = vol_new(nx, ny, nz, 1, DT_F32, LPS);
+	vol_t *fl = vol_new(nx, ny, nz, 1, DT_F32, LPS);
+	vol_t *f = vol_new(nx, ny, nz, 3, DT_F32, LPS);
+	box(a, 20, 30, 20, 35, 15, 30);
+	box(t, 45, 52, 25, 32, 20, 27);
+	box(x, 42, 55, 22, 35, 17, 30);
+	box(b, 5, 58, 5, 54, 5, 44);
+	box(g, 18, 28, 20, 35, 15, 30);
+	unsigned seed = 99;
+	vol_t *im[2] = { t1, fl };
+	for (int m = 0; m < 2; m++) {
+		fbox(im[m], -1, 0, 0, 0, 0, 0, 100, &seed);
+		fbox(im[m], 17, 28, 20, 35, 15, 30, 20, &seed);
+		fbox(im[m], 20, 24, 40, 43, 20, 24, 20, &seed);
+	}
+	int64_t nv = vol_nvox(f);
+	for (int64_t e = 0; e < nv; e++) {
+		double i = (double)(e % nx), j = (double)(e / nx % ny);
+		((float *)f->data)[e] = (float)(0.8 * sin(i / 7));
+		((float *)f->data)[e + nv] = (float)(0.5 * cos(j / 5));
+	}
+	const msg_t *in[8] = { &a->base, &t->base, &t1->base, &fl->base,
+			       &g->base, &x->base, &b->base, &f->base };
+	msg_t *out[3][2] = { { NULL } };
+	char err[1024];
+	for (int nt = 1; nt <= 3; nt++)
+		if (tu_run_nt(TU_PLUGIN(), NULL, in, out[nt - 1], nt, err,
+			      sizeof err))
+			fail_msg("%s", err);
+	const tab_t *t0 = (const tab_t *)out[0][0];
+	const vol_t *p0 = (const vol_t *)out[0][1];
+	double vp = tab_value(t0, "volume", "patient_ventricles"),
+	       sh = tab_value(t0, "shift", "patient"),
+	       sg = tab_value(t0, "shift", "grown");
+	print_message("threads: patient ventricles %.3f ml, shift %.4f mm "
+		      "(grown %.4f), dice %.4f, jac_min %.5f: the same bits on "
+		      "1-3 threads\n", vp, sh, sg,
+		      tab_value(t0, "dice", "ventricles"),
+		      tab_value(t0, "jac_min", "field"));
+	assert_float_equal(vp, 3.072, 1e-12);
+	/* the centroids moved 2.5 (patient) and 2 (grown) voxels along -i,
+	 * +x world; n = (c_a - t) / |c_a - t|, c_a - t = (23.5, 1, -1) mm */
+	double nx_ = 23.5 / sqrt(23.5 * 23.5 + 2);
+	assert_float_equal(sh, 2.5 * nx_, 1e-9);
+	assert_float_equal(sg, 2.0 * nx_, 1e-9);
+	for (int nt = 2; nt <= 3; nt++) {
+		const tab_t *tb = (const tab_t *)out[nt - 1][0];
+		const vol_t *pv = (const vol_t *)out[nt - 1][1];
+		const tab_col_t *v0 = tab_col(t0, "value"), *v = tab_col(tb, "value");
+		assert_int_equal(tb->nrows, t0->nrows);
+		assert_memory_equal(v0->num, v->num,
+				    sizeof(double) * (size_t)t0->nrows);
+		assert_memory_equal(p0->data, pv->data, (size_t)nv);
+	}
+	for (int nt = 0; nt < 3; nt++) {
+		msg_unref(out[nt][0]);
+		msg_unref(out[nt][1]);
+	}
+	vol_t *vs[8] = { a, t, x, b, g, t1, fl, f };
+	for (int k = 0; k < 8; k++)
+		msg_unref(&vs[k]->base);
+}
+
 /* The real-anatomy phantom: SRI24 with BraTS 2013 pat0001's manual tumour,
  * the phantom's own elastic mass effect (5 mm), no inter-subject
  * deformation, patient and atlas on the atlas's grid (orientation LAS). */
@@ -374,6 +477,7 @@ int main(void)
 		cmocka_unit_test(test_intrusion),
 		cmocka_unit_test(test_real_anatomy),
 		cmocka_unit_test(test_refusals),
+		cmocka_unit_test(test_threads),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
