@@ -171,22 +171,32 @@ static int check_finite(armstg_stage_t *st, const vol_t *v, const char *what)
  * (duplicates closer than 1e-9 mm are skipped), by lib/img's k-d tree.
  * Returns -1 when no point has a distinct neighbour, -2 when out of
  * memory. */
-static double mean_nn(const double *xyz, int64_t n)
+static double mean_nn(const double *xyz, int64_t n, int nt)
 {
 	if (n < 2)
 		return -1;
 	kdtree_t t;
-	if (kd_build(&t, xyz, n))
+	double *d = malloc((size_t)n * sizeof *d);
+	if (!d || kd_build(&t, xyz, n)) {
+		free(d);
 		return -2;
-	double sum = 0;
-	int64_t cnt = 0;
+	}
+	/* the distances on the threads, their sum in the points' order */
+#pragma omp parallel for num_threads(nt) schedule(static)
 	for (int64_t i = 0; i < n; i++) {
 		double best = INFINITY;
-		if (kd_nearest_beyond(&t, xyz + 3 * i, 1e-18, &best) >= 0) {
-			sum += sqrt(best);
+		d[i] = kd_nearest_beyond(&t, xyz + 3 * i, 1e-18, &best) >= 0
+			       ? sqrt(best)
+			       : -1;
+	}
+	double sum = 0;
+	int64_t cnt = 0;
+	for (int64_t i = 0; i < n; i++)
+		if (d[i] >= 0) {
+			sum += d[i];
 			cnt++;
 		}
-	}
+	free(d);
 	kd_free(&t);
 	return cnt ? sum / (double)cnt : -1;
 }
@@ -285,7 +295,7 @@ static int op_points(armstg_stage_t *st)
 	/* radii, mm */
 	double rad = p->radius, nn = -1;
 	if (rad <= 0 || p->offset < 0) {
-		nn = mean_nn(xyz, ns);
+		nn = mean_nn(xyz, ns, st->host->threads(st));
 		if (nn == -2) {
 			free(xyz);
 			return st->host->fail(st, ARMSTG_ENOMEM,
@@ -332,28 +342,39 @@ static int op_points(armstg_stage_t *st)
 		dim[a] = rdim[a] + 2 * pad[a];
 	int64_t nv = (int64_t)dim[0] * dim[1] * dim[2];
 	double *g = malloc((size_t)nv * sizeof *g);
-	uint8_t *out_o = calloc((size_t)nv, 1);
-	int64_t *queue = malloc((size_t)nv * sizeof *queue);
 	vol_t *o = st->host->vol_new(ref->nx, ref->ny, ref->nz, 1, DT_U8,
 				     ref->affine);
-	if (!g || !out_o || !queue || !o) {
+	if (!g || !o) {
 		free(xyz);
 		free(g);
-		free(out_o);
-		free(queue);
 		if (o)
 			st->host->msg_unref(&o->base);
 		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
 	}
 	const int nt = st->host->threads(st);
-	/* 1. exact squared distance to the nearest point, up to cap */
+	/* 1. exact squared distance to the nearest point, up to cap: each
+	 * point's box of voxels within cap (per axis), then each slice takes
+	 * the least over the points whose box holds it (a minimum: the same
+	 * on any thread count) */
 #pragma omp parallel for num_threads(nt) schedule(static)
 	for (int64_t e = 0; e < nv; e++)
 		g[e] = cap * cap;
+	int (*pb)[6] = malloc((size_t)ns * sizeof *pb);
+	double (*pvx)[3] = malloc((size_t)ns * sizeof *pvx);
+	if (!pb || !pvx) {
+		free(pb);
+		free(pvx);
+		free(xyz);
+		free(g);
+		st->host->msg_unref(&o->base);
+		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
+	}
 	int64_t used = 0;
+	/* U: the union of the boxes (lo, hi per axis) */
+	int ulo[3] = { dim[0], dim[1], dim[2] }, uhi[3] = { -1, -1, -1 };
 	for (int64_t i = 0; i < ns; i++) {
-		double vx[3];
-		int lo[3], hi[3], skip = 0;
+		double *vx = pvx[used];
+		int *lo = pb[used], *hi = pb[used] + 3, skip = 0;
 		aff_apply(inv, xyz + 3 * i, vx);
 		for (int a = 0; a < 3; a++) {
 			vx[a] += pad[a];
@@ -368,8 +389,27 @@ static int op_points(armstg_stage_t *st)
 		}
 		if (skip)
 			continue;
+		for (int a = 0; a < 3; a++) {
+			ulo[a] = lo[a] < ulo[a] ? lo[a] : ulo[a];
+			uhi[a] = hi[a] > uhi[a] ? hi[a] : uhi[a];
+		}
 		used++;
-		for (int k = lo[2]; k <= hi[2]; k++) {
+	}
+	free(xyz);
+	if (st->host->cancelled(st)) {
+		free(pb);
+		free(pvx);
+		free(g);
+		st->host->msg_unref(&o->base);
+		return ARMSTG_ECANCELLED;
+	}
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 1)
+	for (int k = 0; k < dim[2]; k++)
+		for (int64_t i = 0; i < used; i++) {
+			const int *lo = pb[i], *hi = pb[i] + 3;
+			const double *vx = pvx[i];
+			if (k < lo[2] || k > hi[2])
+				continue;
 			double dz = sp[2] * (k - vx[2]);
 			for (int j = lo[1]; j <= hi[1]; j++) {
 				double dy = sp[1] * (j - vx[1]);
@@ -386,61 +426,97 @@ static int op_points(armstg_stage_t *st)
 				}
 			}
 		}
-		if ((i & 1023) == 0 && st->host->cancelled(st)) {
-			free(xyz);
-			free(g);
-			free(out_o);
-			free(queue);
-			st->host->msg_unref(&o->base);
-			return ARMSTG_ECANCELLED;
-		}
-	}
-	free(xyz);
+	free(pb);
+	free(pvx);
 	/* 2. outside O: complement of D = {d_P <= rho} connected to the
-	 * border (6-neighbours); the rest of the complement is filled */
-	int64_t qh = 0, qt = 0;
-	for (int k = 0; k < dim[2]; k++)
-		for (int j = 0; j < dim[1]; j++)
-			for (int i = 0; i < dim[0]; i++) {
-				if (i && j && k && i < dim[0] - 1 &&
-				    j < dim[1] - 1 && k < dim[2] - 1)
+	 * border (6-neighbours); the rest of the complement is filled.
+	 * D lies in U (g is cap^2 > rho^2 elsewhere); B = U grown by one
+	 * voxel, clipped to the grid.  Every voxel outside B is in O (a
+	 * straight line outside B leads to the border); the voxels of B's
+	 * face layer not in D are in O (on the border, or next to a voxel
+	 * outside B); a path from inside B to the outside crosses that
+	 * layer.  So O is everything outside B and, inside B, what a flood
+	 * from the face layer's voxels not in D reaches within B: the same
+	 * set as the flood from the border over the whole grid, on B's
+	 * voxels only.  out_o holds B (bd its dims). */
+	int blo[3], bd[3];
+	for (int a = 0; a < 3; a++) {
+		blo[a] = used ? (ulo[a] > 0 ? ulo[a] - 1 : 0) : 0;
+		int bhi = used ? (uhi[a] < dim[a] - 1 ? uhi[a] + 1 : dim[a] - 1)
+			       : -1;
+		bd[a] = bhi - blo[a] + 1;
+	}
+	int64_t nb_ = (int64_t)bd[0] * bd[1] * bd[2], qh = 0, qt = 0;
+	uint8_t *out_o = calloc((size_t)(nb_ ? nb_ : 1), 1);
+	int64_t *queue = malloc((size_t)(nb_ ? nb_ : 1) * sizeof *queue);
+	if (!out_o || !queue) {
+		free(out_o);
+		free(queue);
+		free(g);
+		st->host->msg_unref(&o->base);
+		return st->host->fail(st, ARMSTG_ENOMEM, "out of memory");
+	}
+#define GB(i, j, k) (((int64_t)((k) + blo[2]) * dim[1] + (j) + blo[1]) * \
+			     dim[0] + (i) + blo[0])
+	for (int k = 0; k < bd[2]; k++)
+		for (int j = 0; j < bd[1]; j++)
+			for (int i = 0; i < bd[0]; i++) {
+				if (i && j && k && i < bd[0] - 1 &&
+				    j < bd[1] - 1 && k < bd[2] - 1)
 					continue;
-				int64_t e = ((int64_t)k * dim[1] + j) * dim[0] +
+				int64_t e = ((int64_t)k * bd[1] + j) * bd[0] +
 					i;
-				if (g[e] > rho * rho && !out_o[e]) {
+				if (g[GB(i, j, k)] > rho * rho && !out_o[e]) {
 					out_o[e] = 1;
 					queue[qt++] = e;
 				}
 			}
 	while (qh < qt) {
 		int64_t e = queue[qh++];
-		int i = (int)(e % dim[0]), j = (int)(e / dim[0] % dim[1]),
-		    k = (int)(e / ((int64_t)dim[0] * dim[1]));
-		int64_t nb[6];
+		int i = (int)(e % bd[0]), j = (int)(e / bd[0] % bd[1]),
+		    k = (int)(e / ((int64_t)bd[0] * bd[1]));
+		int64_t nb[6], gb = GB(i, j, k), gn[6];
 		int nn6 = 0;
-		if (i > 0) nb[nn6++] = e - 1;
-		if (i < dim[0] - 1) nb[nn6++] = e + 1;
-		if (j > 0) nb[nn6++] = e - dim[0];
-		if (j < dim[1] - 1) nb[nn6++] = e + dim[0];
-		if (k > 0) nb[nn6++] = e - (int64_t)dim[0] * dim[1];
-		if (k < dim[2] - 1) nb[nn6++] = e + (int64_t)dim[0] * dim[1];
+		const int64_t sx = 1, sy = dim[0],
+			      sz = (int64_t)dim[0] * dim[1],
+			      by = bd[0], bz = (int64_t)bd[0] * bd[1];
+		if (i > 0) nb[nn6] = e - 1, gn[nn6++] = gb - sx;
+		if (i < bd[0] - 1) nb[nn6] = e + 1, gn[nn6++] = gb + sx;
+		if (j > 0) nb[nn6] = e - by, gn[nn6++] = gb - sy;
+		if (j < bd[1] - 1) nb[nn6] = e + by, gn[nn6++] = gb + sy;
+		if (k > 0) nb[nn6] = e - bz, gn[nn6++] = gb - sz;
+		if (k < bd[2] - 1) nb[nn6] = e + bz, gn[nn6++] = gb + sz;
 		for (int m = 0; m < nn6; m++)
-			if (!out_o[nb[m]] && g[nb[m]] > rho * rho) {
+			if (!out_o[nb[m]] && g[gn[m]] > rho * rho) {
 				out_o[nb[m]] = 1;
 				queue[qt++] = nb[m];
 			}
 	}
 	free(queue);
 	/* 3. x is outside iff |x-y|^2 < (d_P(y) - keep)^2 for some y in O */
-#pragma omp parallel for num_threads(nt) schedule(static)
-	for (int64_t e = 0; e < nv; e++) {
-		if (out_o[e]) {
-			double w = sqrt(g[e]) - keep;
-			g[e] = w > 0 ? -w * w : 0;
-		} else {
-			g[e] = INFINITY; /* no parabola */
+#pragma omp parallel for num_threads(nt) schedule(static) collapse(2)
+	for (int k = 0; k < dim[2]; k++)
+		for (int j = 0; j < dim[1]; j++) {
+			double *row = g + ((int64_t)k * dim[1] + j) * dim[0];
+			int kb = k - blo[2], jb = j - blo[1];
+			int rin = kb >= 0 && kb < bd[2] && jb >= 0 &&
+				  jb < bd[1];
+			const uint8_t *ob = rin ? out_o + ((int64_t)kb * bd[1] +
+							   jb) * bd[0]
+						: NULL;
+			for (int i = 0; i < dim[0]; i++) {
+				int ib = i - blo[0];
+				int in_o = !ob || ib < 0 || ib >= bd[0] ||
+					   ob[ib];
+				if (in_o) {
+					double w = sqrt(row[i]) - keep;
+					row[i] = w > 0 ? -w * w : 0;
+				} else {
+					row[i] = INFINITY; /* no parabola */
+				}
+			}
 		}
-	}
+#undef GB
 	free(out_o);
 	/* g <- min over the grid of |x-y|^2 + g(y) (lib/img, FH 2012; the
 	 * same on any thread count) */

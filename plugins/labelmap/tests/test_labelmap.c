@@ -793,6 +793,59 @@ static void test_points_speed(void **s)
 	msg_unref(&ref->base);
 }
 
+/*
+ * The same mask on 1 and 3 threads, and the former code's voxel counts
+ * (the whole-grid flood of main 08b9598; now the flood runs in the box of
+ * the painted balls): (a) the hollow shell of test_points_shell with its
+ * centre 12 mm inside the grid's corner (the shell 3 mm past the grid), so
+ * that the balls reach the padded grid's border (the flood's box clipped
+ * there) and the hole is filled; (b) the same shell inside the grid with
+ * outline=balls.
+ */
+static void test_points_threads(void **s)
+{
+	(void)s;
+	vol_t *ref = grid1mm();
+	int n = n_sphere(RB, 3);
+	static const double shift[2][3] = { { -12, -12, -12 }, { 0, 0, 0 } };
+	static const int64_t want[2] = { 13664, 19754 };
+	const char *pa[] = { "op=points", "labels=4", NULL };
+	const char *pb[] = { "op=points", "labels=4", "outline=balls",
+			     "radius=2", "offset=0", NULL };
+	for (int c = 0; c < 2; c++) {
+		ps_t *ps = ps_new(n);
+		fib_sphere(ps->xyz, ps->label, n, RB, 4);
+		for (int i = 0; i < n; i++)
+			for (int a = 0; a < 3; a++)
+				ps->xyz[3 * i + a] += shift[c][a];
+		msg_freeze(&ps->base);
+		const msg_t *in[4] = { &ref->base, NULL, &ps->base };
+		msg_t *o1[1] = { NULL }, *o3[1] = { NULL };
+		char err[512];
+		const char *const *p = c ? pb : pa;
+		assert_int_equal(tu_run_nt(TU_PLUGIN(), p, in, o1, 1, err,
+					   sizeof err), 0);
+		assert_int_equal(tu_run_nt(TU_PLUGIN(), p, in, o3, 3, err,
+					   sizeof err), 0);
+		const vol_t *v1 = (const vol_t *)o1[0], *v3 = (const vol_t *)o3[0];
+		int64_t n1 = count(v1);
+		print_message("shell %s: %lld voxels on 1 and 3 threads "
+			      "(main: %lld)\n", c ? "inside, outline=balls" :
+			      "past the corner", (long long)n1,
+			      (long long)want[c]);
+		assert_memory_equal(v1->data, v3->data, (size_t)vol_nvox(v1));
+		assert_int_equal(n1, want[c]);
+		/* the centre is filled */
+		int ci = c ? 24 : 12;
+		assert_int_equal(((const uint8_t *)v1->data)
+				 [vol_idx(v1, ci, ci, ci)], 1);
+		msg_unref(o1[0]);
+		msg_unref(o3[0]);
+		msg_unref(&ps->base);
+	}
+	msg_unref(&ref->base);
+}
+
 int main(void)
 {
 	const struct CMUnitTest t[] = {
@@ -808,6 +861,7 @@ int main(void)
 		cmocka_unit_test(test_points_labels_errors),
 		cmocka_unit_test(test_points_auto_radius),
 		cmocka_unit_test(test_points_speed),
+		cmocka_unit_test(test_points_threads),
 	};
 	return cmocka_run_group_tests(t, NULL, NULL);
 }
