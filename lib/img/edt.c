@@ -122,6 +122,8 @@ int img_edt_sq(const uint8_t *site, const int n[3], const double sp[3],
 	       int threads, float *d2)
 {
 	const int64_t nv = (int64_t)n[0] * n[1] * n[2];
+#pragma omp parallel for num_threads(threads > 0 ? threads : 1) \
+	schedule(static)
 	for (int64_t e = 0; e < nv; e++)
 		d2[e] = site[e] ? 0.0f : INFINITY;
 	return passes(d2, 0, n, sp, threads);

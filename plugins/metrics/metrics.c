@@ -216,6 +216,7 @@ static int labels_on(mctx_t *c, int in, const vol_t *ref, int is_mask,
 static int64_t count_in(const int32_t *l, const lset_t *s, int64_t n)
 {
 	int64_t m = 0;
+#pragma omp parallel for schedule(static) reduction(+ : m)
 	for (int64_t e = 0; e < n; e++)
 		m += lset_has(s, l[e]);
 	return m;
@@ -488,6 +489,7 @@ static int tumour_metrics(mctx_t *c)
 				"atlas_tumour mask is empty");
 		goto out;
 	}
+#pragma omp parallel for schedule(static) reduction(+ : nab)
 	for (int64_t e = 0; e < n; e++)
 		nab += t[e] && a[e];
 	rc = pair_rows(c, "tumour", t, &one, a, &one, ref, nt, na, nab, NULL,
@@ -505,7 +507,7 @@ static int region_rows(mctx_t *c, const char *prefix, const char *region,
 		       int jac)
 {
 	mtx_stats_t s;
-	int rc = mtx_stats(x, sel, n, &s);
+	int rc = mtx_stats(x, sel, n, c->nthreads, &s);
 	char m[32];
 	if (rc)
 		return c->h->fail(c->st, rc, "out of memory for statistics");
@@ -559,6 +561,7 @@ static int band_select(mctx_t *c, const vol_t *g, const char *what, int side,
 		goto out;
 	}
 	int64_t ct = 0;
+#pragma omp parallel for schedule(static) reduction(+ : ct)
 	for (int64_t e = 0; e < n; e++)
 		ct += t[e];
 	if (!ct) {
@@ -572,6 +575,7 @@ static int band_select(mctx_t *c, const vol_t *g, const char *what, int side,
 		if ((sd == 0 && side == SIDE_INSIDE) ||
 		    (sd == 1 && side == SIDE_OUTSIDE))
 			continue;
+#pragma omp parallel for schedule(static)
 		for (int64_t e = 0; e < n; e++)
 			feat[e] = (uint8_t)(sd == 0 ? t[e] != 0 : t[e] == 0);
 		const int dims[3] = { g->nx, g->ny, g->nz };
@@ -579,6 +583,7 @@ static int band_select(mctx_t *c, const vol_t *g, const char *what, int side,
 			rc = c->h->fail(st, rc, "out of memory");
 			goto out;
 		}
+#pragma omp parallel for schedule(static)
 		for (int64_t e = 0; e < n; e++)
 			if (!feat[e] && d2[e] <= b2 * (1 + 1e-6))
 				sel[e] = 1;
@@ -624,6 +629,7 @@ static int field_metrics(mctx_t *c)
 			goto out;
 		}
 		int64_t cm = 0;
+#pragma omp parallel for schedule(static) reduction(+ : cm)
 		for (int64_t e = 0; e < n; e++)
 			cm += selm[e] = (uint8_t)(m[e] != 0);
 		if (!cm) {
@@ -641,9 +647,11 @@ static int field_metrics(mctx_t *c)
 		if ((rc = band_select(c, f, "field", c->p->band_side,
 				      c->p->band_mm, selb)))
 			goto out;
-		if (selm)
+		if (selm) {
+#pragma omp parallel for schedule(static)
 			for (int64_t e = 0; e < n; e++)
 				selb[e] &= selm[e];
+		}
 	}
 
 	/* Jacobian determinant */
@@ -651,14 +659,18 @@ static int field_metrics(mctx_t *c)
 		rc = c->h->fail(st, rc, "field: singular affine");
 		goto out;
 	}
+	/* the first voxel (in voxel order) whose determinant is not finite */
+	int64_t bad = n;
+#pragma omp parallel for schedule(static) reduction(min : bad)
 	for (int64_t e = 0; e < n; e++)
-		if (!isfinite(x[e])) {
-			rc = c->h->fail(st, ARMSTG_ENUMERIC,
-					"field: Jacobian determinant is not "
-					"finite at voxel %lld",
-					(long long)e);
-			goto out;
-		}
+		if (!isfinite(x[e]) && e < bad)
+			bad = e;
+	if (bad < n) {
+		rc = c->h->fail(st, ARMSTG_ENUMERIC,
+				"field: Jacobian determinant is not finite at "
+				"voxel %lld", (long long)bad);
+		goto out;
+	}
 	if ((rc = region_rows(c, "jac", "all", x, NULL, n, 1)) ||
 	    (selm && (rc = region_rows(c, "jac", "mask", x, selm, n, 1))) ||
 	    (selb && (rc = region_rows(c, "jac", "band", x, selb, n, 1))))
@@ -683,6 +695,7 @@ static int field_metrics(mctx_t *c)
 				  "resampled trilinearly through world "
 				  "coordinates (%lld voxels outside it left "
 				  "out)", (long long)nout);
+#pragma omp parallel for schedule(static)
 		for (int64_t e = 0; e < n; e++) {
 			double d0 = (double)u[e] - ut[e],
 			       d1 = (double)u[n + e] - ut[n + e],
@@ -711,31 +724,64 @@ out:
 }
 
 /* Pearson's normalised cross-correlation of a and b over sel (two-pass
- * sums in double).  NaN when fewer than 2 voxels or a constant side. */
-static double ncc_over(const vol_t *a, const vol_t *b, const uint8_t *sel,
-		       int64_t n, int64_t *cnt)
+ * sums in double).  NaN when fewer than 2 voxels or a constant side.  The
+ * selected values are gathered on the threads in voxel order (mtx.h), the
+ * sums taken over them in that order, as the serial loops did: the same
+ * bits on any thread count.  -1 (*cnt untouched) when out of memory. */
+static int ncc_over(const vol_t *a, const vol_t *b, const uint8_t *sel,
+		    int64_t n, int nthreads, int64_t *cnt, double *r)
 {
-	double sa = 0, sb = 0;
-	int64_t m = 0;
-	for (int64_t e = 0; e < n; e++)
-		if (sel[e]) {
-			sa += vol_get(a, e);
-			sb += vol_get(b, e);
-			m++;
-		}
+	int64_t nch, *off = mtx_chunks_new(n, &nch);
+	if (!off)
+		return -1;
+#pragma omp parallel for num_threads(nthreads) schedule(static)
+	for (int64_t c = 0; c < nch; c++) {
+		int64_t e0 = c * MTX_CHUNK, e1 = e0 + MTX_CHUNK < n ? e0 + MTX_CHUNK
+								 : n, k = 0;
+		for (int64_t e = e0; e < e1; e++)
+			k += sel[e] != 0;
+		off[c] = k;
+	}
+	int64_t m = mtx_chunks_prefix(off, nch);
 	*cnt = m;
-	if (m < 2)
-		return NAN;
+	*r = NAN;
+	if (m < 2) {
+		free(off);
+		return 0;
+	}
+	double *va = malloc(sizeof(double) * 2 * (size_t)m), *vb = va + m;
+	if (!va) {
+		free(off);
+		return -1;
+	}
+#pragma omp parallel for num_threads(nthreads) schedule(static)
+	for (int64_t c = 0; c < nch; c++) {
+		int64_t e0 = c * MTX_CHUNK, e1 = e0 + MTX_CHUNK < n ? e0 + MTX_CHUNK
+								 : n,
+			t = off[c];
+		for (int64_t e = e0; e < e1; e++)
+			if (sel[e]) {
+				va[t] = vol_get(a, e);
+				vb[t++] = vol_get(b, e);
+			}
+	}
+	free(off);
+	double sa = 0, sb = 0;
+	for (int64_t t = 0; t < m; t++) {
+		sa += va[t];
+		sb += vb[t];
+	}
 	double ma = sa / (double)m, mb = sb / (double)m, sab = 0, saa = 0,
 	       sbb = 0;
-	for (int64_t e = 0; e < n; e++)
-		if (sel[e]) {
-			double da = vol_get(a, e) - ma, db = vol_get(b, e) - mb;
-			sab += da * db;
-			saa += da * da;
-			sbb += db * db;
-		}
-	return saa > 0 && sbb > 0 ? sab / sqrt(saa * sbb) : NAN;
+	for (int64_t t = 0; t < m; t++) {
+		double da = va[t] - ma, db = vb[t] - mb;
+		sab += da * db;
+		saa += da * da;
+		sbb += db * db;
+	}
+	free(va);
+	*r = saa > 0 && sbb > 0 ? sab / sqrt(saa * sbb) : NAN;
+	return 0;
 }
 
 static int image_metrics(mctx_t *c)
@@ -764,12 +810,17 @@ static int image_metrics(mctx_t *c)
 		goto out;
 	if (st->in[IN_EXCL] && (rc = labels_on(c, IN_EXCL, im, 1, &x)))
 		goto out;
+#pragma omp parallel for schedule(static)
 	for (int64_t e = 0; e < n; e++)
 		sel[e] = (uint8_t)((!m || m[e]) && (!x || !x[e]) &&
 				   isfinite(vol_get(im, e)) &&
 				   isfinite(vol_get(at, e)));
 	int64_t cnt;
-	double r = ncc_over(im, at, sel, n, &cnt);
+	double r;
+	if (ncc_over(im, at, sel, n, c->nthreads, &cnt, &r)) {
+		rc = c->h->fail(st, ARMSTG_ENOMEM, "out of memory");
+		goto out;
+	}
 	if ((rc = row(c, "ncc", "mask", r, "")) ||
 	    (rc = row(c, "ncc_n", "mask", (double)cnt, "voxels")))
 		goto out;
@@ -782,9 +833,13 @@ static int image_metrics(mctx_t *c)
 		if ((rc = band_select(c, im, "image", SIDE_OUTSIDE,
 				      c->p->ncc_band_mm, feat)))
 			goto out;
+#pragma omp parallel for schedule(static)
 		for (int64_t e = 0; e < n; e++)
 			sel[e] &= feat[e];
-		r = ncc_over(im, at, sel, n, &cnt);
+		if (ncc_over(im, at, sel, n, c->nthreads, &cnt, &r)) {
+			rc = c->h->fail(st, ARMSTG_ENOMEM, "out of memory");
+			goto out;
+		}
 		if (cnt < 2) {
 			rc = c->h->fail(st, ARMSTG_EINVAL, "ncc: no voxel of "
 					"the band (%g mm around the tumour, in "

@@ -116,15 +116,29 @@ double mtx_quantile(double *a, size_t n, double q);
  */
 int mtx_jacobian(const vol_t *f, const float *u, int nthreads, double *jac);
 
+/*
+ * Ordered gathers on threads: the flat index cut into chunks of MTX_CHUNK
+ * (a fixed size, so the order gathered is the serial loop's on any thread
+ * count); each chunk counts what it keeps into off[c], mtx_chunks_prefix
+ * turns the counts into each chunk's first place (off[nch] = the total)
+ * and each chunk copies its values there.  mtx_chunks_new: the nch + 1
+ * offsets for n elements (NULL: out of memory).
+ */
+#define MTX_CHUNK ((int64_t)1 << 16)
+int64_t *mtx_chunks_new(int64_t n, int64_t *nch);
+int64_t mtx_chunks_prefix(int64_t *off, int64_t nch);
+
 /* Summary of the values of x[] (NaN entries skipped) where sel != NULL &&
- * sel[v] != 0 (or everywhere when sel == NULL). */
+ * sel[v] != 0 (or everywhere when sel == NULL): the values gathered on
+ * nthreads threads in voxel order, their sum (the mean) taken in that order,
+ * so every figure is the same bits on any thread count. */
 typedef struct mtx_stats {
 	int64_t n;
 	double min, max, mean, median, p95;
 	int64_t n_nonpos;    /* entries <= 0 */
 } mtx_stats_t;
 
-int mtx_stats(const double *x, const uint8_t *sel, int64_t n,
+int mtx_stats(const double *x, const uint8_t *sel, int64_t n, int nthreads,
 	      mtx_stats_t *out);
 
 #endif
