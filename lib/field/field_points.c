@@ -274,6 +274,10 @@ static int blk_gather(const kdtree_t *t, const double *xyz, const double *vec,
 	return 0;
 }
 
+/* two doubles (GCC's vector extension: SSE2 on x86-64, the same IEEE
+ * operations lane by lane) */
+typedef double v2d __attribute__((vector_size(16)));
+
 /* mls_at at y from the block's m candidates (K->p, K->d): 1, 0 */
 static int blk_at(mls_blk_t *K, int64_t m, const double y[3], double sigma,
 		  double taper, double out[3])
@@ -298,29 +302,48 @@ static int blk_at(mls_blk_t *K, int64_t m, const double y[3], double sigma,
 		return 0;
 	const double dmin = sqrt(rmin2), R = fmin(Rs, dmin + 3 * sigma),
 		     R2 = R * R;
-	mls_acc_t A;
-	memset(&A, 0, sizeof A);
+	/* mls_sum's terms, the same products added to the same sums in the
+	 * same order, two sums to a vector register (each lane is the IEEE
+	 * double operation mls_sum does): w q_a q_b is (w q_a) q_b there too */
+	v2d a0 = { 0, 0 }, a1 = a0, a2 = a0, a3 = a0, a4 = a0, a5 = a0,
+	    a6 = a0, a7 = a0, a8 = a0, a9 = a0, a10 = a0, a11 = a0;
+	double s0 = 0, dmax2 = 0;
 	for (int64_t k = 0; k < m; k++) {
 		if (!(r2[k] <= R2))
 			continue;
-		/* mls_sum's term, the same operations */
-		double q[3] = { P[3 * k] - y[0], P[3 * k + 1] - y[1],
-				P[3 * k + 2] - y[2] };
-		double w = exp(-(r2[k] - rmin2) * is2);
+		const double q0 = P[3 * k] - y[0], q1 = P[3 * k + 1] - y[1],
+			     q2 = P[3 * k + 2] - y[2];
+		const double w = exp(-(r2[k] - rmin2) * is2);
 		const double *d = K->d + 3 * k;
-		double dn2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-		if (dn2 > A.dmax2)
-			A.dmax2 = dn2;
-		A.S0 += w;
-		for (int a = 0; a < 3; a++) {
-			A.S1[a] += w * q[a];
-			A.R0[a] += w * d[a];
-			for (int bb = 0; bb < 3; bb++) {
-				A.S2[a][bb] += w * q[a] * q[bb];
-				A.R1[a][bb] += w * q[a] * d[bb];
-			}
-		}
+		const double d0 = d[0], d1 = d[1], d2 = d[2];
+		double dn2 = d0 * d0 + d1 * d1 + d2 * d2;
+		if (dn2 > dmax2)
+			dmax2 = dn2;
+		const double wq0 = w * q0, wq1 = w * q1, wq2 = w * q2;
+		s0 += w;
+		a0 += (v2d){ wq0, wq0 } * (v2d){ q0, q1 };  /* S2 00 01 */
+		a1 += (v2d){ wq0, wq1 } * (v2d){ q2, q0 };  /* S2 02 10 */
+		a2 += (v2d){ wq1, wq1 } * (v2d){ q1, q2 };  /* S2 11 12 */
+		a3 += (v2d){ wq2, wq2 } * (v2d){ q0, q1 };  /* S2 20 21 */
+		a4 += (v2d){ wq2, wq0 } * (v2d){ q2, d0 };  /* S2 22, R1 00 */
+		a5 += (v2d){ wq0, wq0 } * (v2d){ d1, d2 };  /* R1 01 02 */
+		a6 += (v2d){ wq1, wq1 } * (v2d){ d0, d1 };  /* R1 10 11 */
+		a7 += (v2d){ wq1, wq2 } * (v2d){ d2, d0 };  /* R1 12 20 */
+		a8 += (v2d){ wq2, wq2 } * (v2d){ d1, d2 };  /* R1 21 22 */
+		a9 += (v2d){ wq0, wq1 };                    /* S1 0 1 */
+		a10 += (v2d){ wq2, w * d0 };                /* S1 2, R0 0 */
+		a11 += (v2d){ w, w } * (v2d){ d1, d2 };     /* R0 1 2 */
 	}
+	mls_acc_t A = {
+		.S0 = s0,
+		.S1 = { a9[0], a9[1], a10[0] },
+		.S2 = { { a0[0], a0[1], a1[0] }, { a1[1], a2[0], a2[1] },
+			{ a3[0], a3[1], a4[0] } },
+		.R0 = { a10[1], a11[0], a11[1] },
+		.R1 = { { a4[1], a5[0], a5[1] }, { a6[0], a6[1], a7[0] },
+			{ a7[1], a8[0], a8[1] } },
+		.dmax2 = dmax2,
+	};
 	if (!(A.S0 > 0))
 		return 0;
 	mls_fit(&A, sigma, taper, dmin, out);
@@ -604,7 +627,12 @@ int field_points_dense(const double *xyz, const double *vec, int64_t n,
 		return ARMSTG_EINVAL;
 	const fgrid_t *g = &out->g;
 	const int64_t nv = fgrid_nvox(g);
-	memset(out->d, 0, sizeof(float) * (size_t)nv * 3);
+	/* zeroed on the threads: the first touch of a fresh output's pages
+	 * (0.06 s of page faults on one thread for a 240 x 240 x 155 field) */
+#pragma omp parallel for num_threads(NT(nthreads)) schedule(static)
+	for (int64_t c = 0; c < 3 * g->nz; c++)
+		memset(out->d + c * (nv / g->nz), 0,
+		       sizeof(float) * (size_t)(nv / g->nz));
 	if (n == 0) {
 		if (n_unsupported)
 			*n_unsupported = nv;
