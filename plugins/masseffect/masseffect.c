@@ -210,9 +210,19 @@ static int jac_min(const vol_t *f, const vol_t *mask, int nthreads,
 		   double *jmin)
 {
 	fimg_t u = { 0 };
+	fgrid_t g;
+	const float *d = NULL;
 	double m = INFINITY;
-	int rc = fimg_from_vol(&u, f);
-	if (!rc) {
+	int rc = 0;
+	/* a float field is read where it lies (fimg's layout: the components
+	 * in planes), not copied (107 MB on a 1 mm case) */
+	if (f->dtype == DT_F32 && !fgrid_from_vol(f, &g)) {
+		d = f->data;
+	} else if (!(rc = fimg_from_vol(&u, f))) {
+		d = u.d;
+		g = u.g;
+	}
+	if (d) {
 		const int n[3] = { f->nx, f->ny, f->nz };
 #pragma omp parallel for schedule(static) reduction(min : m) \
 	num_threads(nthreads > 0 ? nthreads : 1)
@@ -222,7 +232,7 @@ static int jac_min(const vol_t *f, const vol_t *mask, int nthreads,
 					if (!mask ||
 					    vol_get(mask, vol_idx(f, i, j, k)) > 0)
 						m = fmin(m, field_jac_det_at(
-								    u.d, n, u.g.w2v,
+								    d, n, g.w2v,
 								    i, j, k));
 	}
 	fimg_free(&u);
