@@ -106,6 +106,7 @@ static int quantiles_par(const double *a, int64_t m, const double q[2],
 		return -1;
 	}
 	int64_t nneg0 = 0, npos0 = 0;
+	int team = 1;
 	for (int pass = 0; pass < 4; pass++) {
 		const int sh = 48 - 16 * pass;
 		const uint64_t hmask = pass ? ~UINT64_C(0) << (64 - 16 * pass) : 0;
@@ -120,13 +121,19 @@ static int quantiles_par(const double *a, int64_t m, const double q[2],
 				sp[ns++] = pre[r];
 			slot[r] = j;
 		}
-		memset(hist, 0, sizeof(uint32_t) * (size_t)nthreads * NR * NDIG);
 #pragma omp parallel num_threads(nthreads) reduction(+ : nneg0, npos0)
 		{
 #ifdef _OPENMP
 			uint32_t *hh = hist + (size_t)omp_get_thread_num() * NR * NDIG;
 #else
 			uint32_t *hh = hist;
+#endif
+			/* each thread its own histograms; the merge below reads
+			 * the team's (it may be smaller than asked) */
+			memset(hh, 0, sizeof(uint32_t) * NR * NDIG);
+#ifdef _OPENMP
+#pragma omp single
+			team = omp_get_num_threads();
 #endif
 #pragma omp for schedule(static)
 			for (int64_t e = 0; e < m; e++) {
@@ -143,7 +150,7 @@ static int quantiles_par(const double *a, int64_t m, const double q[2],
 #pragma omp parallel for num_threads(nthreads) schedule(static)
 		for (int64_t d = 0; d < (int64_t)ns * NDIG; d++) {
 			int64_t t = 0;
-			for (int th = 0; th < nthreads; th++)
+			for (int th = 0; th < team; th++)
 				t += hist[(size_t)th * NR * NDIG + d];
 			tot[d] = t;
 		}
