@@ -19,7 +19,7 @@
  *     reproduced exactly;
  *   - the shape-function derivatives at the ips are corrected once so that the
  *     discrete integration constraint  sum_ip V_ip dN_a(x_ip) = G_a  holds for
- *     every node whose force is used, to TLED_CORR_RTOL (1e-9) of its
+ *     every node whose force is used, to TLED_CORR_RTOL (1e-13) of its
  *     uncorrected residual (tled_corr.h; the linear patch test then passes
  *     to 9.8e-10 relative in test_patch; cf. variationally consistent integration, Chen, Hillman &
  *     Rueter 2013, IJNME 95:387; G_a: see enum tled_corr).  The correction is the least-norm one that

@@ -361,8 +361,8 @@ static void test_corr_coarse(void **state)
 			t[k] = omp_get_wtime() - t0;
 			/* the conjugate gradients stop at TLED_CORR_RTOL, not
 			 * far below it (the residual falls by 0.3-0.7 an
-			 * iteration: a solve on to round-off, 1e-14 before
-			 * 2026-11-27, fails the lower bound) */
+			 * iteration: a solve on past the rule fails the lower
+			 * bound) */
 			print_message("  %s, %s: %d CG iterations, residual "
 				      "%.3g\n", mode ? "free nodes" : "all nodes",
 				      k ? "two-level" : "Jacobi",
@@ -389,7 +389,7 @@ static void test_corr_coarse(void **state)
 			      dmax / gmax);
 		assert_true(dmax / gmax < 1e-8);
 		/* the singular system is the hard one (250 -> 39 iterations
-		 * at 1 331 nodes to TLED_CORR_RTOL; 311 -> 56 to 1e-13); the
+		 * at 1 331 nodes to 1e-9; 311 -> 56 to 1e-13); the
 		 * definite one has fixed nodes all round (83 -> 41) */
 		if (mode == 0)
 			assert_true(2 * m[1].corr_iters < m[0].corr_iters);
