@@ -6,7 +6,7 @@ set -eu
 PKGS="build-essential pkg-config libnifti2-dev libniftiio-dev libhdf5-dev \
 libmsgpack-dev libinih-dev zlib1g-dev libpng-dev libcmocka-dev libzmq3-dev \
 clang libclang-rt-14-dev python3 python3-venv libfftw3-dev \
-libczmq-dev liblapacke-dev libopenblas-dev"
+libczmq-dev libsodium-dev liblapacke-dev libopenblas-dev"
 missing=""
 for p in $PKGS; do
     if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then

@@ -47,120 +47,26 @@
 
 /* ------------------------------------------------------------ BLAKE2b */
 
-static const uint64_t b2_iv[8] = {
-	0x6a09e667f3bcc908ULL, 0xbb67ae8584caa73bULL, 0x3c6ef372fe94f82bULL,
-	0xa54ff53a5f1d36f1ULL, 0x510e527fade682d1ULL, 0x9b05688c2b3e6c1fULL,
-	0x1f83d9abfb41bd6bULL, 0x5be0cd19137e2179ULL,
-};
-
-static const uint8_t b2_sigma[12][16] = {
-	{ 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15 },
-	{ 14, 10, 4, 8, 9, 15, 13, 6, 1, 12, 0, 2, 11, 7, 5, 3 },
-	{ 11, 8, 12, 0, 5, 2, 15, 13, 10, 14, 3, 6, 7, 1, 9, 4 },
-	{ 7, 9, 3, 1, 13, 12, 11, 14, 2, 6, 5, 10, 4, 0, 15, 8 },
-	{ 9, 0, 5, 7, 2, 4, 10, 15, 14, 1, 11, 12, 6, 8, 3, 13 },
-	{ 2, 12, 6, 10, 0, 11, 8, 3, 4, 13, 7, 5, 15, 14, 1, 9 },
-	{ 12, 5, 1, 15, 14, 13, 4, 10, 0, 7, 6, 3, 9, 2, 8, 11 },
-	{ 13, 11, 7, 14, 12, 1, 3, 9, 5, 0, 15, 4, 8, 6, 2, 10 },
-	{ 6, 15, 14, 9, 11, 3, 0, 8, 12, 2, 13, 7, 1, 4, 10, 5 },
-	{ 10, 2, 8, 4, 7, 6, 1, 5, 15, 11, 9, 14, 3, 12, 13, 0 },
-	{ 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15 },
-	{ 14, 10, 4, 8, 9, 15, 13, 6, 1, 12, 0, 2, 11, 7, 5, 3 },
-};
-
-static inline uint64_t rotr64(uint64_t x, int n)
-{
-	return (x >> n) | (x << (64 - n));
-}
-
-static inline uint64_t load64(const uint8_t *p)
-{
-	uint64_t v = 0;
-	for (int i = 7; i >= 0; i--)
-		v = (v << 8) | p[i];
-	return v;
-}
-
-/* RFC 7693 section 3.1: the mixing function G */
-#define B2G(a, b, c, d, x, y)                                                \
-	do {                                                                 \
-		a = a + b + (x);                                             \
-		d = rotr64(d ^ a, 32);                                       \
-		c = c + d;                                                   \
-		b = rotr64(b ^ c, 24);                                       \
-		a = a + b + (y);                                             \
-		d = rotr64(d ^ a, 16);                                       \
-		c = c + d;                                                   \
-		b = rotr64(b ^ c, 63);                                       \
-	} while (0)
-
-/* RFC 7693 section 3.2: the compression function F */
-static void b2_compress(dm_hash_t *s, int last)
-{
-	uint64_t v[16], m[16];
-	for (int i = 0; i < 8; i++) {
-		v[i] = s->h[i];
-		v[i + 8] = b2_iv[i];
-	}
-	v[12] ^= s->t[0];
-	v[13] ^= s->t[1];
-	if (last)
-		v[14] = ~v[14];
-	for (int i = 0; i < 16; i++)
-		m[i] = load64(s->buf + 8 * i);
-	for (int r = 0; r < 12; r++) {
-		const uint8_t *z = b2_sigma[r];
-		B2G(v[0], v[4], v[8], v[12], m[z[0]], m[z[1]]);
-		B2G(v[1], v[5], v[9], v[13], m[z[2]], m[z[3]]);
-		B2G(v[2], v[6], v[10], v[14], m[z[4]], m[z[5]]);
-		B2G(v[3], v[7], v[11], v[15], m[z[6]], m[z[7]]);
-		B2G(v[0], v[5], v[10], v[15], m[z[8]], m[z[9]]);
-		B2G(v[1], v[6], v[11], v[12], m[z[10]], m[z[11]]);
-		B2G(v[2], v[7], v[8], v[13], m[z[12]], m[z[13]]);
-		B2G(v[3], v[4], v[9], v[14], m[z[14]], m[z[15]]);
-	}
-	for (int i = 0; i < 8; i++)
-		s->h[i] ^= v[i] ^ v[i + 8];
-}
-
+/* libsodium's BLAKE2b, unkeyed, 32-byte digest (the value of Python's
+ * hashlib.blake2b(digest_size=32)).  sodium_init picks the fastest code
+ * and may be called from several threads; it fails only where its random
+ * source cannot be opened, which the hash does not use (it then runs the
+ * portable code, the same digest) */
 void dm_hash_init(dm_hash_t *s)
 {
-	memset(s, 0, sizeof *s);
-	memcpy(s->h, b2_iv, sizeof s->h);
-	s->h[0] ^= 0x01010000u ^ 32u; /* no key, 32-byte digest */
+	int r = sodium_init();
+	(void)r;
+	crypto_generichash_init(&s->st, NULL, 0, 32);
 }
 
 void dm_hash_update(dm_hash_t *s, const void *p, size_t n)
 {
-	const uint8_t *b = p;
-	while (n > 0) {
-		/* the last block is compressed by dm_hash_final (flagged) */
-		if (s->n == sizeof s->buf) {
-			s->t[0] += sizeof s->buf;
-			if (s->t[0] < sizeof s->buf)
-				s->t[1]++;
-			b2_compress(s, 0);
-			s->n = 0;
-		}
-		size_t c = sizeof s->buf - s->n;
-		if (c > n)
-			c = n;
-		memcpy(s->buf + s->n, b, c);
-		s->n += c;
-		b += c;
-		n -= c;
-	}
+	crypto_generichash_update(&s->st, p, (unsigned long long)n);
 }
 
 void dm_hash_final(dm_hash_t *s, uint8_t out[32])
 {
-	s->t[0] += s->n;
-	if (s->t[0] < s->n)
-		s->t[1]++;
-	memset(s->buf + s->n, 0, sizeof s->buf - s->n);
-	b2_compress(s, 1);
-	for (int i = 0; i < 32; i++)
-		out[i] = (uint8_t)(s->h[i / 8] >> (8 * (i % 8)));
+	crypto_generichash_final(&s->st, out, 32);
 }
 
 /* ------------------------------------------------------------- the key */

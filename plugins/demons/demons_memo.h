@@ -7,6 +7,7 @@
 #ifndef DEMONS_MEMO_H
 #define DEMONS_MEMO_H
 
+#include <sodium.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -20,11 +21,10 @@ struct demons_priv; /* demons_int.h */
 #define DM_MEMO_ENTRIES 8
 #define DM_MEMO_BYTES ((size_t)256 << 20)
 
-/* BLAKE2b (RFC 7693) with a 32-byte digest, sequential */
+/* BLAKE2b (RFC 7693) with a 32-byte digest, sequential: libsodium's
+ * crypto_generichash */
 typedef struct dm_hash {
-	uint64_t h[8], t[2];
-	uint8_t buf[128];
-	size_t n;
+	crypto_generichash_state st;
 } dm_hash_t;
 
 void dm_hash_init(dm_hash_t *s);

@@ -3,3 +3,4 @@
 # (only the entry point is exported)
 demons_LIBS := field img
 demons_CFLAGS := -fvisibility=hidden
+demons_LDLIBS := -lsodium   # the memo key: BLAKE2b (crypto_generichash)
