@@ -2172,6 +2172,34 @@ static void test_parallel_interrupt(void **state)
 	done(&r);
 }
 
+/* a search in which a candidate is cancelled in its running stage: sets
+ * with parallel = 1 and parallel = par give the same files
+ * (expect_parallel_same); the run with par (r, done() by the caller)
+ * succeeds and ends in time (the cancelled candidate's 20 s sleep cut
+ * short), with nrows rows in tune.tsv, read into tt (ttab_free() by the
+ * caller) */
+static void run_parallel_cancel(trun_t *r, const char *const *sets,
+				int nsets, int par, int nrows, ttab_t *tt)
+{
+	const char *s2[16];
+	char pk[32];
+	assert_true(nsets < 15);
+	expect_parallel_same(sets, nsets, 1, par);
+	for (int i = 0; i < nsets; i++)
+		s2[i] = sets[i];
+	snprintf(pk, sizeof pk, "tune.parallel=%d", par);
+	s2[nsets] = pk;
+	double t0 = sched_now();
+	run_sets(r, s2, nsets + 1);
+	double wall = sched_now() - t0;
+	if (r->rc)
+		fail_msg("rc %d: %s", r->rc, r->err);
+	if (wall > 10)
+		fail_msg("the cancelled candidate ran on: %.1f s", wall);
+	tune_tsv(r->out, tt);
+	assert_int_equal(tt->t->nrows, nrows);
+}
+
 /* stop cancels the candidates started after the one that stops the
  * search, in their running stage: five at once, 4 fails require (stop =
  * require), 5's sim would sleep 20 s but polls host->cancelled and ends
@@ -2187,20 +2215,9 @@ static void test_parallel_stop_cancels(void **state)
 	const char *sets[] = { "tune.require=sq far > 100", "tune.stop=require",
 			       "sim.slow_at=5", "sim.slow_ms=20000",
 			       "sim.sleep_ms=500" };
-	expect_parallel_same(sets, 5, 1, 5);
-	const char *par[] = { sets[0], sets[1], sets[2], sets[3], sets[4],
-			      "tune.parallel=5" };
 	trun_t r;
-	double t0 = sched_now();
-	run_sets(&r, par, 6);
-	double wall = sched_now() - t0;
-	if (r.rc)
-		fail_msg("rc %d: %s", r.rc, r.err);
-	if (wall > 10)
-		fail_msg("the cancelled candidate ran on: %.1f s", wall);
 	ttab_t tt;
-	tune_tsv(r.out, &tt);
-	assert_int_equal(tt.t->nrows, 5);
+	run_parallel_cancel(&r, sets, 5, 5, 5, &tt);
 	assert_string_equal(tt.status->str[3], "failed");
 	assert_string_equal(tt.status->str[4], "skipped");
 	assert_string_equal(tt.error->str[4], "stop = require: 4 failed it");
@@ -2223,20 +2240,9 @@ static void test_parallel_decline_cancels(void **state)
 	const char *sets[] = { "tune.stop=past_peak", "tune.patience=2",
 			       "tune.values=1,2,3,4,5,6,7", "sim.slow_at=6",
 			       "sim.slow_ms=20000", "sim.sleep_ms=500" };
-	expect_parallel_same(sets, 6, 1, 2);
-	const char *par[] = { sets[0], sets[1], sets[2], sets[3], sets[4],
-			      sets[5], "tune.parallel=2" };
 	trun_t r;
-	double t0 = sched_now();
-	run_sets(&r, par, 7);
-	double wall = sched_now() - t0;
-	if (r.rc)
-		fail_msg("rc %d: %s", r.rc, r.err);
-	if (wall > 10)
-		fail_msg("the cancelled candidate ran on: %.1f s", wall);
 	ttab_t tt;
-	tune_tsv(r.out, &tt);
-	assert_int_equal(tt.t->nrows, 7);
+	run_parallel_cancel(&r, sets, 6, 2, 7, &tt);
 	assert_string_equal(tt.status->str[4], "ok");
 	assert_string_equal(tt.status->str[5], "skipped");
 	assert_string_equal(tt.status->str[6], "skipped");
