@@ -1,11 +1,12 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * synth_head.h: the synthetic head the demons tests register (test_demons.c,
- * test_label.c): blurred ellipsoids (brain, white matter, two ventricles, an
- * optional bright blob) and a texture, in world mm, sampled analytically;
- * the plugin's ports; the checks both tests make of a result (the Jacobian's
- * minimum, bit-for-bit equality).  Static functions: each test includes it
- * once.
+ * test_label.c, test_memo.c): blurred ellipsoids (brain, white matter, two
+ * ventricles, an optional bright blob) and a texture, in world mm, sampled
+ * analytically; the pair of heads with a tumour each that test_label.c and
+ * test_memo.c register (fx_t, fx_make, fx_free); the plugin's ports; the
+ * checks the tests make of a result (the Jacobian's minimum, bit-for-bit
+ * equality).  Static functions: each test includes it once.
  */
 #ifndef DEMONS_SYNTH_HEAD_H
 #define DEMONS_SYNTH_HEAD_H
@@ -59,6 +60,108 @@ static double synth_head(const double y[3], const double abrain[3],
 		v += 0.25 * ell(y, cb, ab, 1.0);
 	v += 0.12 * b * sin(y[0] / 3.1) * sin(y[1] / 3.7 + 1) * cos(y[2] / 2.9);
 	return v;
+}
+
+/* ---- the pair of heads of test_label.c and test_memo.c ----
+ * 48 x 52 x 40 grids of SP mm: the fixed one LAS, the moving one LPS and
+ * shifted by a fraction of a voxel; the same anatomy (synth_head, brain
+ * PAIR_ABRAIN, white matter PAIR_AWHITE), the fixed one's taken at
+ * x + u(x) when a field u is given; a tumour painted in each at a
+ * different place and of a different shape (moving: a ball of 9 mm at
+ * PAIR_CM; fixed: an ellipsoid at PAIR_CF, 5.4 mm away), left out of both
+ * masks, and a ring of edema around the fixed one too.  Inline:
+ * test_demons.c includes this file and uses none of it. */
+#define PAIR_NX 48
+#define PAIR_NY 52
+#define PAIR_NZ 40
+
+static const double PAIR_ABRAIN[3] = { 30, 33, 25 },
+		    PAIR_AWHITE[3] = { 20, 23, 15 };
+/* the tumours (centre, semi-axes, mm): moving and fixed */
+static const double PAIR_CM[3] = { -8, 4, 2 }, PAIR_AM[3] = { 9, 9, 9 };
+static const double PAIR_CF[3] = { -3, 6, 2 }, PAIR_AF[3] = { 10.5, 8, 9 };
+
+/* 1 inside the ellipsoid of centre c and semi-axes a + grow (mm), else 0 */
+static inline int in_ell(const double y[3], const double c[3],
+			 const double a[3], double grow)
+{
+	double e = 0;
+	for (int q = 0; q < 3; q++)
+		e += (y[q] - c[q]) * (y[q] - c[q]) / ((a[q] + grow) * (a[q] + grow));
+	return e <= 1;
+}
+
+typedef struct fx_opts {
+	/* the fixed anatomy is the moving one's at x + u(x) (mm); NULL: 0 */
+	void (*u)(const double x[3], double u[3]);
+	double edema_mm; /* the ring around the fixed tumour out of its mask */
+	int blob;	 /* synth_head's bright blob */
+} fx_opts_t;
+
+/* fixed and moving: the images, the masks (brain minus tumour), the
+ * tumours */
+typedef struct fx {
+	vol_t *f, *m, *fm, *mm, *ft, *mt;
+} fx_t;
+
+enum { FX_IMG, FX_MASK, FX_TUMOUR };
+
+/* fixed = 1: the fixed head, else the moving one; what: FX_IMG, FX_MASK or
+ * FX_TUMOUR */
+static inline vol_t *fx_vol(const fx_opts_t *o, int fixed, int what)
+{
+	double A[16] = { -SP, 0, 0, SP * (PAIR_NX - 1) / 2.0,
+			 0, SP, 0, -SP * (PAIR_NY - 1) / 2.0,
+			 0, 0, SP, -SP * (PAIR_NZ - 1) / 2.0,
+			 0, 0, 0, 1 };
+	if (!fixed) {
+		/* the moving grid: LPS, shifted by a fraction of a voxel */
+		A[5] = -SP;
+		A[7] = SP * (PAIR_NY - 1) / 2.0 - 0.4;
+		A[3] += 0.7;
+	}
+	const double *c = fixed ? PAIR_CF : PAIR_CM, *a = fixed ? PAIR_AF : PAIR_AM;
+	double ring = fixed ? o->edema_mm : 0;
+	vol_t *v = vol_new(PAIR_NX, PAIR_NY, PAIR_NZ, 1,
+			   what == FX_IMG ? DT_F32 : DT_U8, A);
+	for (int k = 0; k < PAIR_NZ; k++)
+		for (int j = 0; j < PAIR_NY; j++)
+			for (int i = 0; i < PAIR_NX; i++) {
+				double x[3], y[3], u[3] = { 0, 0, 0 }, val;
+				vol_to_world(v, i, j, k, x);
+				if (fixed && o->u)
+					o->u(x, u);
+				for (int q = 0; q < 3; q++)
+					y[q] = x[q] + u[q];
+				if (what == FX_IMG)
+					val = synth_head(y, PAIR_ABRAIN, PAIR_AWHITE,
+							 o->blob) +
+					      0.4 * ell(x, c, a, 0.8);
+				else if (what == FX_TUMOUR)
+					val = in_ell(x, c, a, 0);
+				else
+					val = ell(y, C0, PAIR_ABRAIN, 0.8) > 0.5 &&
+					      !in_ell(x, c, a, ring);
+				vol_set(v, vol_idx(v, i, j, k), val);
+			}
+	return v;
+}
+
+static inline void fx_make(fx_t *x, const fx_opts_t *o)
+{
+	x->f = fx_vol(o, 1, FX_IMG);
+	x->m = fx_vol(o, 0, FX_IMG);
+	x->fm = fx_vol(o, 1, FX_MASK);
+	x->mm = fx_vol(o, 0, FX_MASK);
+	x->ft = fx_vol(o, 1, FX_TUMOUR);
+	x->mt = fx_vol(o, 0, FX_TUMOUR);
+}
+
+static inline void fx_free(fx_t *x)
+{
+	vol_t *all[] = { x->f, x->m, x->fm, x->mm, x->ft, x->mt };
+	for (int i = 0; i < 6; i++)
+		msg_unref(&all[i]->base);
 }
 
 /* the smallest Jacobian determinant of a displacement field */

@@ -34,91 +34,20 @@
  */
 #include "synth_head.h"
 
-#define NX 48
-#define NY 52
-#define NZ 40
-
-static const double ABRAIN[3] = { 30, 33, 25 };
-/* the tumours: moving a ball of 9 mm, fixed an ellipsoid 5.4 mm away */
-static const double CM[3] = { -8, 4, 2 }, AM[3] = { 9, 9, 9 };
-static const double CF[3] = { -3, 6, 2 }, AF[3] = { 10.5, 8, 9 };
-
-/* anatomy: brain, white matter, ventricles, texture (synth_head.h) */
-static double anatomy(const double y[3])
-{
-	static const double aw[3] = { 20, 23, 15 };
-	return synth_head(y, ABRAIN, aw, 0);
-}
-
-static double inside(const double y[3], const double c[3], const double a[3],
-		     double grow)
-{
-	double e = 0;
-	for (int q = 0; q < 3; q++)
-		e += (y[q] - c[q]) * (y[q] - c[q]) / ((a[q] + grow) * (a[q] + grow));
-	return e <= 1;
-}
-
-enum { IMG, BRAIN_MINUS, TUMOUR };
-
-/* fixed = 1: the fixed case (tumour CF/AF, 8 mm of edema out of the mask),
- * else the moving one; what: the image, the mask (brain minus tumour) or
- * the tumour */
-static vol_t *make(int fixed, int what)
-{
-	double A[16] = { -SP, 0, 0, SP * (NX - 1) / 2.0,
-			 0, SP, 0, -SP * (NY - 1) / 2.0,
-			 0, 0, SP, -SP * (NZ - 1) / 2.0,
-			 0, 0, 0, 1 };
-	if (!fixed) {
-		/* the moving grid: LPS, shifted by a fraction of a voxel */
-		A[5] = -SP;
-		A[7] = SP * (NY - 1) / 2.0 - 0.4;
-		A[3] += 0.7;
-	}
-	const double *c = fixed ? CF : CM, *a = fixed ? AF : AM;
-	vol_t *v = vol_new(NX, NY, NZ, 1, what == IMG ? DT_F32 : DT_U8, A);
-	for (int k = 0; k < NZ; k++)
-		for (int j = 0; j < NY; j++)
-			for (int i = 0; i < NX; i++) {
-				double y[3];
-				vol_to_world(v, i, j, k, y);
-				double val;
-				if (what == IMG)
-					val = anatomy(y) + 0.4 * ell(y, c, a, 0.8);
-				else if (what == TUMOUR)
-					val = inside(y, c, a, 0);
-				else
-					val = ell(y, C0, ABRAIN, 0.8) > 0.5 &&
-					      !inside(y, c, a, fixed ? 8 : 0);
-				vol_set(v, vol_idx(v, i, j, k), val);
-			}
-	return v;
-}
-
-typedef struct fx {
-	vol_t *f, *m, *fm, *mm, *ft, *mt;
-} fx_t;
-
+/* the pair of synth_head.h: the same anatomy (no field), an 8 mm ring of
+ * edema, no blob */
 static int setup(void **state)
 {
 	static fx_t x;
-	x.f = make(1, IMG);
-	x.m = make(0, IMG);
-	x.fm = make(1, BRAIN_MINUS);
-	x.mm = make(0, BRAIN_MINUS);
-	x.ft = make(1, TUMOUR);
-	x.mt = make(0, TUMOUR);
+	static const fx_opts_t o = { .u = NULL, .edema_mm = 8, .blob = 0 };
+	fx_make(&x, &o);
 	*state = &x;
 	return 0;
 }
 
 static int teardown(void **state)
 {
-	fx_t *x = *state;
-	vol_t *all[] = { x->f, x->m, x->fm, x->mm, x->ft, x->mt };
-	for (int i = 0; i < 6; i++)
-		msg_unref(&all[i]->base);
+	fx_free(*state);
 	return 0;
 }
 
@@ -148,7 +77,7 @@ static int run(const char *const *params, const fx_t *x, const vol_t *fl,
 /* Dice of the moving tumour warped by the field (nearest) and the fixed one */
 static double tumour_dice(const fx_t *x, const vol_t *field)
 {
-	vol_t *w = vol_new(NX, NY, NZ, 1, DT_U8, x->f->affine);
+	vol_t *w = vol_new(PAIR_NX, PAIR_NY, PAIR_NZ, 1, DT_U8, x->f->affine);
 	assert_int_equal(field_warp_vol(x->mt, field, FIELD_NEAREST, 0, w, 2), 0);
 	int64_t a = 0, b = 0, ab = 0;
 	for (int64_t e = 0; e < vol_nvox(w); e++) {
@@ -169,13 +98,14 @@ static double far_field(const vol_t *field, const vol_t *other)
 	const float *a = field->data, *b = other ? other->data : NULL;
 	double s = 0;
 	int64_t n = 0;
-	for (int k = 0; k < NZ; k++)
-		for (int j = 0; j < NY; j++)
-			for (int i = 0; i < NX; i++) {
+	for (int k = 0; k < PAIR_NZ; k++)
+		for (int j = 0; j < PAIR_NY; j++)
+			for (int i = 0; i < PAIR_NX; i++) {
 				double y[3];
 				vol_to_world(field, i, j, k, y);
-				if (ell(y, C0, ABRAIN, 0.8) < 0.5 ||
-				    inside(y, CF, AF, 25) || inside(y, CM, AM, 25))
+				if (ell(y, C0, PAIR_ABRAIN, 0.8) < 0.5 ||
+				    in_ell(y, PAIR_CF, PAIR_AF, 25) ||
+				    in_ell(y, PAIR_CM, PAIR_AM, 25))
 					continue;
 				int64_t e = vol_idx(field, i, j, k);
 				double d2 = 0;
@@ -190,28 +120,30 @@ static double far_field(const vol_t *field, const vol_t *other)
 	return s / (double)n;
 }
 
-/* where the field sends the fixed tumour's centre: |y + u(y) - (CM + y - CF)|
- * (mm) at the voxel y nearest CF, the distance from the moving tumour's
- * centre (the two tumours' centres correspond; 5.4 mm for u = 0) */
+/* where the field sends the fixed tumour's centre:
+ * |y + u(y) - (PAIR_CM + y - PAIR_CF)| (mm) at the voxel y nearest PAIR_CF,
+ * the distance from the moving tumour's centre (the two tumours' centres
+ * correspond; 5.4 mm for u = 0) */
 static double centre_error(const vol_t *field)
 {
 	const int64_t nv = vol_nvox(field);
 	const float *u = field->data;
 	double best = 1e30, err = 0;
-	for (int k = 0; k < NZ; k++)
-		for (int j = 0; j < NY; j++)
-			for (int i = 0; i < NX; i++) {
+	for (int k = 0; k < PAIR_NZ; k++)
+		for (int j = 0; j < PAIR_NY; j++)
+			for (int i = 0; i < PAIR_NX; i++) {
 				double y[3], d2 = 0;
 				vol_to_world(field, i, j, k, y);
 				for (int q = 0; q < 3; q++)
-					d2 += (y[q] - CF[q]) * (y[q] - CF[q]);
+					d2 += (y[q] - PAIR_CF[q]) * (y[q] - PAIR_CF[q]);
 				if (d2 >= best)
 					continue;
 				best = d2;
 				const int64_t e = vol_idx(field, i, j, k);
 				double s = 0;
 				for (int q = 0; q < 3; q++) {
-					double r = y[q] + u[e + q * nv] - (CM[q] + y[q] - CF[q]);
+					double r = y[q] + u[e + q * nv] -
+						   (PAIR_CM[q] + y[q] - PAIR_CF[q]);
 					s += r * r;
 				}
 				err = sqrt(s);

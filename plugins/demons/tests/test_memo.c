@@ -29,15 +29,7 @@
 #include "synth_head.h"
 #include "../demons_memo.h"
 
-#define NX 48
-#define NY 52
-#define NZ 40
-
-static const double ABRAIN[3] = { 30, 33, 25 }, AWHITE[3] = { 20, 23, 15 };
-/* the tumours (centre, semi-axes, mm): moving and fixed, 5.4 mm apart */
-static const double CM[3] = { -8, 4, 2 }, AM[3] = { 9, 9, 9 };
-static const double CF[3] = { -3, 6, 2 }, AF[3] = { 10.5, 8, 9 };
-
+/* the fixed anatomy is the moving one's at x + u(x) (mm) */
 static void true_u(const double x[3], double u[3])
 {
 	u[0] = 2.6 * sin(x[1] / 9.0) * cos(x[2] / 11.0);
@@ -45,75 +37,20 @@ static void true_u(const double x[3], double u[3])
 	u[2] = 1.8 * cos(x[0] / 8.0) * sin(x[1] / 12.0 + 0.5);
 }
 
-static int in_ell(const double y[3], const double c[3], const double a[3],
-		  double grow)
-{
-	double e = 0;
-	for (int q = 0; q < 3; q++)
-		e += (y[q] - c[q]) * (y[q] - c[q]) / ((a[q] + grow) * (a[q] + grow));
-	return e <= 1;
-}
-
-enum { IMG, MASK, TUMOUR };
-
-static vol_t *make(int fixed, int what)
-{
-	double A[16] = { -SP, 0, 0, SP * (NX - 1) / 2.0,
-			 0, SP, 0, -SP * (NY - 1) / 2.0,
-			 0, 0, SP, -SP * (NZ - 1) / 2.0,
-			 0, 0, 0, 1 };
-	if (!fixed) {
-		A[5] = -SP;
-		A[7] = SP * (NY - 1) / 2.0 - 0.4;
-		A[3] += 0.7;
-	}
-	const double *c = fixed ? CF : CM, *a = fixed ? AF : AM;
-	vol_t *v = vol_new(NX, NY, NZ, 1, what == IMG ? DT_F32 : DT_U8, A);
-	for (int k = 0; k < NZ; k++)
-		for (int j = 0; j < NY; j++)
-			for (int i = 0; i < NX; i++) {
-				double x[3], y[3], u[3] = { 0, 0, 0 }, val;
-				vol_to_world(v, i, j, k, x);
-				if (fixed)
-					true_u(x, u);
-				for (int q = 0; q < 3; q++)
-					y[q] = x[q] + u[q];
-				if (what == IMG)
-					val = synth_head(y, ABRAIN, AWHITE, 1) +
-					      0.4 * ell(x, c, a, 0.8);
-				else if (what == TUMOUR)
-					val = in_ell(x, c, a, 0);
-				else
-					val = ell(y, C0, ABRAIN, 0.8) > 0.5 &&
-					      !in_ell(x, c, a, fixed ? 6 : 0);
-				vol_set(v, vol_idx(v, i, j, k), val);
-			}
-	return v;
-}
-
-typedef struct fx {
-	vol_t *f, *m, *fm, *mm, *ft, *mt;
-} fx_t;
-
+/* the pair of synth_head.h: the fixed head displaced by true_u, a 6 mm
+ * ring of edema, the bright blob */
 static int setup(void **state)
 {
 	static fx_t x;
-	x.f = make(1, IMG);
-	x.m = make(0, IMG);
-	x.fm = make(1, MASK);
-	x.mm = make(0, MASK);
-	x.ft = make(1, TUMOUR);
-	x.mt = make(0, TUMOUR);
+	static const fx_opts_t o = { .u = true_u, .edema_mm = 6, .blob = 1 };
+	fx_make(&x, &o);
 	*state = &x;
 	return 0;
 }
 
 static int teardown(void **state)
 {
-	fx_t *x = *state;
-	vol_t *all[] = { x->f, x->m, x->fm, x->mm, x->ft, x->mt };
-	for (int i = 0; i < 6; i++)
-		msg_unref(&all[i]->base);
+	fx_free(*state);
 	dm_memo_clear();
 	return 0;
 }
@@ -245,7 +182,7 @@ static void test_memo_miss(void **state)
 	/* one voxel of the moving image, inside both masks, 1e-3 brighter:
 	 * no hit, and the field of the run without the memo */
 	vol_t *m2 = vol_clone(x->m);
-	int64_t e = vol_idx(m2, NX / 2, NY / 2 - 8, NZ / 2);
+	int64_t e = vol_idx(m2, PAIR_NX / 2, PAIR_NY / 2 - 8, PAIR_NZ / 2);
 	while (e < vol_nvox(m2) && !(vol_get(x->mm, e) > 0))
 		e++;
 	assert_true(e < vol_nvox(m2));
