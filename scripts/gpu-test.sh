@@ -26,7 +26,8 @@ mkdir -p "$OUT"
 gpu=$(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1)
 echo "gpu-test: $(date -u '+%Y-%m-%d %H:%M UTC'), commit $commit, ${gpu:-no nvidia-smi}, $(nproc) cores"
 rc=0
-BUILD=$BUILD sh scripts/run-tests.sh "$BUILD"/tests/tled_cuda_test_* || rc=1
+BUILD=$BUILD sh scripts/run-tests.sh "$BUILD"/tests/tled_cuda_test_* "$BUILD"/tests/demons_cuda_test_* || rc=1
+grep -h "^parity" "$BUILD"/test-logs/demons_cuda_test_parity.log 2>/dev/null
 grep -h '^parity' "$BUILD"/test-logs/tled_cuda_test_parity.log 2>/dev/null
 band() { # band error (mm) of a metrics.tsv
     awk -F'\t' 'NR==1{for(i=1;i<=NF;i++)c[$i]=i; next}

@@ -339,6 +339,22 @@ static void test_shipped_graphs(void **state)
 					 "nodes.spacing %s", graphs[k], i,
 					 val(g, "grow", "plugin"),
 					 val(g, "nodes", "spacing"));
+			/* the registrations follow the backend where the
+			 * graph has them as [vars] DEMONS (not distributed.ini,
+			 * whose workers may have no GPU; spherical.ini has
+			 * none): demons_cuda with tled_cuda */
+			if (var_tol[k]) {
+				const char *want = strcmp(cases[i].plugin, "tled_cuda")
+							   ? "demons" : "demons_cuda";
+				const char *st[] = { "register", "to_atlas",
+						     "to_atlas_image" };
+				for (int q = 0; q < 3; q++)
+					if (g_stage_index(g, st[q]) >= 0 &&
+					    strcmp(val(g, st[q], "plugin"), want))
+						fail_msg("%s, case %zu: %s.plugin %s",
+							 graphs[k], i, st[q],
+							 val(g, st[q], "plugin"));
+			}
 			const g_kv_t *tol = g_kv_find(g->tune.kv, g->tune.nkv,
 						      "tolerance");
 			assert_non_null(tol);

@@ -28,7 +28,7 @@ cpb() { # worktree dest
 	cp "$1/build/plugins/"*.so "$C/$2/plugins/"
 	if [ "$2" = build ]; then
 		mkdir -p "$C/$2/tests/tools"
-		cp "$1/build/tests/tled_cuda_test_"* "$C/$2/tests/"
+		cp "$1/build/tests/tled_cuda_test_"* "$1/build/tests/demons_cuda_test_"* "$C/$2/tests/"
 		cp "$1/build/tests/tools/"* "$C/$2/tests/tools/"
 	fi
 	find "$C/$2" -type f -exec strip --strip-debug {} +

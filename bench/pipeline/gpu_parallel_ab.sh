@@ -26,7 +26,7 @@ CASES=${CASES:-"pat0001 pat0002"} JOBS=${JOBS:-4} RUNS=${RUNS:-"m:1 n:1 n:3"}
 STOP_S=${STOP_S:-540}
 { cat .commit; date -u; nproc; nvidia-smi --query-gpu=name --format=csv,noheader; } > $R/machine.txt
 if [ "${TESTS:-1}" = 1 ]; then
-  ARMSTG_REQUIRE_GPU=1 BUILD=build sh scripts/run-tests.sh build/tests/tled_cuda_test_* > $R/cuda-tests.txt 2>&1
+  ARMSTG_REQUIRE_GPU=1 BUILD=build sh scripts/run-tests.sh build/tests/tled_cuda_test_* build/tests/demons_cuda_test_* > $R/cuda-tests.txt 2>&1
   echo "cuda tests rc $?" >> $R/cuda-tests.txt
   grep -h "^two threads\|^parity" build/test-logs/tled_cuda_test_parity.log >> $R/cuda-tests.txt 2>/dev/null
 fi

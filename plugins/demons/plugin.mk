@@ -1,6 +1,5 @@
-# demons: the field library (lib/field) and lib/img beneath it; internal
-# symbols (demons_img.c, demons_force.c, demons_label.c) stay inside the .so
-# (only the entry point is exported)
-demons_LIBS := field img
+# demons: the stage of lib/demons on the host; lib/demons builds on lib/field
+# and lib/img (in that order), and the memo key's BLAKE2b on libsodium
+# (crypto_generichash: lib/demons/lib.mk)
+demons_LIBS := demons field img
 demons_CFLAGS := -fvisibility=hidden
-demons_LDLIBS := -lsodium   # the memo key: BLAKE2b (crypto_generichash)

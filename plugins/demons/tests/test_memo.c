@@ -27,7 +27,7 @@
  * 7693) across block boundaries.
  */
 #include "synth_head.h"
-#include "../demons_memo.h"
+#include "demons/demons_memo.h"
 
 /* the fixed anatomy is the moving one's at x + u(x) (mm) */
 static void true_u(const double x[3], double u[3])

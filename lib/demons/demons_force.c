@@ -1,9 +1,9 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * demons (demons.c): one level's buffers (level_t) and the update of each
+ * demons (demons_run.c): one level's buffers (level_t) and the update of each
  * iteration: the demons force (Thirion / the symmetric ESM force, bounded
  * by sigma_x), the LNCC gradient (Avants et al. 2008, eq. 6) and the
- * update's statistics; the equations are in demons.c's header.  Sums over
+ * update's statistics; the equations are in demons_run.c's header.  Sums over
  * voxels are taken per row, then over the rows in order (the same bits on
  * any thread count).
  */

@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * demons (demons.c): the images before the levels: the intensity
+ * demons (demons_run.c): the images before the levels: the intensity
  * normalisation (min-max, histogram matching, the local normalisation by
  * normalised convolution), edge-clamped resampling, and the masks'
  * bounding box with the crops and blends of a level's block.  Every result

@@ -1,12 +1,12 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * demons_int.h: what the parts of plugins/demons share (private to the
- * plugin).  demons.c: the parameters and the registration's levels
- * (demons_process); demons_img.c: the images before the levels (intensity
+ * demons_int.h: what the parts of lib/demons share, and what a backend
+ * (demons.h) reads of a level.  demons_run.c: the registration's levels
+ * (dm_stage_process); demons_img.c: the images before the levels (intensity
  * normalisation, the masks' box and the crops); demons_force.c: one
  * level's buffers and the forces of each iteration (SSD demons, LNCC);
  * demons_label.c: the label term; demons_memo.c: the coarse levels' field
- * kept for a later run (memo).  The equations are in demons.c's header.
+ * kept for a later run (memo).  The equations are in demons_run.c's header.
  */
 #ifndef DEMONS_INT_H
 #define DEMONS_INT_H
