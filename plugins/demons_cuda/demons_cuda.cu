@@ -608,7 +608,8 @@ extern "C" int dmc_probe(int device, char *name, size_t namesize,
 	cudaError_t e = cudaGetDeviceCount(&nd);
 	if (e != cudaSuccess || nd <= 0) {
 		snprintf(err, errsize, "no CUDA device (%s): run the stage with "
-			 "plugin = demons", e != cudaSuccess
+			 "plugin = demons (the growth graphs: unset TLED, or "
+			 "TLED=tled_cpu)", e != cudaSuccess
 				 ? cudaGetErrorString(e) : "0 devices");
 		cudaGetLastError();
 		return 0;
