@@ -1,7 +1,8 @@
 # Sourced (POSIX sh): the environment that points the graphs
-# (graphs/armstg.ini and the others) at one case's files.  No other side
-# effect, so scripts that do not want lib.sh's (the GPU host's, run from a
-# folder carry_prep.sh fills) source it alone, from the tree's root:
+# (graphs/armstg.ini and the others) at one case's files and the runs at
+# one build, and the data folder they read.  No other side effect, so
+# scripts that do not want lib.sh's (the GPU host's, run from a folder
+# carry_prep.sh fills) source it alone, from the tree's root:
 #     . bench/pipeline/case_env.sh
 # and, for one command alone, brats_run (below).
 
@@ -41,4 +42,41 @@ brats_env() {
 # environment, in a subshell (the caller's environment stays as it is)
 brats_run() {
 	( brats_env "$1" "$2"; shift 2; exec "$@" )
+}
+
+# brats_case CASE DATA: brats_env CASE DATA once the files it points at
+# exist; else exits 2 naming the first one missing
+brats_case() {
+	brats_env "$1" "$2"
+	for _bc_f in "$ATLAS_T1" "$ATLAS_LABELS" "$ATLAS_TISSUES" "$PATIENT_T1" \
+		"$PATIENT_FLAIR" "$PATIENT_LABELS" "$PATIENT_MASK"; do
+		[ -e "$_bc_f" ] ||
+			{ echo "$0: $_bc_f is missing (DATA or --data: the data folder)" >&2; exit 2; }
+	done
+}
+
+# data_dir: the data folder, absolute: $DATA, else $ARMSTG_DATA (as the
+# tests), else ../shared/data; a relative one from the current folder
+# (the tree's root)
+data_dir() {
+	abspath "${DATA:-${ARMSTG_DATA:-../shared/data}}"
+}
+
+# use_build BUILD: the runs that follow go to BUILD's armstg ($ARMSTG) and
+# plugins (ARMSTG_PLUGIN_PATH, exported, absolute); exits 2 when BUILD has
+# no armstg
+use_build() {
+	[ -x "$1/armstg" ] || { echo "$0: no $1/armstg (build first)" >&2; exit 2; }
+	# shellcheck disable=SC2034 # (the sourcing script's)
+	ARMSTG="$1/armstg"
+	ARMSTG_PLUGIN_PATH="$(abspath "$1")/plugins"
+	export ARMSTG_PLUGIN_PATH
+}
+
+# absolute path of $1 (which need not exist)
+abspath() {
+	case $1 in
+	/*) echo "$1" ;;
+	*) echo "$PWD/$1" ;;
+	esac
 }

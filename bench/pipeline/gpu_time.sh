@@ -38,7 +38,6 @@ set -eu
 cd "$(dirname "$0")/../.."
 . bench/pipeline/lib.sh
 OUT=out/gpu_time
-DATA=${DATA:-${ARMSTG_DATA:-../shared/data}}
 OPTS="out data"
 USAGE="[--out DIR] [--data DIR]"
 usage_exit() { echo "usage: $0 $USAGE" >&2; exit 2; }
@@ -48,15 +47,11 @@ SPACINGS=${SPACINGS:-"6 default"}
 THREADS=${THREADS:-$(nproc)}
 export OMP_NUM_THREADS="$THREADS" TLED
 OUT=$(abspath "$OUT")
-DATA=$(abspath "$DATA")
+DATA=$(data_dir)
 build_all
 [ "$TLED" = tled_cpu ] || [ -e "$BUILD/plugins/$TLED.so" ] ||
 	{ echo "$0: no $BUILD/plugins/$TLED.so (built where nvcc is)" >&2; exit 2; }
-for f in sri24/spgr.nii.gz sri24/tzo116plus.nii.gz sri24/tissues.nii.gz \
-	brats2013/brats_2013_pat0001_1/T1c_subtrMeanDivStd.nii.gz; do
-	[ -e "$DATA/$f" ] || { echo "$0: $DATA/$f is missing (--data DIR)" >&2; exit 2; }
-done
-brats_env 0001 "$DATA"
+brats_case 0001 "$DATA"
 mkdir -p "$OUT"
 TSV="$OUT/gpu_time.tsv"
 printf 'run\ttled\tspacing_mm\tthreads\tstage\tplugin\tstatus\twall_s\n' >"$TSV"

@@ -27,7 +27,8 @@ build_all() {
 		"$BUILD/plugins/h5_sink.so"
 }
 
-# phantom_env, brats_env: the graphs' environment for a case
+# phantom_env, brats_env, brats_case: the graphs' environment for a case;
+# data_dir, use_build, abspath
 # shellcheck source=bench/pipeline/case_env.sh disable=SC1091
 . bench/pipeline/case_env.sh
 
@@ -51,14 +52,6 @@ run_graph() {
 graph_stage() {
 	awk -v h="[stage $1]" 'index($0, h) == 1 { f = 1 }
 		f && /^\[/ && index($0, h) != 1 { f = 0 } f' "$2"
-}
-
-# absolute path of $1 (which need not exist)
-abspath() {
-	case $1 in
-	/*) echo "$1" ;;
-	*) echo "$PWD/$1" ;;
-	esac
 }
 
 # parse_args "$@": the options the scripts here share.  A script sets OPTS

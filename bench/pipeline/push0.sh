@@ -13,21 +13,27 @@
 # saved inputs timed 3 times per build (/usr/bin/time: user, sys, wall s).
 # GRAPH: the graph both builds run (default graphs/armstg.ini; an older build may
 # not know a newer graph's keys: `git show OLD:graphs/armstg.ini > FILE`).
+# DATA: the data folder (default ../shared/data; case_env.sh, data_dir).
 set -eu
 old=$1; new=$2; out=$3; cases=${4:-0001 0003}
 here=$(cd "$(dirname "$0")/../.." && pwd)
-data=${DATA:-$here/../shared/data}
+# data_dir, brats_case, use_build (from the tree's root)
+# shellcheck source=bench/pipeline/case_env.sh disable=SC1091
+. "$here/bench/pipeline/case_env.sh"
+data=$(cd "$here" && data_dir)
+(cd "$here" && use_build "$old" && use_build "$new")
 mkdir -p "$out"
 out=$(cd "$out" && pwd)   # run cds to the tree's root
 # run B O GRAPH [OPTION...]: build B's (old or new) armstg on GRAPH from the
 # tree's root, 2 threads, niced, --jobs 1, into O (fresh); its log in O.log,
 # its /usr/bin/time (user, sys, wall s) in O.time
 run() {
-	bin=$old/armstg; [ "$1" = new ] && bin=$new/armstg
+	_run_b=$old; [ "$1" = new ] && _run_b=$new   # (not b: the callers' loop)
 	o=$2 rg=$3; shift 3
 	rm -rf "$o"
-	(cd "$here" && OMP_NUM_THREADS=2 /usr/bin/time -f "%U %S %e" -o "$o.time" \
-	 nice -n 5 "$bin" run "$rg" "$@" --out "$o" --jobs 1 > "$o.log" 2>&1)
+	(cd "$here" && use_build "$_run_b" &&
+	 OMP_NUM_THREADS=2 /usr/bin/time -f "%U %S %e" -o "$o.time" \
+	 nice -n 5 "$ARMSTG" run "$rg" "$@" --out "$o" --jobs 1 > "$o.log" 2>&1)
 }
 g=$out/armstg_push0.ini
 cp "${GRAPH:-$here/graphs/armstg.ini}" "$g"
@@ -54,13 +60,9 @@ path   = grow_in_contours.h5
 points = contours.contours
 INI
 for p in $cases; do
-	d=$data/brats2013/brats_2013_pat${p}_1
 	for b in old new; do
 		o=$out/pat$p-$b
-		(export PATIENT_T1=$d/T1c_subtrMeanDivStd.nii.gz \
-		 PATIENT_FLAIR=$d/Flair_subtrMeanDivStd.nii.gz \
-		 PATIENT_LABELS=$d/OTMultiClass.nii.gz PATIENT_MASK=$d/brainmask.nii.gz
-		 run $b "$o" "$g" --set tune.values=0)
+		(brats_case "$p" "$data"; run $b "$o" "$g" --set tune.values=0)
 		echo "pat$p $b: grow wall_s $(awk -F'\t' '$1=="grow"{print $4}' "$o/run.tsv")"
 	done
 	a=$out/pat$p-old; c=$out/pat$p-new

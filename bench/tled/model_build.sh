@@ -13,19 +13,19 @@
 #   threads  repeat  process_cpu_s  build_s  then the -v line of the phases
 # (process CPU: the armstg process, input reading included, up to the build's
 # end; each run's log stays in $MB_DIR).  BUILD=A:B alternates two builds (A, then B, each run), for side by
-# side timings on a shared machine.  Data: $DATA (default ../shared/data).
+# side timings on a shared machine.  Data: $DATA (default ../shared/data;
+# bench/pipeline/case_env.sh, data_dir).
 # MB_GROW=1: let each growth run to its end (push MB_PUSH mm, default 1.5)
 # and keep its nodes in $MB_DIR/nodes-THREADS-REPEAT-BUILD.h5, for
 # build/tests/tools/ps_diff between builds.
 set -u
 BUILDS=$1 CASE=$2 SP=$3 THREADS=$4 REP=${5:-1}
-DATA=${DATA:-../shared/data}
 D=${MB_DIR:-/tmp/model_build}
 # shellcheck source=bench/pipeline/case_env.sh disable=SC1091
 . bench/pipeline/case_env.sh
-brats_env "$CASE" "$DATA"
+brats_case "$CASE" "$(data_dir)"
+for b in $(echo "$BUILDS" | tr ':' ' '); do use_build "$b"; done
 first=${BUILDS%%:*}
-[ -x "$first/armstg" ] || { echo "model_build.sh: no $first/armstg (build first)" >&2; exit 2; }
 mkdir -p "$D"
 IN="$D/pat$CASE-$SP"
 if [ ! -s "$IN/nodes_in.h5" ]; then
@@ -43,7 +43,8 @@ plugin = h5_sink
 path   = contours_in.h5
 points = contours.contours
 EOF
-    ARMSTG_PLUGIN_PATH="$first/plugins" "$first/armstg" run "$D/inputs.ini" \
+    use_build "$first"
+    "$ARMSTG" run "$D/inputs.ini" \
         --set nodes.spacing="$SP" --target mb_nodes --target mb_contours \
         --out "$IN" --jobs 2 -q || exit 1
 fi
@@ -89,7 +90,8 @@ while [ "$r" -le "$REP" ]; do
             log="$D/run-$th-$r-$(echo "$b" | tr '/' '_').log"
             rm -rf "$D/out"
             : >"$log" # (emptied before the run starts: the loop below reads it)
-            OMP_NUM_THREADS=$th ARMSTG_PLUGIN_PATH="$b/plugins" "$b/armstg" run "$D/grow.ini" \
+            use_build "$b"
+            OMP_NUM_THREADS=$th "$ARMSTG" run "$D/grow.ini" \
                 --set grow.threads="$th" --out "$D/out" -v >"$log" 2>&1 &
             pid=$!
             cpu=""
