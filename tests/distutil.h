@@ -9,6 +9,10 @@
  *                                          log file), plugins from
  *                                          $BUILD/plugins and
  *                                          $BUILD/test-plugins
+ *   dt_worker_start_ipc(&w, "a", extra)    the same on ipc://TMPDIR/a.sock
+ *                                          (see there: for tests that kill
+ *                                          a worker and ask its endpoint
+ *                                          again)
  *   dt_worker_stop(&w)                     SIGTERM and wait (exit status)
  *   dt_worker_kill(&w)                     SIGKILL and wait
  *   dt_log_count(path, needle)             lines of a log holding needle
@@ -44,10 +48,12 @@ static inline void dt_sleep(double s)
 	nanosleep(&ts, NULL);
 }
 
-/* extra: NULL-terminated extra arguments (or NULL).  0 once the worker
- * listens (its --ready-file exists), -1 after 20 s or when it exited. */
-static inline int dt_worker_start(dt_worker_t *w, const char *name,
-				  const char *const *extra)
+/* bind: the worker's --bind; extra: NULL-terminated extra arguments (or
+ * NULL).  0 once the worker listens (its --ready-file exists), -1 after
+ * 20 s or when it exited. */
+static inline int dt_worker_start_at(dt_worker_t *w, const char *name,
+				     const char *bind,
+				     const char *const *extra)
 {
 	char exe[512], ready[512], p1[512], p2[512];
 	memset(w, 0, sizeof *w);
@@ -58,7 +64,7 @@ static inline int dt_worker_start(dt_worker_t *w, const char *name,
 	snprintf(p1, sizeof p1, "%s/plugins", tu_build_dir());
 	snprintf(p2, sizeof p2, "%s/test-plugins", tu_build_dir());
 	unlink(ready);
-	const char *argv[48] = { exe, "worker", "--bind", "tcp://127.0.0.1:*",
+	const char *argv[48] = { exe, "worker", "--bind", bind,
 				 "--name", name, "--ready-file", ready,
 				 "--plugins", p1, "--plugins", p2 };
 	int n = 12;
@@ -97,6 +103,26 @@ static inline int dt_worker_start(dt_worker_t *w, const char *name,
 		dt_sleep(0.02);
 	}
 	return -1;
+}
+
+static inline int dt_worker_start(dt_worker_t *w, const char *name,
+				  const char *const *extra)
+{
+	return dt_worker_start_at(w, name, "tcp://127.0.0.1:*", extra);
+}
+
+/* A worker on ipc://TMPDIR/NAME.sock, an endpoint of this test program
+ * only.  A tcp://127.0.0.1:* port is czmq's first free one from 49152 up:
+ * once a worker there is killed, the next `:*` bind on the host (another
+ * test program's worker, another make test beside this one) gets that
+ * port, and its worker answers for the killed one.  Tests that kill a
+ * worker and then count on its endpoint staying silent use this. */
+static inline int dt_worker_start_ipc(dt_worker_t *w, const char *name,
+				      const char *const *extra)
+{
+	char bind[512];
+	snprintf(bind, sizeof bind, "ipc://%s/%s.sock", tu_tmpdir(), name);
+	return dt_worker_start_at(w, name, bind, extra);
 }
 
 /* exit status of the worker after SIGTERM (-1: it did not stop in 20 s,

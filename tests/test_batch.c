@@ -1,8 +1,12 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * armstg batch (runtime/batch.c) on loopback: tests/graphs/batch_case.ini
+ * armstg batch (runtime/batch.c) on this host: tests/graphs/batch_case.ini
  * (a 32x32x24 phantom at 6 mm, demons, the labels through the field) over
- * real `armstg worker` processes.
+ * real `armstg worker` processes on ipc:// endpoints in the test's own
+ * folder (dt_worker_start_ipc): a killed worker's tcp://127.0.0.1:* port
+ * went to the next worker another program on the host started, which then
+ * answered the coordinator for the killed one (test_batch failed 4 of 20
+ * runs with a second test_batch beside it, 2026-11-27).
  *
  *   - 20 cases (phantom seeds 1-20) over 4 workers, two of them SIGKILLed
  *     while they run a case's phantom: all 20 cases finish, their NIfTI
@@ -150,7 +154,7 @@ static void test_batch_with_two_workers_killed(void **state)
 	for (int i = 0; i < 4; i++) {
 		char name[16];
 		snprintf(name, sizeof name, "bw%d", i + 1);
-		assert_int_equal(dt_worker_start(&w[i], name, vv), 0);
+		assert_int_equal(dt_worker_start_ipc(&w[i], name, vv), 0);
 		snprintf(eps + strlen(eps), sizeof eps - strlen(eps), "%s%s",
 			 i ? "," : "", w[i].ep);
 	}
@@ -233,7 +237,7 @@ static void test_batch_failed_case(void **state)
 {
 	(void)state;
 	dt_worker_t w;
-	assert_int_equal(dt_worker_start(&w, "bf", NULL), 0);
+	assert_int_equal(dt_worker_start_ipc(&w, "bf", NULL), 0);
 	char cases[600], out[600], log[600];
 	snprintf(cases, sizeof cases, "%s/cases2.tsv", tu_tmpdir());
 	snprintf(out, sizeof out, "%s/batch2", tu_tmpdir());
