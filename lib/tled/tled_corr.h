@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * The integration-constraint correction of the MLS derivatives (tled_corr.c;
- * internal to lib/tled: called by tled_model_build).
+ * The integration-constraint correction of the MLS derivatives (tled_corr.c
+ * and the files of tled_corr_int.h; internal to lib/tled: called by
+ * tled_model_build).
  */
 #ifndef TLED_CORR_H
 #define TLED_CORR_H
@@ -60,7 +61,7 @@ int tled_correct_gradients(tled_model_t *m, const double *w, const double *P,
  * factored by LAPACK dpbtrf 'L' (lower band storage, column-major,
  * half-bandwidth kd: A[c (kd + 1) + r - c] = L_rc, c <= r <= c + kd), on
  * up to 3 OpenMP threads (one right-hand side each): the same bits on any
- * nt (tled_corr.c, the coarse level's solve).
+ * nt (tled_corr_band.c, the coarse level's solve).
  */
 void tled_band_solve3(int64_t nc, int64_t kd, const double *A, double *b,
 		      int nt);

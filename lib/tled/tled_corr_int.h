@@ -32,7 +32,7 @@ static inline double omp_get_wtime(void) { return 0; }
  * multipliers solve the SPD system Q mu = -g with
  *   (Q v)_a = sum_ip V_ip w_a (v_a - p_a^T M^-1 sum_b w_b p_b v_b),
  * by conjugate gradients (3 right-hand sides), preconditioned on two levels
- * (below).
+ * (tled_corr_coarse.c).
  */
 typedef struct tled_corr_ctx {
 	const tled_model_t *m;

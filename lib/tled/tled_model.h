@@ -123,7 +123,8 @@ typedef struct tled_model_opts {
 	int corr_coarse;        /* 1 (default): the correction's conjugate
 	                           gradients are preconditioned on two levels
 	                           (Jacobi + a trilinear coarse grid solved by
-	                           LAPACK, tled_corr.c); 0: Jacobi only */
+	                           LAPACK, tled_corr_coarse.c); 0: Jacobi
+	                           only */
 	int ebc;                /* 1 (default): essential boundary conditions by
 	                           collocation u^h(X_c) = u_c (see tled_solve.h)
 	                           and the correction targets the boundary

@@ -336,7 +336,7 @@ static void test_iter_log_thin(void **state)
 	assert_int_equal(lg.nrow, 0);
 }
 
-/* The correction's two-level preconditioner (tled_corr.c) gives the same
+/* The correction's two-level preconditioner (tled_corr_coarse.c) gives the same
  * corrected derivatives as Jacobi alone, in fewer CG iterations:
  * all nodes constrained (singular system, linear null space) and, with
  * legacy boundary conditions, the free nodes only (definite). */
