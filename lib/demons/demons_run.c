@@ -106,6 +106,12 @@
  * maximum (test_threads).  s o exp(u) is one pass of lib/field
  * (fimg_compose_exp: the scaling read on the fly, the last squaring fused
  * with the composition, the same floats as the separate steps).
+ *
+ * Backends (demons.h dm_backend_t): a device may run a level's iterations
+ * in place of the loop below, with the same floats (plugins/demons_cuda on
+ * an NVIDIA GPU; demons_cuda_test_parity compares the bits); everything
+ * else here (normalisation, pyramids, crops, memo, the label term, the
+ * outputs) stays on the host.
  */
 #include <math.h>
 #include <stddef.h>
@@ -124,9 +130,6 @@
 #include "demons_label.h"
 #include "demons_memo.h"
 #include "clock.h"
-
-
-
 
 #define FAIL(code, ...) st->host->fail(st, code, __VA_ARGS__)
 
