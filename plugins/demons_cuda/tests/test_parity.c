@@ -3,10 +3,11 @@
  * demons_cuda against the host: the same registration with device = -1
  * (every iteration on the host, plugin demons's code) and device = 0 (the
  * GPU) must give the same bits: the field, the warped image and every
- * figure of the table but the seconds.  The images: a synthetic head
- * (blurred ellipsoids, a texture) on an LAS fixed grid, warped by a known
- * smooth field, and on an LPS moving grid of another size and origin, so
- * that the warp's matrices are no identity; the settings: the growth
+ * figure of the table but the seconds.  The images: tests/synth_head.h's
+ * pair of heads (an LAS fixed grid warped by a known smooth field, an LPS
+ * moving grid shifted by a fraction of a voxel, so that the warp's
+ * matrices are no identity; a tumour in each, left out of the masks); the
+ * settings: the growth
  * graphs' three stages (LNCC with both masks and the crop, the final
  * registration; SSD on masks, the outline map) and the other branches
  * (Thirion force, additive update, histogram matching, a fixed mask only,
@@ -21,16 +22,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "testutil.h"
+#include "synth_head.h"
 #include "../demons_cuda.h"
-
-enum { IN_FIXED, IN_MOVING, IN_FMASK, IN_MMASK, IN_INIT, IN_FLABEL, IN_MLABEL };
-enum { OUT_FIELD, OUT_WARPED, OUT_TABLE };
-
-#define SP 1.5
-#define FX 48
-#define FY 52
-#define FZ 40
 
 static void require_gpu(void)
 {
@@ -45,81 +38,12 @@ static void require_gpu(void)
 	skip();
 }
 
-static double sigm(double d)
-{
-	return 1.0 / (1.0 + exp(-d));
-}
-
-static double ell(const double y[3], const double c[3], const double a[3],
-		  double w)
-{
-	double e = 0;
-	for (int q = 0; q < 3; q++)
-		e += (y[q] - c[q]) * (y[q] - c[q]) / (a[q] * a[q]);
-	e = sqrt(e);
-	return sigm((1 - e) * (a[0] + a[1] + a[2]) / 3 / w);
-}
-
-static const double C0[3] = { 0, 0, 0 }, AB[3] = { 27, 31, 23 };
-
-static double head(const double y[3])
-{
-	static const double cw[3] = { 0, 2, 3 }, aw[3] = { 18, 21, 14 },
-			    cv1[3] = { 6, 3, 4 }, cv2[3] = { -6, 3, 4 },
-			    av[3] = { 3.5, 10, 5 };
-	const double b = ell(y, C0, AB, 0.8);
-	return 0.45 * b + 0.35 * ell(y, cw, aw, 1.0) -
-	       0.5 * ell(y, cv1, av, 0.8) - 0.5 * ell(y, cv2, av, 0.8) +
-	       0.12 * b * sin(y[0] / 3.1) * sin(y[1] / 3.7 + 1) * cos(y[2] / 2.9);
-}
-
+/* the fixed head's anatomy is the moving one's at x + u(x) */
 static void true_u(const double x[3], double u[3])
 {
 	u[0] = 2.6 * sin(x[1] / 9.0) * cos(x[2] / 11.0);
 	u[1] = 2.2 * sin(x[0] / 10.0 + x[2] / 13.0);
 	u[2] = 1.8 * cos(x[0] / 8.0) * sin(x[1] / 12.0 + 0.5);
-}
-
-/* kind: 0 the head (warped: at x + u(x)), 1 the brain mask, 2 the brain
- * mask minus a ball (a "tumour" left out), 3 the ball, 4 the head with
- * its contrast inverted */
-static vol_t *make(int las, int nx, int ny, int nz, int warped, int kind)
-{
-	double A[16] = { -SP, 0, 0, SP * (nx - 1) / 2.0,
-			 0, SP, 0, -SP * (ny - 1) / 2.0,
-			 0, 0, SP, -SP * (nz - 1) / 2.0,
-			 0, 0, 0, 1 };
-	if (!las) {
-		A[3] += 0.7;
-		A[5] = -SP;
-		A[7] = SP * (ny - 1) / 2.0 - 0.4;
-		A[11] += 0.3;
-	}
-	static const double cb[3] = { 12, -12, -6 };
-	vol_t *v = vol_new(nx, ny, nz, 1, kind == 0 || kind == 4 ? DT_F32 : DT_U8,
-			   A);
-	for (int k = 0; k < nz; k++)
-		for (int j = 0; j < ny; j++)
-			for (int i = 0; i < nx; i++) {
-				double x[3], u[3] = { 0, 0, 0 }, y[3];
-				vol_to_world(v, i, j, k, x);
-				if (warped)
-					true_u(x, u);
-				for (int q = 0; q < 3; q++)
-					y[q] = x[q] + u[q];
-				double d = 0;
-				for (int q = 0; q < 3; q++)
-					d += (y[q] - cb[q]) * (y[q] - cb[q]);
-				const int ball = sqrt(d) < 7;
-				const int brain = ell(y, C0, AB, 0.8) > 0.5;
-				double val = kind == 0 ? head(y)
-					     : kind == 4 ? 1 - head(y)
-					     : kind == 1 ? brain
-					     : kind == 2 ? brain && !ball
-					     : ball;
-				vol_set(v, vol_idx(v, i, j, k), val);
-			}
-	return v;
 }
 
 typedef struct res {
@@ -160,14 +84,6 @@ static res_t run(const char *const *params, int device, const vol_t *const in[7]
 		fail_msg("device %d: %s", device, e);
 	return (res_t){ (vol_t *)out[OUT_FIELD], (vol_t *)out[OUT_WARPED],
 			(tab_t *)out[OUT_TABLE] };
-}
-
-static int same_bits(const vol_t *a, const vol_t *b)
-{
-	return a->nx == b->nx && a->ny == b->ny && a->nz == b->nz &&
-	       a->nc == b->nc && a->dtype == b->dtype &&
-	       !memcmp(a->data, b->data, vol_nvox(a) * a->nc *
-					       vol_dtype_size(a->dtype));
 }
 
 /* the largest difference between two float fields, mm */
@@ -212,27 +128,27 @@ static void same_table(const tab_t *a, const tab_t *b)
 	}
 }
 
-static vol_t *g_img[8];
-enum { F_T1, M_T1, M_INV, F_MASK, M_MASK, F_BRAIN, F_BALL, M_BALL };
+/* synth_head.h's pair of heads (the fixed one warped by true_u, a tumour
+ * in each left out of the masks, edema around the fixed one) and the
+ * moving head with its contrast inverted (1 - v: LNCC across contrasts) */
+static fx_t g_fx;
+static vol_t *g_minv;
 
 static int setup(void **state)
 {
-	g_img[F_T1] = make(1, FX, FY, FZ, 1, 0);
-	g_img[M_T1] = make(0, FX + 4, FY - 2, FZ + 2, 0, 0);
-	g_img[M_INV] = make(0, FX + 4, FY - 2, FZ + 2, 0, 4);
-	g_img[F_MASK] = make(1, FX, FY, FZ, 1, 2);
-	g_img[M_MASK] = make(0, FX + 4, FY - 2, FZ + 2, 0, 2);
-	g_img[F_BRAIN] = make(1, FX, FY, FZ, 1, 1);
-	g_img[F_BALL] = make(1, FX, FY, FZ, 1, 3);
-	g_img[M_BALL] = make(0, FX + 4, FY - 2, FZ + 2, 0, 3);
+	const fx_opts_t o = { true_u, 6, 1 };
+	fx_make(&g_fx, &o);
+	g_minv = vol_new(g_fx.m->nx, g_fx.m->ny, g_fx.m->nz, 1, DT_F32,
+			 g_fx.m->affine);
+	for (int64_t e = 0; e < vol_nvox(g_fx.m); e++)
+		((float *)g_minv->data)[e] = 1 - ((float *)g_fx.m->data)[e];
 	return 0;
 }
 
 static int teardown(void **state)
 {
-	for (int q = 0; q < 8; q++)
-		if (g_img[q])
-			msg_unref(&g_img[q]->base);
+	fx_free(&g_fx);
+	msg_unref(&g_minv->base);
 	return 0;
 }
 
@@ -248,8 +164,10 @@ static void parity(const char *what, const char *const *params,
 	assert_true(same_bits(h.field, g.field));
 	assert_true(same_bits(h.warped, g.warped));
 	same_table(h.tab, g.tab);
-	/* the registration moved: true |u| is up to ~3.5 mm */
+	/* the registration moved (true |u| is up to ~3.5 mm) and did not
+	 * fold */
 	assert_true(max_len(h.field) > 1.0);
+	assert_true(jac_min(h.field) > 0);
 	res_free(&h);
 	res_free(&g);
 }
@@ -263,8 +181,8 @@ static void test_lncc_masks(void **state)
 			    "update=diffeomorphic", "sigma_unit=voxel",
 			    "sigma_fluid=3", "sigma_field=1.5", "levels=3",
 			    "iterations=40,30,10", NULL };
-	const vol_t *in[7] = { g_img[F_T1], g_img[M_INV], g_img[F_MASK],
-			       g_img[M_MASK], NULL, NULL, NULL };
+	const vol_t *in[7] = { g_fx.f, g_minv, g_fx.fm,
+			       g_fx.mm, NULL, NULL, NULL };
 	parity("lncc, both masks", p, in);
 }
 
@@ -274,7 +192,7 @@ static void test_ssd_plain(void **state)
 	require_gpu();
 	const char *p[] = { "normalize=minmax", "sigma_field=3.0", "levels=3",
 			    "iterations=30,20,10", NULL };
-	const vol_t *in[7] = { g_img[F_T1], g_img[M_T1], NULL, NULL, NULL, NULL,
+	const vol_t *in[7] = { g_fx.f, g_fx.m, NULL, NULL, NULL, NULL,
 			       NULL };
 	parity("ssd, no mask", p, in);
 }
@@ -288,7 +206,7 @@ static void test_thirion_additive(void **state)
 			    "normalize=histogram", "sigma_field=2",
 			    "sigma_fluid=1", "crop=false", "levels=2",
 			    "iterations=25,15", NULL };
-	const vol_t *in[7] = { g_img[F_T1], g_img[M_T1], g_img[F_BRAIN], NULL,
+	const vol_t *in[7] = { g_fx.f, g_fx.m, g_fx.fm, NULL,
 			       NULL, NULL, NULL };
 	parity("thirion additive, fixed mask", p, in);
 }
@@ -299,9 +217,9 @@ static void test_thirion_additive(void **state)
 static void test_label_levels(void **state)
 {
 	require_gpu();
-	const vol_t *in[7] = { g_img[F_T1], g_img[M_INV], g_img[F_MASK],
-			       g_img[M_MASK], NULL, g_img[F_BALL],
-			       g_img[M_BALL] };
+	const vol_t *in[7] = { g_fx.f, g_minv, g_fx.fm,
+			       g_fx.mm, NULL, g_fx.ft,
+			       g_fx.mt };
 	const char *all[] = { "metric=lncc", "normalize=minmax",
 			      "sigma_unit=voxel", "sigma_fluid=3",
 			      "sigma_field=1.5", "levels=3",
@@ -335,8 +253,8 @@ static void test_two_threads(void **state)
 	const char *p[] = { "metric=lncc", "normalize=minmax", "sigma_unit=voxel",
 			    "sigma_fluid=3", "sigma_field=1.5", "levels=3",
 			    "iterations=40,30,10", NULL };
-	const vol_t *in[7] = { g_img[F_T1], g_img[M_INV], g_img[F_MASK],
-			       g_img[M_MASK], NULL, NULL, NULL };
+	const vol_t *in[7] = { g_fx.f, g_minv, g_fx.fm,
+			       g_fx.mm, NULL, NULL, NULL };
 	res_t ref = run(p, -1, in);
 	job_t j[2] = { { p, in, { 0 } }, { p, in, { 0 } } };
 	pthread_t th[2];
@@ -357,7 +275,7 @@ static void test_bad_device(void **state)
 {
 	require_gpu();
 	const char *p[] = { "device=63", NULL };
-	const msg_t *m[7] = { &g_img[F_T1]->base, &g_img[M_T1]->base };
+	const msg_t *m[7] = { &g_fx.f->base, &g_fx.m->base };
 	msg_t *out[3] = { 0 };
 	char e[1024] = "";
 	assert_int_not_equal(tu_run(TU_PLUGIN(), p, m, out, e, sizeof e), 0);
@@ -373,14 +291,14 @@ static void test_no_gpu(void **state)
 	if (dmc_probe(0, NULL, 0, NULL, err, sizeof err))
 		skip(); /* a GPU is here: the other tests run */
 	const char *p[] = { "levels=2", "iterations=5,5", NULL };
-	const msg_t *m[7] = { &g_img[F_T1]->base, &g_img[M_T1]->base };
+	const msg_t *m[7] = { &g_fx.f->base, &g_fx.m->base };
 	msg_t *out[3] = { 0 };
 	char e[1024] = "";
 	assert_int_equal(tu_run(TU_PLUGIN(), p, m, out, e, sizeof e),
 			 ARMSTG_EUNSUPPORTED);
 	assert_non_null(strstr(e, "plugin = demons"));
 	assert_null(out[0]);
-	const vol_t *in[7] = { g_img[F_T1], g_img[M_T1] };
+	const vol_t *in[7] = { g_fx.f, g_fx.m };
 	res_t h = run(p, -1, in);
 	assert_true(max_len(h.field) > 0.5);
 	res_free(&h);

@@ -1,7 +1,9 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * synth_head.h: the synthetic head the demons tests register (test_demons.c,
- * test_label.c, test_memo.c): blurred ellipsoids (brain, white matter, two
+ * synth_head.h: the synthetic head the demons stage's tests register
+ * (plugins/demons/tests, plugins/demons_cuda/tests, lib/demons/tests; here
+ * in tests/ so that none of them reads another's folder): blurred
+ * ellipsoids (brain, white matter, two
  * ventricles, an optional bright blob) and a texture, in world mm, sampled
  * analytically; the pair of heads with a tumour each that test_label.c and
  * test_memo.c register (fx_t, fx_make, fx_free); the plugin's ports; the
@@ -17,9 +19,12 @@
 #include "testutil.h"
 #include "field/field.h"
 
-/* demons's ports, in its descriptor's order */
+/* demons's ports, in its descriptor's order (lib/demons's demons_int.h
+ * names them too: a test that includes it first takes its names) */
+#ifndef DEMONS_INT_H
 enum { IN_FIXED, IN_MOVING, IN_FMASK, IN_MMASK, IN_INIT, IN_FLABEL, IN_MLABEL };
 enum { OUT_FIELD, OUT_WARPED, OUT_TABLE };
+#endif
 
 #define SP 1.5 /* mm: the test grids' spacing */
 
