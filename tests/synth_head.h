@@ -48,6 +48,15 @@ static double ell(const double y[3], const double c[3], const double a[3],
 
 static const double C0[3] = { 0, 0, 0 };
 
+/* the tests' known smooth field (mm, up to about 3.5 mm): a fixed head is
+ * the moving one's anatomy at x + synth_u(x) (fx_opts_t.u) */
+static inline void synth_u(const double x[3], double u[3])
+{
+	u[0] = 2.6 * sin(x[1] / 9.0) * cos(x[2] / 11.0);
+	u[1] = 2.2 * sin(x[0] / 10.0 + x[2] / 13.0);
+	u[2] = 1.8 * cos(x[0] / 8.0) * sin(x[1] / 12.0 + 0.5);
+}
+
 /* the head at y (mm): the brain an ellipsoid of semi-axes abrain centred
  * on 0, white matter of semi-axes awhite centred on (0, 2, 3), two
  * ventricles, with blob a bright ellipsoid at (12, -15, -8), and a texture

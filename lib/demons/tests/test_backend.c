@@ -207,18 +207,11 @@ static const armstg_plugin_t desc = {
 
 /* ---- the runs ---- */
 
-static void true_u(const double x[3], double u[3])
-{
-	u[0] = 2.6 * sin(x[1] / 9.0) * cos(x[2] / 11.0);
-	u[1] = 2.2 * sin(x[0] / 10.0 + x[2] / 13.0);
-	u[2] = 1.8 * cos(x[0] / 8.0) * sin(x[1] / 12.0 + 0.5);
-}
-
 static fx_t g_fx;
 
 static int setup(void **state)
 {
-	const fx_opts_t o = { true_u, 6, 1 };
+	const fx_opts_t o = { synth_u, 6, 1 };
 	fx_make(&g_fx, &o);
 	return 0;
 }
@@ -327,19 +320,19 @@ static void test_ssd_additive(void **state)
 	compare("ssd additive", p, 0, 2);
 }
 
+/* the settings of test_label and test_memo: the final registration's
+ * (LNCC, voxel sigmas, 3 levels) with the given iterations and one more key */
+#define LNCC3(iters, key)                                                    \
+	{ "metric=lncc", "normalize=minmax", "sigma_unit=voxel",             \
+	  "sigma_fluid=3", "sigma_field=1.5", "levels=3", iters, key, NULL }
+
 /* the label term inside the finest level: that level on the host, the two
  * coarser ones on the backend; after the levels: all three on it */
 static void test_label(void **state)
 {
-	const char *in[] = { "metric=lncc", "normalize=minmax",
-			     "sigma_unit=voxel", "sigma_fluid=3",
-			     "sigma_field=1.5", "levels=3",
-			     "iterations=12,10,6", "label_where=all", NULL };
+	const char *in[] = LNCC3("iterations=12,10,6", "label_where=all");
 	compare("label term in the finest level", in, 1, 2);
-	const char *after[] = { "metric=lncc", "normalize=minmax",
-				"sigma_unit=voxel", "sigma_fluid=3",
-				"sigma_field=1.5", "levels=3",
-				"iterations=12,10,6", "label_where=after", NULL };
+	const char *after[] = LNCC3("iterations=12,10,6", "label_where=after");
 	compare("label correction after the levels", after, 1, 3);
 }
 
@@ -348,15 +341,9 @@ static void test_label(void **state)
  * of 0 iterations is not handed over */
 static void test_memo(void **state)
 {
-	const char *cand[] = { "metric=lncc", "normalize=minmax",
-			       "sigma_unit=voxel", "sigma_fluid=3",
-			       "sigma_field=1.5", "levels=3",
-			       "iterations=12,10,0", "memo=true", NULL };
+	const char *cand[] = LNCC3("iterations=12,10,0", "memo=true");
 	compare("memo: the candidate", cand, 0, 2);
-	const char *fin[] = { "metric=lncc", "normalize=minmax",
-			      "sigma_unit=voxel", "sigma_fluid=3",
-			      "sigma_field=1.5", "levels=3",
-			      "iterations=12,10,6", "memo=true", NULL };
+	const char *fin[] = LNCC3("iterations=12,10,6", "memo=true");
 	/* the coarse levels come from the memo: only the finest runs */
 	compare("memo: the final run", fin, 0, 1);
 }

@@ -21,13 +21,6 @@ static double phantom(const double y[3])
 	return synth_head(y, ABRAIN, AWHITE, 1);
 }
 
-static void true_u(const double x[3], double u[3])
-{
-	u[0] = 2.6 * sin(x[1] / 9.0) * cos(x[2] / 11.0);
-	u[1] = 2.2 * sin(x[0] / 10.0 + x[2] / 13.0);
-	u[2] = 1.8 * cos(x[0] / 8.0) * sin(x[1] / 12.0 + 0.5);
-}
-
 /* fixed: LAS grid centred on 0; moving: LPS grid, other size and origin */
 static void aff_las(double A[16], int nx, int ny, int nz)
 {
@@ -58,7 +51,7 @@ static vol_t *make_img(const double A[16], int nx, int ny, int nz, int warped,
 				double x[3], u[3] = { 0, 0, 0 }, y[3];
 				vol_to_world(v, i, j, k, x);
 				if (warped)
-					true_u(x, u);
+					synth_u(x, u);
 				for (int q = 0; q < 3; q++)
 					y[q] = x[q] + u[q];
 				double val = mask ? brain(y) > 0.5 : phantom(y);
@@ -113,7 +106,7 @@ static void field_error(const vol_t *fld, const vol_t *fmask, double *err,
 		    k = (int)(e / ((int64_t)fld->nx * fld->ny));
 		double x[3], u[3];
 		vol_to_world(fld, i, j, k, x);
-		true_u(x, u);
+		synth_u(x, u);
 		double d2 = 0, b2 = 0;
 		for (int c = 0; c < 3; c++) {
 			double d = ((float *)fld->data)[e + c * nv] - u[c];

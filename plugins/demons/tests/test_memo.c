@@ -29,20 +29,12 @@
 #include "synth_head.h"
 #include "demons/demons_memo.h"
 
-/* the fixed anatomy is the moving one's at x + u(x) (mm) */
-static void true_u(const double x[3], double u[3])
-{
-	u[0] = 2.6 * sin(x[1] / 9.0) * cos(x[2] / 11.0);
-	u[1] = 2.2 * sin(x[0] / 10.0 + x[2] / 13.0);
-	u[2] = 1.8 * cos(x[0] / 8.0) * sin(x[1] / 12.0 + 0.5);
-}
-
-/* the pair of synth_head.h: the fixed head displaced by true_u, a 6 mm
+/* the pair of synth_head.h: the fixed head displaced by synth_u, a 6 mm
  * ring of edema, the bright blob */
 static int setup(void **state)
 {
 	static fx_t x;
-	static const fx_opts_t o = { .u = true_u, .edema_mm = 6, .blob = 1 };
+	static const fx_opts_t o = { .u = synth_u, .edema_mm = 6, .blob = 1 };
 	fx_make(&x, &o);
 	*state = &x;
 	return 0;

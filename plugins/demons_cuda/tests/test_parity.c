@@ -38,14 +38,6 @@ static void require_gpu(void)
 	skip();
 }
 
-/* the fixed head's anatomy is the moving one's at x + u(x) */
-static void true_u(const double x[3], double u[3])
-{
-	u[0] = 2.6 * sin(x[1] / 9.0) * cos(x[2] / 11.0);
-	u[1] = 2.2 * sin(x[0] / 10.0 + x[2] / 13.0);
-	u[2] = 1.8 * cos(x[0] / 8.0) * sin(x[1] / 12.0 + 0.5);
-}
-
 typedef struct res {
 	vol_t *field, *warped;
 	tab_t *tab;
@@ -128,7 +120,7 @@ static void same_table(const tab_t *a, const tab_t *b)
 	}
 }
 
-/* synth_head.h's pair of heads (the fixed one warped by true_u, a tumour
+/* synth_head.h's pair of heads (the fixed one warped by synth_u, a tumour
  * in each left out of the masks, edema around the fixed one) and the
  * moving head with its contrast inverted (1 - v: LNCC across contrasts) */
 static fx_t g_fx;
@@ -136,7 +128,7 @@ static vol_t *g_minv;
 
 static int setup(void **state)
 {
-	const fx_opts_t o = { true_u, 6, 1 };
+	const fx_opts_t o = { synth_u, 6, 1 };
 	fx_make(&g_fx, &o);
 	g_minv = vol_new(g_fx.m->nx, g_fx.m->ny, g_fx.m->nz, 1, DT_F32,
 			 g_fx.m->affine);
