@@ -469,7 +469,11 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 			rc = FAIL(ARMSTG_ENOMEM, "out of memory (level %d)", l + 1);
 			goto out;
 		}
-		if (p->metric == METRIC_LNCC &&
+		/* a backend runs the level's iterations (below) on its own
+		 * buffers: the host's window sums are not needed then */
+		const int on_dev = be && iters[l] > 0 &&
+				   !label_at(p, use_label, l, nlev);
+		if (p->metric == METRIC_LNCC && !on_dev &&
 		    !(L.sums = malloc(sizeof(float) * 6 * (size_t)fgrid_nvox(&g)))) {
 			rc = FAIL(ARMSTG_ENOMEM, "out of memory (lncc sums, level %d)",
 				  l + 1);
@@ -545,7 +549,7 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 		 * device, the same floats as below; the label term inside the
 		 * levels stays on the host (label_where = after, what the
 		 * growth graphs use, runs after the levels) */
-		if (be && iters[l] > 0 && !label_at(p, use_label, l, nlev)) {
+		if (on_dev) {
 			if ((rc = be->level_begin(be->ctx, &dev, p, &L, MM0.d ? &MM0 : NULL,
 						  &S, err, sizeof err))) {
 				rc = FAIL(rc, "%s: %s (level %d)", be->name, err,
