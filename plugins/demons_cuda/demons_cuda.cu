@@ -458,31 +458,11 @@ __device__ __forceinline__ void max_bits(unsigned long long *m, double v)
 		atomicMax(m, (unsigned long long)__double_as_longlong(v));
 }
 
-/* fimg_field_maxnorm: the largest squared length in mm (m[0]) and in
- * voxels (m[1]) */
-__global__ void k_maxnorm(const float *U, i64 nv, mat w2v,
-			  unsigned long long *m)
-{
-	const i64 e = (i64)blockIdx.x * blockDim.x + threadIdx.x;
-	double n2 = 0, v2 = 0;
-	if (e < nv) {
-		const double d[3] = { U[e], U[e + nv], U[e + 2 * nv] };
-		double c[3];
-		const double q = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-		if (q > 0)
-			n2 = q;
-		aff_vec(w2v, d, c);
-		const double vv = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
-		if (vv > 0)
-			v2 = vv;
-	}
-	max_bits(&m[0], n2);
-	max_bits(&m[1], v2);
-}
-
 /* dm_update_stats: U scaled in place (scale != 1), each vector's length
  * into vc (used where > 0), the largest length (m[0]) and squared length
- * in voxels (m[1]) */
+ * in voxels (m[1]).  With scale 1 it is also fimg_field_maxnorm (the LNCC
+ * step): its largest length in voxels is the square root of m[1], as
+ * there (vc and used are rewritten by the next sums anyway) */
 __global__ void k_stats(float *U, i64 nv, float scale, mat w2v, double *vc,
 			uint8_t *used, unsigned long long *m)
 {
@@ -790,7 +770,7 @@ static int rows_total(dmc_t *c, double *sum, i64 *cnt, char *err,
 	return 0;
 }
 
-/* the two maxima of k_maxnorm / k_stats as doubles */
+/* the two maxima of k_stats as doubles */
 static int read_max(dmc_t *c, double m[2], char *err, size_t errsize)
 {
 	CK(cudaMemcpyAsync(c->h_max, c->dmax, 2 * sizeof(unsigned long long),
@@ -892,7 +872,8 @@ extern "C" int dmc_iterate(dmc_t *c, dmc_step_t *s, char *err, size_t errsize)
 		/* the step (demons_run.c) */
 		CK(cudaMemsetAsync(c->dmax, 0, 2 * sizeof(unsigned long long),
 				   cudaStreamPerThread), "the step");
-		k_maxnorm<<<nblk(nv), TPB>>>(c->A, nv, mk_mat(d->gw2v), c->dmax);
+		k_stats<<<nblk(nv), TPB>>>(c->A, nv, 1.0f, mk_mat(d->gw2v), c->vc,
+					   c->used, c->dmax);
 		if (read_max(c, m, err, errsize))
 			return -1;
 		const double mvox = sqrt(m[1]);
