@@ -537,6 +537,16 @@ int fimg_resample_block_where(const fimg_t *src, const fimg_t *u, int interp,
 /* Gaussian smoothing                                                  */
 /* ------------------------------------------------------------------ */
 
+void fimg_smooth_voxels(const fgrid_t *g, double sigma_mm, double sv[3])
+{
+	/* below 0.05 voxel an axis is left alone */
+	for (int a = 0; a < 3; a++) {
+		sv[a] = sigma_mm / g->sp[a];
+		if (sv[a] < 0.05)
+			sv[a] = 0;
+	}
+}
+
 int fimg_smooth(fimg_t *f, double sigma_mm, int nthreads)
 {
 	if (!f || !f->d)
@@ -546,13 +556,9 @@ int fimg_smooth(fimg_t *f, double sigma_mm, int nthreads)
 	const int64_t nv = fgrid_nvox(&f->g);
 	const int dims[3] = { f->g.nx, f->g.ny, f->g.nz };
 	/* lib/img's discrete Gaussian, float kernel and sums (the hot path
-	 * of demons); below 0.05 voxel an axis is left alone */
+	 * of demons) */
 	double sv[3];
-	for (int a = 0; a < 3; a++) {
-		sv[a] = sigma_mm / f->g.sp[a];
-		if (sv[a] < 0.05)
-			sv[a] = 0;
-	}
+	fimg_smooth_voxels(&f->g, sigma_mm, sv);
 	for (int c = 0; c < f->nc; c++) {
 		int rc = img_gauss_smooth(f->d + c * nv, dims, sv,
 					  IMG_GAUSS_DISCRETE, IMG_GAUSS_SUM_F32,

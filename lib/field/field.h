@@ -185,6 +185,11 @@ int fimg_resample_block_where(const fimg_t *src, const fimg_t *u, int interp,
  * follows the voxel axes (exact for axis-aligned grids).
  */
 int fimg_smooth(fimg_t *f, double sigma_mm, int nthreads);
+/* fimg_smooth's width per axis of grid g in voxels, sv[a] = sigma /
+ * spacing, 0 below 0.05 voxel (that axis is left alone); what a device
+ * that smooths as fimg_smooth does takes its kernels from (img_gauss_kernel,
+ * IMG_GAUSS_DISCRETE, float taps; an axis of one voxel is left alone too) */
+void fimg_smooth_voxels(const fgrid_t *g, double sigma_mm, double sv[3]);
 
 /*
  * Composition out = outer o inner as transforms:

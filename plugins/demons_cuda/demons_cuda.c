@@ -65,26 +65,25 @@ static void dlev_free(void *dv)
 	free(L);
 }
 
-/* fimg_smooth's Gaussian of sigma mm on grid g (lib/field field.c: below
- * 0.05 voxel an axis is left alone, as is an axis of one voxel; lib/img's
- * discrete kernel, its taps as floats); 0 or ARMSTG_ENOMEM */
+/* fimg_smooth's Gaussian of sigma mm on grid g (its widths per axis,
+ * fimg_smooth_voxels; an axis of one voxel left alone, as img_gauss_smooth
+ * does; lib/img's discrete kernel, its taps as floats); 0 or ARMSTG_ENOMEM */
 static int taps_of(dlev_t *L, int q, double sigma)
 {
 	if (L->sig[q] == sigma)
 		return 0;
 	const int n[3] = { L->g.nx, L->g.ny, L->g.nz };
+	double sv[3];
+	fimg_smooth_voxels(&L->g, sigma, sv);
 	for (int a = 0; a < 3; a++) {
 		free(L->taps[q][a]);
 		L->taps[q][a] = NULL;
 		L->gs[q].r[a] = 0;
 		L->gs[q].k[a] = NULL;
-		double sv = sigma / L->g.sp[a];
-		if (sv < 0.05)
-			sv = 0;
-		if (!(sv > 0) || n[a] < 2)
+		if (!(sv[a] > 0) || n[a] < 2)
 			continue;
 		int r;
-		double *ker = img_gauss_kernel(sv, IMG_GAUSS_DISCRETE, &r);
+		double *ker = img_gauss_kernel(sv[a], IMG_GAUSS_DISCRETE, &r);
 		float *kf = ker ? malloc(sizeof(float) * (size_t)(2 * r + 1)) : NULL;
 		if (!kf) {
 			free(ker);
