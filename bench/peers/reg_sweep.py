@@ -51,12 +51,14 @@ def child_cpu():
     return r.ru_utime + r.ru_stime
 
 
-def section(text, name):
-    """the [stage NAME] section of a graph, up to the next section"""
+def section(text, name, kind="stage"):
+    """the [stage NAME] section of a graph (kind "vars": its [vars]), up to
+    the next section"""
+    head = "[vars]" if kind == "vars" else "[stage %s]" % name
     out, on = [], False
     for line in text.splitlines():
         if line.startswith("["):
-            on = line.strip() == "[stage %s]" % name
+            on = line.strip() == head
         if on:
             out.append(line)
     return "\n".join(out) + "\n"
@@ -123,6 +125,9 @@ def main():
     ap.add_argument("--depth", default="0")
     ap.add_argument("--tag", default="")
     ap.add_argument("--set", action="append", default=[])
+    ap.add_argument("--images", default="",
+                    help="replay: FIXED,MOVING images for the register stage instead of the "
+                    "patient's T1 and the grown atlas T1 (MOVING in the atlas's space)")
     ap.add_argument("--armstg", default="build/armstg")
     ap.add_argument("--data", default=os.environ.get("ARMSTG_DATA", "../shared/data"))
     args = ap.parse_args()
@@ -166,7 +171,19 @@ def main():
         for n, port, _ in SINKS:
             reg = reg.replace(port, "%s.volume" % n)
         reg = re.sub(r"^memo\s*=.*$", "memo = false", reg, flags=re.M)
-        g = ("[graph]\nname = reg_sweep\n" + src + reg + "\n" +
+        if args.images:
+            # another pair of images: the patient's (fixed) and the atlas's
+            # (moving, carried by the saved growth field as grown_t1 is)
+            fx, mv = args.images.split(",")
+            src += ("[stage x_fixed]\nplugin = nifti_source\npath = %s\n"
+                    "[stage x_moving0]\nplugin = nifti_source\npath = %s\n"
+                    "[stage x_moving]\nplugin = warp\nvolume = x_moving0.volume\n"
+                    "field = growth_field.volume\n" % (os.path.abspath(fx), os.path.abspath(mv)))
+            reg = re.sub(r"^fixed\s*=.*$", "fixed = x_fixed.volume", reg, flags=re.M)
+            reg = re.sub(r"^moving\s*=.*$", "moving = x_moving.volume", reg, flags=re.M)
+        # the graph's [vars] too: the stage names its plugin as ${DEMONS}
+        g = ("[graph]\nname = reg_sweep\n" + section(graph_text, "vars", "vars") + src +
+             reg + "\n" +
              "[stage total]\nplugin = warp\nmode = compose\nfield = growth_field.volume\n"
              "field2 = register.field\n\n"
              "[stage tumour_in_patient]\nplugin = warp\ninterpolation = nearest\n"
