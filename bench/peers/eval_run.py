@@ -35,8 +35,7 @@ def main():
                  mask=os.path.join(d, "patient_mask.nii.gz"))
         vent = os.path.join(d, "patient_ventricles.nii.gz")
     else:
-        v = c["vent"]
-        vent = os.path.join(a.ventricles, "%s%s_ventricles.nii.gz" % ("pat" if v.isdigit() else "", v))
+        vent = real.vent_file(a.ventricles, c["vent"])
     ref = nib.load(c["t1c"])
     x = peers.world(ref)
     sp = np.sqrt((ref.affine[:3, :3] ** 2).sum(0))
@@ -45,15 +44,7 @@ def main():
     else:
         brain = peers.vol3(nib.load(os.path.join(a.run, "brain_auto.nii.gz"))) > 0
     T = x + peers.itk_field_ras(os.path.join(a.run, "atlas_to_patient_warp.nii.gz"))
-    atl = nib.load(c["atlas_labels"])
-    AL = peers.vol3(atl)
-    inv = np.linalg.inv(atl.affine)
-    ijk = np.rint(T @ inv[:3, :3].T + inv[:3, 3]).astype(int)
-    ok = np.all((ijk >= 0) & (ijk < np.array(AL.shape)), -1)
-    lab = np.zeros(ok.shape, AL.dtype)
-    lab[ok] = AL[ijk[ok][:, 0], ijk[ok][:, 1], ijk[ok][:, 2]]
-    lab[~brain] = 0
-    A = (lab >= 201) & (lab <= 414)
+    A = real.atlas_vent_at(T, nib.load(c["atlas_labels"]), brain)
     P = peers.vol3(nib.load(vent)) > 0
     msd, S, dv = real.vent_metrics(A, P, sp)
     td = float("nan")

@@ -158,8 +158,7 @@ def prepare(args, c, d):
             nib.save(nib.Nifti1Image((pl == 4).astype(np.uint8), ref.affine), vent)
         c["vent_mask"] = vent
     else:
-        c["vent_mask"] = os.path.join(args.out, "ventricles", "%s%s_ventricles.nii.gz"
-                                      % ("pat" if c["vent"].isdigit() else "", c["vent"]))
+        c["vent_mask"] = vent_file(os.path.join(args.out, "ventricles"), c["vent"])
     env = case_env(c)
     if not c["labels"] or not c["mask"]:
         # sts on the case's images: the brain mask (and, without labels,
@@ -357,6 +356,34 @@ def jac_min(T, aff, mask):
     return float(np.linalg.det(J[mask]).min())
 
 
+def vent_file(vd, vent):
+    """the semi-automatic ventricle mask of case key VENT in folder VD
+    (bench/pipeline/ventricles.py's name: pat0001_..., tcga7294_...)"""
+    return os.path.join(vd, "%s%s_ventricles.nii.gz" % ("pat" if vent.isdigit() else "", vent))
+
+
+def ensure_ventricles(data, vd, vents):
+    """make the masks of VENTS (case keys) in VD unless they are there"""
+    if any(not os.path.exists(vent_file(vd, v)) for v in vents):
+        subprocess.run([sys.executable, os.path.join(os.path.dirname(os.path.abspath(__file__)),
+                                                     "..", "pipeline", "ventricles.py"),
+                        "--data", data, "--out", vd] + list(vents), check=True)
+
+
+def atlas_vent_at(T, atl, brain):
+    """the atlas's lateral ventricles (labels 201-414 of the nibabel image
+    ATL) sampled, nearest, at the world points T (RAS mm, one per patient
+    voxel), inside the patient's BRAIN: a boolean mask on the patient grid"""
+    AL = peers.vol3(atl)
+    inv = np.linalg.inv(atl.affine)
+    ijk = np.rint(T @ inv[:3, :3].T + inv[:3, 3]).astype(int)
+    ok = np.all((ijk >= 0) & (ijk < np.array(AL.shape)), -1)
+    lab = np.zeros(ok.shape, AL.dtype)
+    lab[ok] = AL[ijk[ok][:, 0], ijk[ok][:, 1], ijk[ok][:, 2]]
+    lab[~brain] = 0
+    return (lab >= 201) & (lab <= 414)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--armstg", default="build/armstg")
@@ -389,11 +416,7 @@ def main():
     cases = args.cases.split(",")
     real = [c for c in cases if not c.startswith("phantom")]
     vd = os.path.join(args.out, "ventricles")
-    want = [case_def(args.data, c)["vent"] for c in real]
-    if any(not os.path.exists(os.path.join(vd, "%s%s_ventricles.nii.gz" % ("pat" if v.isdigit() else "", v)))
-           for v in want):
-        subprocess.run([sys.executable, os.path.join(args.here, "..", "pipeline", "ventricles.py"),
-                        "--data", args.data, "--out", vd] + want, check=True)
+    ensure_ventricles(args.data, vd, [case_def(args.data, c)["vent"] for c in real])
     tsv = os.path.join(args.out, "real.tsv")
     done = set()
     if os.path.exists(tsv):
@@ -416,8 +439,6 @@ def main():
         sp = np.sqrt((ref.affine[:3, :3] ** 2).sum(0))
         P = peers.vol3(nib.load(c["vent_mask"])) > 0
         atl = nib.load(c["atlas_labels"])
-        AL = peers.vol3(atl)
-        inv = np.linalg.inv(atl.affine)
         band = None
         if c["phantom"]:
             Ttrue = x + peers.itk_field_ras(os.path.join(d, "true_field.nii.gz"))
@@ -442,12 +463,7 @@ def main():
                     f.write("%s\t%s\t%s\n" % (cn, name, " ".join(str(e)[-800:].split())))
                 continue
             load = "%.1f-%.1f" % (l0, os.getloadavg()[0])
-            ijk = np.rint(T @ inv[:3, :3].T + inv[:3, 3]).astype(int)
-            ok = np.all((ijk >= 0) & (ijk < np.array(AL.shape)), -1)
-            lab = np.zeros(ok.shape, AL.dtype)
-            lab[ok] = AL[ijk[ok][:, 0], ijk[ok][:, 1], ijk[ok][:, 2]]
-            lab[~c["brain"]] = 0
-            A = (lab >= 201) & (lab <= 414)
+            A = atlas_vent_at(T, atl, c["brain"])
             msd, S, dv = vent_metrics(A, P, sp)
             td = float("nan")
             if labfile and not c.get("labels_note"):

@@ -97,16 +97,8 @@ def score(args, c, warp, tumour_file):
     x = peers.world(ref)
     sp = np.sqrt((ref.affine[:3, :3] ** 2).sum(0))
     P = peers.vol3(nib.load(c["vent_mask"])) > 0
-    atl = nib.load(c["atlas_labels"])
-    AL = peers.vol3(atl)
-    inv = np.linalg.inv(atl.affine)
     T = x + peers.itk_field_ras(warp)
-    ijk = np.rint(T @ inv[:3, :3].T + inv[:3, 3]).astype(int)
-    ok = np.all((ijk >= 0) & (ijk < np.array(AL.shape)), -1)
-    lab = np.zeros(ok.shape, AL.dtype)
-    lab[ok] = AL[ijk[ok][:, 0], ijk[ok][:, 1], ijk[ok][:, 2]]
-    lab[~c["brain"]] = 0
-    A = (lab >= 201) & (lab <= 414)
+    A = real.atlas_vent_at(T, nib.load(c["atlas_labels"]), c["brain"])
     msd, S, dv = real.vent_metrics(A, P, sp)
     ml = A.sum() * float(np.prod(sp)) / 1000
     td = float("nan")
@@ -128,6 +120,9 @@ def main():
     ap.add_argument("--images", default="",
                     help="replay: FIXED,MOVING images for the register stage instead of the "
                     "patient's T1 and the grown atlas T1 (MOVING in the atlas's space)")
+    ap.add_argument("--pre", default="",
+                    help="replay: 'KEY=V;KEY=V': a first register stage with these keys "
+                    "starts the stage (initial_field)")
     ap.add_argument("--armstg", default="build/armstg")
     ap.add_argument("--data", default=os.environ.get("ARMSTG_DATA", "../shared/data"))
     args = ap.parse_args()
@@ -136,11 +131,7 @@ def main():
     args.data = os.path.abspath(args.data)
     args.here, args.log = here, False
     c = real.case_def(args.data, args.case)
-    vd = os.path.join(args.out, "ventricles")
-    vname = "%s%s_ventricles.nii.gz" % ("pat" if c["vent"].isdigit() else "", c["vent"])
-    if not os.path.exists(os.path.join(vd, vname)):
-        subprocess.run([sys.executable, os.path.join(here, "..", "pipeline", "ventricles.py"),
-                        "--data", args.data, "--out", vd, c["vent"]], check=True)
+    real.ensure_ventricles(args.data, os.path.join(args.out, "ventricles"), [c["vent"]])
     d = os.path.join(args.out, args.case)
     c = real.prepare(args, c, d)
     env = real.case_env(c)
@@ -181,6 +172,16 @@ def main():
                     "field = growth_field.volume\n" % (os.path.abspath(fx), os.path.abspath(mv)))
             reg = re.sub(r"^fixed\s*=.*$", "fixed = x_fixed.volume", reg, flags=re.M)
             reg = re.sub(r"^moving\s*=.*$", "moving = x_moving.volume", reg, flags=re.M)
+        if args.pre:
+            # a first registration (the stage's text with these keys) whose
+            # field starts the stage: a schedule per level without new keys
+            pre = re.sub(r"^\[stage register\]", "[stage register0]", reg, flags=re.M)
+            for kv in args.pre.split(";"):
+                k, v = kv.split("=", 1)
+                pre = re.sub(r"^%s\s*=.*$" % k, "", pre, flags=re.M)
+                pre = pre.replace("[stage register0]\n", "[stage register0]\n%s = %s\n" % (k, v), 1)
+            reg = pre + "\n" + reg.replace("[stage register]\n",
+                                            "[stage register]\ninitial_field = register0.field\n", 1)
         # the graph's [vars] too: the stage names its plugin as ${DEMONS}
         g = ("[graph]\nname = reg_sweep\n" + section(graph_text, "vars", "vars") + src +
              reg + "\n" +

@@ -99,7 +99,6 @@ def main():
     atlas_t1 = os.path.join(s, "spgr.nii.gz")
     atl = nib.load(os.path.join(s, "tzo116plus.nii.gz"))
     AL = peers.vol3(atl)
-    inv = np.linalg.inv(atl.affine)
     ref = nib.load(a.t1c)
     x = peers.world(ref)
     sp = np.sqrt((ref.affine[:3, :3] ** 2).sum(0))
@@ -165,12 +164,7 @@ def main():
                         np.linalg.det(M), " ".join("%.3f" % v for v in np.linalg.svd(M)[1]))
         else:
             T = x + peers.itk_field_ras(src)
-        ijk = np.rint(T @ inv[:3, :3].T + inv[:3, 3]).astype(int)
-        ok = np.all((ijk >= 0) & (ijk < np.array(AL.shape)), -1)
-        lab = np.zeros(ok.shape, AL.dtype)
-        lab[ok] = AL[ijk[ok][:, 0], ijk[ok][:, 1], ijk[ok][:, 2]]
-        lab[~brain] = 0
-        A = (lab >= 201) & (lab <= 414)
+        A = real.atlas_vent_at(T, atl, brain)
         msd, S, dv = real.vent_metrics(A, P, sp)
         shown[name] = A
         # the two directions of the MSD and where the atlas surface is far

@@ -52,8 +52,6 @@ def main():
     sp = np.sqrt((ref.affine[:3, :3] ** 2).sum(0))
     P = peers.vol3(nib.load(c["vent_mask"])) > 0
     atl = nib.load(c["atlas_labels"])
-    AL = peers.vol3(atl)
-    inv = np.linalg.inv(atl.affine)
     T = {"identity": x.copy()}
     if not a.no_ants:
         keep = [os.path.join(dd, f) for f in ("0GenericAffine.mat", "1Warp.nii.gz")]
@@ -92,12 +90,7 @@ def main():
     print("patient ventricles %.1f ml; tumour on the %s of the midline" %
           (P.sum() * vml, "x > mid" if tx > bx else "x < mid"))
     for n, Tn in T.items():
-        ijk = np.rint(Tn @ inv[:3, :3].T + inv[:3, 3]).astype(int)
-        ok = np.all((ijk >= 0) & (ijk < np.array(AL.shape)), -1)
-        lab = np.zeros(ok.shape, AL.dtype)
-        lab[ok] = AL[ijk[ok][:, 0], ijk[ok][:, 1], ijk[ok][:, 2]]
-        lab[~c["brain"]] = 0
-        A = (lab >= 201) & (lab <= 414)
+        A = real.atlas_vent_at(Tn, atl, c["brain"])
         masks[n] = A
         msd, S, dv = real.vent_metrics(A, P, sp)
         m1 = real.vent_metrics(A & side, P & side, sp)[0]
