@@ -119,6 +119,50 @@ static int coarse_transpose(int64_t n, tled_coarse_t *C)
 				     c##_once_ = 1;                           \
 			     c##_once_; c##_once_ = 0)
 
+/*
+ * Factors the assembled band C->A in place: A_c = L L^T by LAPACK dpbtrf
+ * (lower band storage, half-bandwidth C->kd).  A_c is singular when every
+ * node is constrained (the linear fields); a shift of 1e-10 of the largest
+ * diagonal keeps the factor defined, raised tenfold until dpbtrf succeeds
+ * (at most 1e-6).  Returns 0 factored, 1 when there is no factor (a zero
+ * diagonal, or dpbtrf failed at every shift: no coarse level), -1 out of
+ * memory.
+ */
+static int coarse_factor(tled_coarse_t *C)
+{
+	int64_t nc = C->nc, kd = C->kd, ld = kd + 1;
+	double *A = C->A;
+	double dmax = 0;
+	for (int64_t c = 0; c < nc; c++)
+		dmax = fmax(dmax, A[c * ld]);
+	if (!(dmax > 0))
+		return 1;
+	/* the band as assembled, for a retry with a larger shift (dpbtrf
+	 * overwrites it) */
+	double *A0 = malloc((size_t)(ld * nc) * sizeof *A0);
+	if (!A0)
+		return -1;
+	memcpy(A0, A, (size_t)(ld * nc) * sizeof *A0);
+	/* OpenBLAS factors on one thread and on several by different blockings
+	 * (other bits: 1 thread differs from 2, 3, 4 and 8, measured with
+	 * dpotrf at nc = 125); one thread always, so that the factor, and the
+	 * model, do not depend on the thread count. */
+	int blas_nt = openblas_get_num_threads();
+	openblas_set_num_threads(1);
+	lapack_int info = 1;
+	for (double sh = 1e-10; sh <= 1.01e-6 && info; sh *= 10) {
+		if (sh > 1e-10)
+			memcpy(A, A0, (size_t)(ld * nc) * sizeof *A);
+		for (int64_t c = 0; c < nc; c++)
+			A[c * ld] = A0[c * ld] + sh * dmax;
+		info = LAPACKE_dpbtrf(LAPACK_COL_MAJOR, 'L', (lapack_int)nc,
+				      (lapack_int)kd, A, (lapack_int)ld);
+	}
+	openblas_set_num_threads(blas_nt);
+	free(A0);
+	return info ? 1 : 0;
+}
+
 /* Returns 0 (C->nc = 0 when there is no coarse level: too few nodes, or
  * A_c would not factor), -1 out of memory. */
 int tled_coarse_build(const tled_corr_ctx_t *cx, const int64_t *ent_ip,
@@ -131,7 +175,6 @@ int tled_coarse_build(const tled_corr_ctx_t *cx, const int64_t *ent_ip,
 	/* scratch, freed at out: (NULL until allocated) */
 	int64_t *map = NULL, *bstart = NULL, *bip = NULL, *fill = NULL;
 	int32_t *ipblk = NULL, *yz = NULL;
-	double *A0 = NULL;
 	int rc = 0;
 	memset(C, 0, sizeof *C);
 	for (int64_t a = 0; a < n; a++)
@@ -392,42 +435,11 @@ int tled_coarse_build(const tled_corr_ctx_t *cx, const int64_t *ent_ip,
 	}
 	if (fail)
 		goto oom;
-	/* A_c is singular when every node is constrained (the linear fields);
-	 * a shift of 1e-10 of the largest diagonal keeps the factor defined,
-	 * raised tenfold until dpbtrf succeeds (at most 1e-6) */
-	double dmax = 0;
-	for (int64_t c = 0; c < nc; c++)
-		dmax = fmax(dmax, A[c * ld]);
-	if (!(dmax > 0)) {
-		tled_coarse_free(C);
-		goto out;
-	}
-	/* the band as assembled, for a retry with a larger shift (dpbtrf
-	 * overwrites it) */
-	A0 = malloc((size_t)(ld * nc) * sizeof *A0);
-	if (!A0)
+	int frc = coarse_factor(C);
+	if (frc < 0)
 		goto oom;
-	memcpy(A0, A, (size_t)(ld * nc) * sizeof *A0);
-	/* OpenBLAS factors on one thread and on several by different blockings
-	 * (other bits: 1 thread differs from 2, 3, 4 and 8, measured with
-	 * dpotrf at nc = 125); one thread always, so that the factor, and the
-	 * model, do not depend on the thread count. */
-	int blas_nt = openblas_get_num_threads();
-	openblas_set_num_threads(1);
-	lapack_int info = 1;
-	for (double sh = 1e-10; sh <= 1.01e-6 && info; sh *= 10) {
-		if (sh > 1e-10)
-			memcpy(A, A0, (size_t)(ld * nc) * sizeof *A);
-		for (int64_t c = 0; c < nc; c++)
-			A[c * ld] = A0[c * ld] + sh * dmax;
-		info = LAPACKE_dpbtrf(LAPACK_COL_MAJOR, 'L', (lapack_int)nc,
-				      (lapack_int)kd, A, (lapack_int)ld);
-	}
-	openblas_set_num_threads(blas_nt);
-	if (info) {
+	if (frc > 0)
 		tled_coarse_free(C);
-		goto out;
-	}
 	goto out;
 oom:
 	tled_coarse_free(C);
@@ -439,7 +451,6 @@ out:
 	free(bstart);
 	free(bip);
 	free(fill);
-	free(A0);
 	return rc;
 }
 
