@@ -120,6 +120,117 @@ static int coarse_transpose(int64_t n, tled_coarse_t *C)
 			     c##_once_; c##_once_ = 0)
 
 /*
+ * Each ip's (y, z) range of grid rows, from its constrained entries'
+ * cells (C->cid still grid indices, coarse_prolong; corners 0 and 7 bound
+ * a cell): yz[2 p], yz[2 p + 1] = the lowest y and z row (yz[2 p] = -1
+ * for an ip without constrained entries).  *span = the largest y or z
+ * extent of one ip's rows (at least 1), *kmax = the most constrained
+ * entries of one ip (at least 1): maxima, the same on any thread count.
+ */
+static void coarse_ip_rows(const tled_corr_ctx_t *cx, const tled_coarse_t *C,
+			   const int g[3], int32_t *yz, int *span_out,
+			   int *kmax_out)
+{
+	const tled_model_t *m = cx->m;
+	int64_t nip = m->nip;
+	int span = 1, kmax = 1;
+	/* (maxima: the same on any thread count) */
+#pragma omp parallel for schedule(static) reduction(max : span, kmax) num_threads(m->nthreads)
+	for (int64_t p = 0; p < nip; p++) {
+		int y0 = INT32_MAX, y1 = -1, z0 = INT32_MAX, z1 = -1, k = 0;
+		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+			int64_t a = m->ipnode[e];
+			if (!cx->con[a])
+				continue;
+			k++;
+			for (int c = 0; c < 8; c += 7) { /* corners 0 and 7 */
+				int64_t q = C->cid[8 * a + c];
+				int y = (int)((q / g[0]) % g[1]), z = (int)(q / ((int64_t)g[0] * g[1]));
+				y0 = y < y0 ? y : y0;
+				y1 = y > y1 ? y : y1;
+				z0 = z < z0 ? z : z0;
+				z1 = z > z1 ? z : z1;
+			}
+		}
+		yz[2 * p] = y0;
+		yz[2 * p + 1] = z0;
+		if (!k) {
+			yz[2 * p] = -1;
+			continue;
+		}
+		kmax = k > kmax ? k : kmax;
+		span = y1 - y0 > span ? y1 - y0 : span;
+		span = z1 - z0 > span ? z1 - z0 : span;
+	}
+	*span_out = span;
+	*kmax_out = kmax;
+}
+
+/* The ips in blocks of grid columns, for the coloured assembly. */
+typedef struct {
+	int nby, nbz;    /* blocks along y and z */
+	int64_t nblk;    /* nby nbz; block b = by + nby bz */
+	int64_t *bstart; /* nblk + 1: block b's ips are bip[bstart[b] ..
+			  * bstart[b+1]-1] */
+	int64_t *bip;    /* the ips with constrained entries, by block, each
+			  * block in ip order */
+} coarse_blocks_t;
+
+/*
+ * Blocks of span x span grid columns: an ip goes to the block of its
+ * lowest (y, z) row (yz, coarse_ip_rows); two blocks of one colour
+ * ((by & 1) + 2 (bz & 1)) are at least 2 span apart, and an ip's rows
+ * reach span past its block's start, so same-colour blocks never write
+ * the same row.  A stable bucketing: each block keeps ip order.  Returns
+ * 0, -1 out of memory (B's arrays then freed by the caller).
+ */
+static int coarse_blocks(int64_t nip, const int32_t *yz, int span,
+			 const int g[3], coarse_blocks_t *B)
+{
+	int32_t *ipblk = malloc((size_t)(nip > 0 ? nip : 1) * sizeof *ipblk);
+	int64_t *fill = NULL;
+	int nby = g[1] / span + 1, nbz = g[2] / span + 1;
+	int64_t nblk = (int64_t)nby * nbz;
+	B->nby = nby;
+	B->nbz = nbz;
+	B->nblk = nblk;
+	B->bstart = calloc((size_t)nblk + 1, sizeof *B->bstart);
+	B->bip = malloc((size_t)(nip > 0 ? nip : 1) * sizeof *B->bip);
+	fill = malloc((size_t)nblk * sizeof *fill);
+	if (!ipblk || !B->bstart || !B->bip || !fill) {
+		free(ipblk);
+		free(fill);
+		return -1;
+	}
+	int64_t *bstart = B->bstart;
+	for (int64_t p = 0; p < nip; p++) {
+		ipblk[p] = yz[2 * p] < 0 ? -1
+					 : (int32_t)((yz[2 * p] / span) +
+						     (int64_t)nby * (yz[2 * p + 1] / span));
+		if (ipblk[p] >= 0)
+			bstart[ipblk[p] + 1]++;
+	}
+	for (int64_t b = 0; b < nblk; b++)
+		bstart[b + 1] += bstart[b];
+	memcpy(fill, bstart, (size_t)nblk * sizeof *fill);
+	for (int64_t p = 0; p < nip; p++) /* stable: ip order kept */
+		if (ipblk[p] >= 0)
+			B->bip[fill[ipblk[p]]++] = p;
+	free(ipblk);
+	free(fill);
+	return 0;
+}
+
+/* The nodes' corners from grid indices to the compact ones of
+ * coarse_number (map). */
+static void coarse_renumber(int64_t n, const int64_t *map, tled_coarse_t *C)
+{
+	for (int64_t a = 0; a < 8 * n; a++)
+		if (C->cid[a] >= 0)
+			C->cid[a] = (int32_t)map[C->cid[a]];
+}
+
+/*
  * Factors the assembled band C->A in place: A_c = L L^T by LAPACK dpbtrf
  * (lower band storage, half-bandwidth C->kd).  A_c is singular when every
  * node is constrained (the linear fields); a shift of 1e-10 of the largest
@@ -172,10 +283,11 @@ int tled_coarse_build(const tled_corr_ctx_t *cx, const int64_t *ent_ip,
 	int64_t n = m->n, nip = m->nip, ncon = 0;
 	double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX },
 	       hi[3] = { -DBL_MAX, -DBL_MAX, -DBL_MAX };
+	coarse_blocks_t B = { 0 };
 	/* scratch, freed at out: (NULL until allocated) */
-	int64_t *map = NULL, *bstart = NULL, *bip = NULL, *fill = NULL;
-	int32_t *ipblk = NULL, *yz = NULL;
-	int rc = 0;
+	int64_t *map = NULL; /* ng: grid index -> compact index, -1 unused */
+	int32_t *yz = NULL;  /* 2 per ip: its lowest (y, z) grid row */
+	int rc = 0, span, kmax;
 	memset(C, 0, sizeof *C);
 	for (int64_t a = 0; a < n; a++)
 		if (cx->con[a]) {
@@ -256,67 +368,14 @@ int tled_coarse_build(const tled_corr_ctx_t *cx, const int64_t *ent_ip,
 				if (map[q] == 0)
 					map[q] = nc++;
 			}
-	/* each ip's (y, z) range of grid rows, in grid coordinates */
-	ipblk = malloc((size_t)(nip > 0 ? nip : 1) * sizeof *ipblk);
+	/* (while C->cid holds grid indices) */
 	yz = malloc((size_t)(2 * (nip > 0 ? nip : 1)) * sizeof *yz);
-	if (!ipblk || !yz)
+	if (!yz)
 		goto oom;
-	int span = 1, kmax = 1;
-	/* (maxima: the same on any thread count) */
-#pragma omp parallel for schedule(static) reduction(max : span, kmax) num_threads(m->nthreads)
-	for (int64_t p = 0; p < nip; p++) {
-		int y0 = INT32_MAX, y1 = -1, z0 = INT32_MAX, z1 = -1, k = 0;
-		for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
-			int64_t a = m->ipnode[e];
-			if (!cx->con[a])
-				continue;
-			k++;
-			for (int c = 0; c < 8; c += 7) { /* corners 0 and 7 */
-				int64_t q = C->cid[8 * a + c];
-				int y = (int)((q / g[0]) % g[1]), z = (int)(q / ((int64_t)g[0] * g[1]));
-				y0 = y < y0 ? y : y0;
-				y1 = y > y1 ? y : y1;
-				z0 = z < z0 ? z : z0;
-				z1 = z > z1 ? z : z1;
-			}
-		}
-		yz[2 * p] = y0;
-		yz[2 * p + 1] = z0;
-		if (!k) {
-			yz[2 * p] = -1;
-			continue;
-		}
-		kmax = k > kmax ? k : kmax;
-		span = y1 - y0 > span ? y1 - y0 : span;
-		span = z1 - z0 > span ? z1 - z0 : span;
-	}
-	/* blocks of span x span grid columns: two blocks of one colour are at
-	 * least 2 span apart, and an ip's rows reach span past its block's
-	 * start, so same-colour blocks never write the same row */
-	int nby = g[1] / span + 1, nbz = g[2] / span + 1;
-	int64_t nblk = (int64_t)nby * nbz;
-	bstart = calloc((size_t)nblk + 1, sizeof *bstart);
-	bip = malloc((size_t)(nip > 0 ? nip : 1) * sizeof *bip);
-	fill = malloc((size_t)nblk * sizeof *fill);
-	if (!bstart || !bip || !fill)
+	coarse_ip_rows(cx, C, g, yz, &span, &kmax);
+	if (coarse_blocks(nip, yz, span, g, &B))
 		goto oom;
-	for (int64_t p = 0; p < nip; p++) {
-		ipblk[p] = yz[2 * p] < 0 ? -1
-					 : (int32_t)((yz[2 * p] / span) +
-						     (int64_t)nby * (yz[2 * p + 1] / span));
-		if (ipblk[p] >= 0)
-			bstart[ipblk[p] + 1]++;
-	}
-	for (int64_t b = 0; b < nblk; b++)
-		bstart[b + 1] += bstart[b];
-	memcpy(fill, bstart, (size_t)nblk * sizeof *fill);
-	for (int64_t p = 0; p < nip; p++) /* stable: ip order kept */
-		if (ipblk[p] >= 0)
-			bip[fill[ipblk[p]]++] = p;
-	/* compact indices for the nodes' corners */
-	for (int64_t a = 0; a < 8 * n; a++)
-		if (C->cid[a] >= 0)
-			C->cid[a] = (int32_t)map[C->cid[a]];
+	coarse_renumber(n, map, C);
 	C->nc = nc;
 	if (coarse_transpose(n, C))
 		goto oom;
@@ -357,12 +416,12 @@ int tled_coarse_build(const tled_corr_ctx_t *cx, const int64_t *ent_ip,
 				for (int64_t c = 0; c < nc; c++)
 					slot[c] = -1;
 #pragma omp for schedule(dynamic, 1)
-			for (int64_t b = 0; b < nblk; b++) {
-				int by = (int)(b % nby), bz = (int)(b / nby);
+			for (int64_t b = 0; b < B.nblk; b++) {
+				int by = (int)(b % B.nby), bz = (int)(b / B.nby);
 				if (fail || (by & 1) + 2 * (bz & 1) != colour)
 					continue;
-				for (int64_t t = bstart[b]; t < bstart[b + 1]; t++) {
-					int64_t p = bip[t];
+				for (int64_t t = B.bstart[b]; t < B.bstart[b + 1]; t++) {
+					int64_t p = B.bip[t];
 					double V = m->ipV[p];
 					const double *Mp = cx->Mi + 16 * p;
 					int nl = 0;
@@ -446,11 +505,9 @@ oom:
 	rc = -1;
 out:
 	free(map);
-	free(ipblk);
 	free(yz);
-	free(bstart);
-	free(bip);
-	free(fill);
+	free(B.bstart);
+	free(B.bip);
 	return rc;
 }
 
