@@ -231,6 +231,166 @@ static void coarse_renumber(int64_t n, const int64_t *map, tled_coarse_t *C)
 }
 
 /*
+ * The half-bandwidth kd of A_c: the largest index distance between two
+ * coarse points of one ip (a max: the same on any thread count), at most
+ * nc - 1.  C->cid holds the compact indices.
+ */
+static int64_t coarse_bandwidth(const tled_corr_ctx_t *cx,
+				const tled_coarse_t *C)
+{
+	const tled_model_t *m = cx->m;
+	int64_t nip = m->nip, kd = 0;
+#pragma omp parallel for schedule(static) reduction(max : kd) num_threads(m->nthreads)
+	for (int64_t p = 0; p < nip; p++) {
+		int32_t c0 = INT32_MAX, c1 = -1;
+		FOR_IP_COARSE(cx, C, p, i, c) {
+			c0 = c < c0 ? c : c0;
+			c1 = c > c1 ? c : c1;
+		}
+		if (c1 >= 0 && c1 - c0 > kd)
+			kd = c1 - c0;
+	}
+	if (kd > C->nc - 1)
+		kd = C->nc - 1;
+	return kd;
+}
+
+/* One thread's scratch for coarse_assemble_ip (kmax: the most
+ * constrained entries of one ip, mmax = 8 kmax coarse points). */
+typedef struct {
+	int32_t *slot; /* nc: a coarse point's place in list, -1 = none */
+	int32_t *list; /* mmax: the ip's distinct coarse points */
+	int *es;       /* 8 kmax: each walked point's place in list */
+	double *Bv;    /* 8 mmax: B (4 per point), then M^-1 B (4 per point) */
+	double *D;     /* mmax^2: sum_e w_e R_e^T R_e, then minus B^T M^-1 B */
+} coarse_scratch_t;
+
+/*
+ * Adds ip p's term V_p [ sum_e w_e R_e^T R_e - B^T M_p^-1 B ] (the header
+ * comment's assembly; V_p in m^3, w_e, p_e and R_e dimensionless, so A_c
+ * in m^3) into the lower band of A (C->A, leading dimension ld = kd + 1):
+ * (r, c) = (list[i], list[l]) with c <= r.  S->slot must hold -1 on entry
+ * and does again on return.
+ */
+static void coarse_assemble_ip(const tled_corr_ctx_t *cx,
+			       const tled_coarse_t *C, int64_t p, int64_t ld,
+			       coarse_scratch_t *S)
+{
+	const tled_model_t *m = cx->m;
+	double *A = C->A;
+	int32_t *slot = S->slot, *list = S->list;
+	int *es = S->es;
+	double *Bv = S->Bv, *D = S->D;
+	double V = m->ipV[p];
+	const double *Mp = cx->Mi + 16 * p;
+	int nl = 0;
+	/* the ip's coarse points: their slots */
+	FOR_IP_COARSE(cx, C, p, i, c) {
+		if (slot[c] < 0) {
+			slot[c] = nl;
+			list[nl++] = c;
+		}
+		es[i] = slot[c];
+	}
+	memset(D, 0, (size_t)nl * nl * sizeof *D);
+	memset(Bv, 0, (size_t)(4 * nl) * sizeof *Bv);
+	int j = 0;
+	for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
+		int64_t a = m->ipnode[e];
+		if (!cx->con[a])
+			continue;
+		const double *wt = C->cw + 8 * a, *pe = cx->P + 4 * e;
+		const int *sl = es + 8 * j++;
+		double we = cx->w[e];
+		for (int k = 0; k < 8; k++) {
+			double f1 = we * wt[k];
+			if (f1 == 0)
+				continue;
+			double *bk = Bv + 4 * sl[k];
+			for (int r = 0; r < 4; r++)
+				bk[r] += f1 * pe[r];
+			double *Dk = D + (size_t)sl[k] * nl;
+			for (int l = 0; l < 8; l++)
+				Dk[sl[l]] += f1 * wt[l];
+		}
+	}
+	/* D -= B^T M^-1 B; Cv = M^-1 B in Bv's upper half */
+	double *Cv = Bv + 4 * nl;
+	for (int i = 0; i < nl; i++)
+		for (int r = 0; r < 4; r++)
+			Cv[4 * i + r] = Mp[4 * r] * Bv[4 * i] +
+					Mp[4 * r + 1] * Bv[4 * i + 1] +
+					Mp[4 * r + 2] * Bv[4 * i + 2] +
+					Mp[4 * r + 3] * Bv[4 * i + 3];
+	/* the lower band: (r, c) = (list[i], list[l]), c <= r <= c + kd */
+	for (int i = 0; i < nl; i++) {
+		const double *bi = Bv + 4 * i;
+		int64_t r = list[i];
+		for (int l = 0; l < nl; l++) {
+			int64_t c = list[l];
+			if (c > r)
+				continue;
+			const double *cl = Cv + 4 * l;
+			double v = D[(size_t)i * nl + l] -
+				   (bi[0] * cl[0] + bi[1] * cl[1] +
+				    bi[2] * cl[2] + bi[3] * cl[3]);
+			A[c * ld + r - c] += V * v;
+		}
+	}
+	for (int i = 0; i < nl; i++)
+		slot[list[i]] = -1;
+}
+
+/*
+ * A_c = R^T Q R into C->A (zeroed, (kd + 1) nc, LAPACK's lower band
+ * storage): the four colours of blocks one after the other, the blocks of
+ * one colour in parallel (their rows never overlap, coarse_blocks), each
+ * block's ips in ip order: the same sums on any thread count.  kmax: the
+ * most constrained entries of one ip (coarse_ip_rows).  Returns 0, -1 out
+ * of memory.
+ */
+static int coarse_assemble(const tled_corr_ctx_t *cx, const tled_coarse_t *C,
+			   const coarse_blocks_t *B, int kmax)
+{
+	const tled_model_t *m = cx->m;
+	int64_t nc = C->nc, ld = C->kd + 1, nblk = B->nblk;
+	int nby = B->nby;
+	int mmax = 8 * kmax, fail = 0;
+	for (int colour = 0; colour < 4; colour++) {
+#pragma omp parallel num_threads(m->nthreads) reduction(| : fail)
+		{
+			coarse_scratch_t S;
+			S.slot = malloc((size_t)nc * sizeof *S.slot);
+			S.list = malloc((size_t)mmax * sizeof *S.list);
+			S.es = malloc((size_t)(8 * kmax) * sizeof *S.es);
+			S.Bv = malloc((size_t)(8 * mmax) * sizeof *S.Bv);
+			S.D = malloc((size_t)mmax * mmax * sizeof *S.D);
+			if (!S.slot || !S.list || !S.es || !S.Bv || !S.D)
+				fail = 1;
+			else
+				for (int64_t c = 0; c < nc; c++)
+					S.slot[c] = -1;
+#pragma omp for schedule(dynamic, 1)
+			for (int64_t b = 0; b < nblk; b++) {
+				int by = (int)(b % nby), bz = (int)(b / nby);
+				if (fail || (by & 1) + 2 * (bz & 1) != colour)
+					continue;
+				for (int64_t t = B->bstart[b]; t < B->bstart[b + 1]; t++)
+					coarse_assemble_ip(cx, C, B->bip[t], ld, &S);
+			}
+			free(S.slot);
+			free(S.list);
+			free(S.es);
+			free(S.Bv);
+			free(S.D);
+		}
+		if (fail)
+			break;
+	}
+	return fail ? -1 : 0;
+}
+
+/*
  * Factors the assembled band C->A in place: A_c = L L^T by LAPACK dpbtrf
  * (lower band storage, half-bandwidth C->kd).  A_c is singular when every
  * node is constrained (the linear fields); a shift of 1e-10 of the largest
@@ -379,120 +539,13 @@ int tled_coarse_build(const tled_corr_ctx_t *cx, const int64_t *ent_ip,
 	C->nc = nc;
 	if (coarse_transpose(n, C))
 		goto oom;
-	/* the half-bandwidth: the largest index distance between two coarse
-	 * points of one ip (a max: the same on any thread count) */
-	int64_t kd = 0;
-#pragma omp parallel for schedule(static) reduction(max : kd) num_threads(m->nthreads)
-	for (int64_t p = 0; p < nip; p++) {
-		int32_t c0 = INT32_MAX, c1 = -1;
-		FOR_IP_COARSE(cx, C, p, i, c) {
-			c0 = c < c0 ? c : c0;
-			c1 = c > c1 ? c : c1;
-		}
-		if (c1 >= 0 && c1 - c0 > kd)
-			kd = c1 - c0;
-	}
-	if (kd > nc - 1)
-		kd = nc - 1;
-	C->kd = kd;
-	int64_t ld = kd + 1;
+	C->kd = coarse_bandwidth(cx, C);
+	int64_t ld = C->kd + 1;
 	C->A = calloc((size_t)(ld * nc), sizeof *C->A);
 	C->rc = malloc((size_t)(3 * nc) * sizeof *C->rc);
 	if (!C->A || !C->rc)
 		goto oom;
-	double *A = C->A;
-	int mmax = 8 * kmax, fail = 0;
-	for (int colour = 0; colour < 4; colour++) {
-#pragma omp parallel num_threads(m->nthreads) reduction(| : fail)
-		{
-			int32_t *slot = malloc((size_t)nc * sizeof *slot);
-			int32_t *list = malloc((size_t)mmax * sizeof *list);
-			int *es = malloc((size_t)(8 * kmax) * sizeof *es);
-			double *Bv = malloc((size_t)(8 * mmax) * sizeof *Bv);
-			double *D = malloc((size_t)mmax * mmax * sizeof *D);
-			if (!slot || !list || !es || !Bv || !D)
-				fail = 1;
-			else
-				for (int64_t c = 0; c < nc; c++)
-					slot[c] = -1;
-#pragma omp for schedule(dynamic, 1)
-			for (int64_t b = 0; b < B.nblk; b++) {
-				int by = (int)(b % B.nby), bz = (int)(b / B.nby);
-				if (fail || (by & 1) + 2 * (bz & 1) != colour)
-					continue;
-				for (int64_t t = B.bstart[b]; t < B.bstart[b + 1]; t++) {
-					int64_t p = B.bip[t];
-					double V = m->ipV[p];
-					const double *Mp = cx->Mi + 16 * p;
-					int nl = 0;
-					/* the ip's coarse points: their slots */
-					FOR_IP_COARSE(cx, C, p, i, c) {
-						if (slot[c] < 0) {
-							slot[c] = nl;
-							list[nl++] = c;
-						}
-						es[i] = slot[c];
-					}
-					memset(D, 0, (size_t)nl * nl * sizeof *D);
-					memset(Bv, 0, (size_t)(4 * nl) * sizeof *Bv);
-					int j = 0;
-					for (int64_t e = m->ipptr[p]; e < m->ipptr[p + 1]; e++) {
-						int64_t a = m->ipnode[e];
-						if (!cx->con[a])
-							continue;
-						const double *wt = C->cw + 8 * a, *pe = cx->P + 4 * e;
-						const int *sl = es + 8 * j++;
-						double we = cx->w[e];
-						for (int k = 0; k < 8; k++) {
-							double f1 = we * wt[k];
-							if (f1 == 0)
-								continue;
-							double *bk = Bv + 4 * sl[k];
-							for (int r = 0; r < 4; r++)
-								bk[r] += f1 * pe[r];
-							double *Dk = D + (size_t)sl[k] * nl;
-							for (int l = 0; l < 8; l++)
-								Dk[sl[l]] += f1 * wt[l];
-						}
-					}
-					/* D -= B^T M^-1 B; Cv = M^-1 B in Bv's upper half */
-					double *Cv = Bv + 4 * nl;
-					for (int i = 0; i < nl; i++)
-						for (int r = 0; r < 4; r++)
-							Cv[4 * i + r] = Mp[4 * r] * Bv[4 * i] +
-									Mp[4 * r + 1] * Bv[4 * i + 1] +
-									Mp[4 * r + 2] * Bv[4 * i + 2] +
-									Mp[4 * r + 3] * Bv[4 * i + 3];
-					/* the lower band: (r, c) = (list[i],
-					 * list[l]), c <= r <= c + kd */
-					for (int i = 0; i < nl; i++) {
-						const double *bi = Bv + 4 * i;
-						int64_t r = list[i];
-						for (int l = 0; l < nl; l++) {
-							int64_t c = list[l];
-							if (c > r)
-								continue;
-							const double *cl = Cv + 4 * l;
-							double v = D[(size_t)i * nl + l] -
-								   (bi[0] * cl[0] + bi[1] * cl[1] +
-								    bi[2] * cl[2] + bi[3] * cl[3]);
-							A[c * ld + r - c] += V * v;
-						}
-					}
-					for (int i = 0; i < nl; i++)
-						slot[list[i]] = -1;
-				}
-			}
-			free(slot);
-			free(list);
-			free(es);
-			free(Bv);
-			free(D);
-		}
-		if (fail)
-			break;
-	}
-	if (fail)
+	if (coarse_assemble(cx, C, &B, kmax))
 		goto oom;
 	int frc = coarse_factor(C);
 	if (frc < 0)
