@@ -39,10 +39,11 @@ int openblas_get_num_threads(void);
  * trilinear weights of node a):
  *     R^T Q_p R = V_p [ sum_e w_e R_e^T R_e - B^T M_p^-1 B ],
  *     B = sum_e w_e p_e R_e  (4 x the ip's coarse points),
- * added into the dense A_c.  The ips are processed in blocks of coarse
- * (y, z) columns, four colours of blocks whose coarse rows never overlap,
- * each block in ip order: the sum has the same order on any thread count
- * (deterministic).
+ * added into A_c's lower band (coarse_assemble_ip; A_c in m^3: V_p in
+ * m^3, w_e, p_e and R_e dimensionless).  The ips are processed in blocks
+ * of coarse (y, z) columns, four colours of blocks whose coarse rows never
+ * overlap, each block in ip order: the sum has the same order on any
+ * thread count (deterministic).
  *
  * A_c is a band matrix: an ip couples only the coarse points of its
  * support's cells, so A_c(c, c') = 0 unless c and c' lie within a few grid
@@ -120,12 +121,159 @@ static int coarse_transpose(int64_t n, tled_coarse_t *C)
 			     c##_once_; c##_once_ = 0)
 
 /*
+ * The steps of tled_coarse_build, in their order:
+ *   coarse_grid        the grid: origin, spacing H (m), points per axis
+ *   coarse_prolong     R: each constrained node's cell (grid indices) and
+ *                      trilinear weights; marks the grid points used
+ *   coarse_number      the used points' compact numbers, longest axis
+ *                      slowest (A_c's band)
+ *   coarse_ip_rows     each ip's lowest (y, z) grid row, the rows' largest
+ *                      span and the most constrained entries of one ip
+ *   coarse_blocks      the ips bucketed into the span x span blocks of
+ *                      grid columns that the assembly colours
+ *   coarse_renumber    the nodes' corners from grid to compact indices
+ *   coarse_transpose   R^T as rows per coarse point (above)
+ *   coarse_bandwidth   the half-bandwidth kd of A_c
+ *   coarse_assemble    A_c = R^T Q R, block colour by colour
+ *                      (coarse_assemble_ip: one ip's term)
+ *   coarse_factor      A_c's band Cholesky factor (LAPACK dpbtrf), with
+ *                      the shift that the singular case needs
+ */
+
+/* The coarse grid: a regular grid of spacing H over the constrained
+ * nodes' bounding box, g[i] points along axis i (x fastest in a grid
+ * index q = (z g[1] + y) g[0] + x). */
+typedef struct {
+	double lo[3]; /* origin (the box's low corner, nudged by 1e-9 H), m */
+	double H;     /* spacing, m */
+	int g[3];     /* points per axis (x, y, z) */
+} coarse_grid_t;
+
+/*
+ * The grid over cx's constrained nodes (positions m->X, m): spacing
+ * H = f h_mean (m) with f = cbrt(ncon / TLED_COARSE_TARGET) held to 3..12
+ * node spacings, so that the grid has about TLED_COARSE_TARGET interior
+ * points (fewer where f is held at 3: below 54 000 constrained nodes);
+ * g[i] = floor((hi - lo) / H) + 2 points (one cell more than the box's
+ * whole cells) cover the box.  Returns 0 when there is no coarse level
+ * (fewer than 64 constrained nodes, or no mean spacing: Jacobi CG is cheap
+ * enough), else 1 with *G set.
+ */
+static int coarse_grid(const tled_corr_ctx_t *cx, coarse_grid_t *G)
+{
+	const tled_model_t *m = cx->m;
+	int64_t n = m->n, ncon = 0;
+	double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX },
+	       hi[3] = { -DBL_MAX, -DBL_MAX, -DBL_MAX };
+	for (int64_t a = 0; a < n; a++)
+		if (cx->con[a]) {
+			ncon++;
+			for (int i = 0; i < 3; i++) {
+				lo[i] = fmin(lo[i], m->X[3 * a + i]);
+				hi[i] = fmax(hi[i], m->X[3 * a + i]);
+			}
+		}
+	if (ncon < 64 || !(m->h_mean > 0))
+		return 0;
+	/* H: about TLED_COARSE_TARGET interior grid points, 3..12 spacings */
+	double f = cbrt((double)ncon / TLED_COARSE_TARGET);
+	f = f < 3 ? 3 : f > 12 ? 12 : f;
+	double H = f * m->h_mean;
+	for (int i = 0; i < 3; i++) {
+		G->g[i] = (int)floor((hi[i] - lo[i]) / H) + 2;
+		lo[i] -= 1e-9 * H;
+		G->lo[i] = lo[i];
+	}
+	G->H = H;
+	return 1;
+}
+
+/*
+ * The prolongation R: for every constrained node a, its grid cell b (the
+ * cell's low corner, clamped into the grid) and local coordinates
+ * t = (X_a - lo) / H - b in [0, 1]^3 give the 8 corners' grid indices
+ * C->cid[8 a + k] (k = dx + 2 dy + 4 dz) and trilinear weights
+ * C->cw[8 a + k] = prod_i (d_i ? t_i : 1 - t_i) (dimensionless, sum 1:
+ * they reproduce linear fields); map[q] = 0 marks each corner used.
+ * Unconstrained nodes get cid -1 and weight 0.  map (ng) must hold -1.
+ */
+static void coarse_prolong(const tled_corr_ctx_t *cx, const coarse_grid_t *G,
+			   int64_t *map, tled_coarse_t *C)
+{
+	const tled_model_t *m = cx->m;
+	const int *g = G->g;
+	for (int64_t a = 0; a < m->n; a++) {
+		int32_t *id = C->cid + 8 * a;
+		double *wt = C->cw + 8 * a;
+		if (!cx->con[a]) {
+			for (int k = 0; k < 8; k++) {
+				id[k] = -1;
+				wt[k] = 0;
+			}
+			continue;
+		}
+		int b[3];
+		double t[3];
+		for (int i = 0; i < 3; i++) {
+			double s = (m->X[3 * a + i] - G->lo[i]) / G->H;
+			b[i] = (int)floor(s);
+			if (b[i] > g[i] - 2)
+				b[i] = g[i] - 2;
+			if (b[i] < 0)
+				b[i] = 0;
+			t[i] = s - b[i];
+		}
+		for (int k = 0; k < 8; k++) {
+			int dx = k & 1, dy = (k >> 1) & 1, dz = k >> 2;
+			int64_t q = ((int64_t)(b[2] + dz) * g[1] + b[1] + dy) * g[0] +
+				    b[0] + dx;
+			wt[k] = (dx ? t[0] : 1 - t[0]) * (dy ? t[1] : 1 - t[1]) *
+				(dz ? t[2] : 1 - t[2]);
+			id[k] = (int32_t)q; /* grid index for now */
+			map[q] = 0;
+		}
+	}
+}
+
+/*
+ * The compact indices of the grid points that coarse_prolong marked
+ * (map[q] == 0 -> 0..nc-1, the others stay -1), with the longest grid
+ * axis slowest, the shortest fastest: the band of A_c is then about 3
+ * planes of the two shorter axes wide (the numbering only; the grid index
+ * q stays x fastest).  Returns nc.
+ */
+static int64_t coarse_number(const coarse_grid_t *G, int64_t *map)
+{
+	const int *g = G->g;
+	int ax[3] = { 0, 1, 2 };
+	for (int i = 0; i < 2; i++)
+		for (int j = i + 1; j < 3; j++)
+			if (g[ax[j]] < g[ax[i]]) {
+				int t = ax[i];
+				ax[i] = ax[j];
+				ax[j] = t;
+			}
+	int64_t st[3] = { 1, g[0], (int64_t)g[0] * g[1] }; /* q strides */
+	int64_t nc = 0;
+	for (int i2 = 0; i2 < g[ax[2]]; i2++)
+		for (int i1 = 0; i1 < g[ax[1]]; i1++)
+			for (int i0 = 0; i0 < g[ax[0]]; i0++) {
+				int64_t q = i0 * st[ax[0]] + i1 * st[ax[1]] +
+					    i2 * st[ax[2]];
+				if (map[q] == 0)
+					map[q] = nc++;
+			}
+	return nc;
+}
+
+/*
  * Each ip's (y, z) range of grid rows, from its constrained entries'
  * cells (C->cid still grid indices, coarse_prolong; corners 0 and 7 bound
  * a cell): yz[2 p], yz[2 p + 1] = the lowest y and z row (yz[2 p] = -1
  * for an ip without constrained entries).  *span = the largest y or z
  * extent of one ip's rows (at least 1), *kmax = the most constrained
  * entries of one ip (at least 1): maxima, the same on any thread count.
+ * g: the grid's points per axis (coarse_grid_t).
  */
 static void coarse_ip_rows(const tled_corr_ctx_t *cx, const tled_coarse_t *C,
 			   const int g[3], int32_t *yz, int *span_out,
@@ -181,8 +329,9 @@ typedef struct {
  * lowest (y, z) row (yz, coarse_ip_rows); two blocks of one colour
  * ((by & 1) + 2 (bz & 1)) are at least 2 span apart, and an ip's rows
  * reach span past its block's start, so same-colour blocks never write
- * the same row.  A stable bucketing: each block keeps ip order.  Returns
- * 0, -1 out of memory (B's arrays then freed by the caller).
+ * the same row.  A stable bucketing: each block keeps ip order.  g: the
+ * grid's points per axis.  Returns 0, -1 out of memory (B's arrays then
+ * freed by the caller).
  */
 static int coarse_blocks(int64_t nip, const int32_t *yz, int span,
 			 const int g[3], coarse_blocks_t *B)
@@ -435,40 +584,22 @@ static int coarse_factor(tled_coarse_t *C)
 }
 
 /* Returns 0 (C->nc = 0 when there is no coarse level: too few nodes, or
- * A_c would not factor), -1 out of memory. */
+ * A_c would not factor), -1 out of memory.  The steps: the list above. */
 int tled_coarse_build(const tled_corr_ctx_t *cx, const int64_t *ent_ip,
 		      tled_coarse_t *C)
 {
 	const tled_model_t *m = cx->m;
-	int64_t n = m->n, nip = m->nip, ncon = 0;
-	double lo[3] = { DBL_MAX, DBL_MAX, DBL_MAX },
-	       hi[3] = { -DBL_MAX, -DBL_MAX, -DBL_MAX };
+	int64_t n = m->n, nip = m->nip;
+	coarse_grid_t G;
 	coarse_blocks_t B = { 0 };
 	/* scratch, freed at out: (NULL until allocated) */
 	int64_t *map = NULL; /* ng: grid index -> compact index, -1 unused */
 	int32_t *yz = NULL;  /* 2 per ip: its lowest (y, z) grid row */
 	int rc = 0, span, kmax;
 	memset(C, 0, sizeof *C);
-	for (int64_t a = 0; a < n; a++)
-		if (cx->con[a]) {
-			ncon++;
-			for (int i = 0; i < 3; i++) {
-				lo[i] = fmin(lo[i], m->X[3 * a + i]);
-				hi[i] = fmax(hi[i], m->X[3 * a + i]);
-			}
-		}
-	if (ncon < 64 || !(m->h_mean > 0))
+	if (!coarse_grid(cx, &G))
 		return 0; /* Jacobi CG is cheap enough */
-	/* H: about TLED_COARSE_TARGET interior grid points, 3..12 spacings */
-	double f = cbrt((double)ncon / TLED_COARSE_TARGET);
-	f = f < 3 ? 3 : f > 12 ? 12 : f;
-	double H = f * m->h_mean;
-	int g[3];
-	for (int i = 0; i < 3; i++) {
-		g[i] = (int)floor((hi[i] - lo[i]) / H) + 2;
-		lo[i] -= 1e-9 * H;
-	}
-	int64_t ng = (int64_t)g[0] * g[1] * g[2];
+	int64_t ng = (int64_t)G.g[0] * G.g[1] * G.g[2];
 	map = malloc((size_t)ng * sizeof *map);
 	C->cid = malloc((size_t)(8 * n) * sizeof *C->cid);
 	C->cw = malloc((size_t)(8 * n) * sizeof *C->cw);
@@ -476,64 +607,14 @@ int tled_coarse_build(const tled_corr_ctx_t *cx, const int64_t *ent_ip,
 		goto oom;
 	for (int64_t q = 0; q < ng; q++)
 		map[q] = -1;
-	for (int64_t a = 0; a < n; a++) {
-		int32_t *id = C->cid + 8 * a;
-		double *wt = C->cw + 8 * a;
-		if (!cx->con[a]) {
-			for (int k = 0; k < 8; k++) {
-				id[k] = -1;
-				wt[k] = 0;
-			}
-			continue;
-		}
-		int b[3];
-		double t[3];
-		for (int i = 0; i < 3; i++) {
-			double s = (m->X[3 * a + i] - lo[i]) / H;
-			b[i] = (int)floor(s);
-			if (b[i] > g[i] - 2)
-				b[i] = g[i] - 2;
-			if (b[i] < 0)
-				b[i] = 0;
-			t[i] = s - b[i];
-		}
-		for (int k = 0; k < 8; k++) {
-			int dx = k & 1, dy = (k >> 1) & 1, dz = k >> 2;
-			int64_t q = ((int64_t)(b[2] + dz) * g[1] + b[1] + dy) * g[0] +
-				    b[0] + dx;
-			wt[k] = (dx ? t[0] : 1 - t[0]) * (dy ? t[1] : 1 - t[1]) *
-				(dz ? t[2] : 1 - t[2]);
-			id[k] = (int32_t)q; /* grid index for now */
-			map[q] = 0;
-		}
-	}
-	/* compact indices with the longest grid axis slowest, the shortest
-	 * fastest: the band of A_c is then about 3 planes of the two shorter
-	 * axes wide (the numbering only; the grid index q stays x fastest) */
-	int ax[3] = { 0, 1, 2 };
-	for (int i = 0; i < 2; i++)
-		for (int j = i + 1; j < 3; j++)
-			if (g[ax[j]] < g[ax[i]]) {
-				int t = ax[i];
-				ax[i] = ax[j];
-				ax[j] = t;
-			}
-	int64_t st[3] = { 1, g[0], (int64_t)g[0] * g[1] }; /* q strides */
-	int64_t nc = 0;
-	for (int i2 = 0; i2 < g[ax[2]]; i2++)
-		for (int i1 = 0; i1 < g[ax[1]]; i1++)
-			for (int i0 = 0; i0 < g[ax[0]]; i0++) {
-				int64_t q = i0 * st[ax[0]] + i1 * st[ax[1]] +
-					    i2 * st[ax[2]];
-				if (map[q] == 0)
-					map[q] = nc++;
-			}
+	coarse_prolong(cx, &G, map, C);
+	int64_t nc = coarse_number(&G, map);
 	/* (while C->cid holds grid indices) */
 	yz = malloc((size_t)(2 * (nip > 0 ? nip : 1)) * sizeof *yz);
 	if (!yz)
 		goto oom;
-	coarse_ip_rows(cx, C, g, yz, &span, &kmax);
-	if (coarse_blocks(nip, yz, span, g, &B))
+	coarse_ip_rows(cx, C, G.g, yz, &span, &kmax);
+	if (coarse_blocks(nip, yz, span, G.g, &B))
 		goto oom;
 	coarse_renumber(n, map, C);
 	C->nc = nc;
