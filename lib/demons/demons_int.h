@@ -21,7 +21,7 @@
 #define MAX_LEVELS 8
 
 enum { FORCE_SYMMETRIC, FORCE_THIRION };
-enum { METRIC_SSD, METRIC_LNCC };
+enum { METRIC_SSD, METRIC_LNCC, METRIC_MI };
 enum { UPD_DIFFEO, UPD_ADDITIVE };
 enum { NORM_HIST, NORM_MINMAX, NORM_NONE, NORM_LOCAL };
 enum { SIGMA_MM, SIGMA_VOXEL, SIGMA_IMAGE_VOXEL };
@@ -46,6 +46,7 @@ typedef struct demons_priv {
 	double local_sigma;  /* mm */
 	int metric;
 	int radius;          /* voxels of the level (lncc window) */
+	int bins;            /* metric=mi: histogram bins per image */
 	int crop;
 	double label_weight;
 	double label_reach;  /* mm */
@@ -113,6 +114,9 @@ void dm_compute_force(const demons_priv_t *p, const level_t *L,
 			  int nt);
 int dm_compute_force_lncc(const demons_priv_t *p, const level_t *L,
 			      fimg_t *U, double *score, int64_t *nused, int nt);
+/* demons_mi.c */
+int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
+			double *score, int64_t *nused, int nt);
 void dm_update_stats(fimg_t *U, const level_t *L, float scale,
 			 double *mean, double *max, double *max_vox, int nt);
 

@@ -82,6 +82,11 @@
  *   through the same diffeomorphic composition and field smoothing.  The
  *   convergence test watches 1 - mean CC in place of the MSE.
  *
+ * metric=mi: the gradient of the mutual information of F and W (one global
+ * joint histogram, Parzen-smoothed; the equations in demons_mi.c), scaled
+ * as the LNCC update; the convergence test watches log(bins) - MI.  No
+ * backend runs it: a demons_cuda stage runs such levels on the host.
+ *
  * fixed_label and moving_label (optional, together) add the label term of
  * demons_label.c: a demons step between the two regions' clamped signed
  * distances, added to the image term's update at each iteration, so that
@@ -153,7 +158,7 @@ int dm_stage_init(armstg_stage_t *st)
 
 static int add_row(armstg_stage_t *st, tab_t *t, int level, int it,
 		   double mse, double mean_u, double max_u, double secs,
-		   int lncc)
+		   const demons_priv_t *p)
 {
 	const armstg_host_t *h = st->host;
 	if (!t)
@@ -163,8 +168,10 @@ static int add_row(armstg_stage_t *st, tab_t *t, int level, int it,
 		return ARMSTG_ENOMEM;
 	h->tab_set_num(t, r, "level", level);
 	h->tab_set_num(t, r, "iteration", it);
-	if (lncc)
+	if (p->metric == METRIC_LNCC)
 		h->tab_set_num(t, r, "lncc", 1 - mse);
+	else if (p->metric == METRIC_MI) /* nats; the cost is log(bins) - MI */
+		h->tab_set_num(t, r, "mi", log((double)p->bins) - mse);
 	else
 		h->tab_set_num(t, r, "mse", mse);
 	h->tab_set_num(t, r, "mean_update_mm", mean_u);
@@ -360,8 +367,7 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 			for (int i = 0; i < nr && !rc; i++) {
 				const dm_memo_row_t *w = &rows[i];
 				rc = add_row(st, tab, w->level, w->it, w->cost,
-					     w->mean_u, w->max_u, secs,
-					     p->metric == METRIC_LNCC);
+					     w->mean_u, w->max_u, secs, p);
 				if (!rc && use_label) {
 					h->tab_set_num(tab, tab->nrows - 1,
 						       "label_dice", w->ldice);
@@ -471,7 +477,7 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 		}
 		/* a backend runs the level's iterations (below) on its own
 		 * buffers: the host's window sums are not needed then */
-		const int on_dev = be && iters[l] > 0 &&
+		const int on_dev = be && iters[l] > 0 && p->metric != METRIC_MI &&
 				   !label_at(p, use_label, l, nlev);
 		if (p->metric == METRIC_LNCC && !on_dev &&
 		    !(L.sums = malloc(sizeof(float) * 6 * (size_t)fgrid_nvox(&g)))) {
@@ -606,7 +612,14 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 								  L.needm, nt);
 				double ssd;
 				int64_t nused;
-				if (lncc) {
+				if (p->metric == METRIC_MI) {
+					if ((rc = dm_compute_force_mi(p, &L, &A, &ssd, &nused,
+								   nt))) {
+						rc = FAIL(rc, "out of memory (mi histogram, "
+							  "level %d)", l + 1);
+						goto out;
+					}
+				} else if (lncc) {
 					if ((rc = dm_compute_force_lncc(p, &L, &A, &ssd, &nused,
 								     nt))) {
 						rc = FAIL(rc, "out of memory (lncc sums, "
@@ -627,7 +640,7 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 				if (sg_fluid > 0)
 					fimg_smooth(&A, sg_fluid, nt);
 				float sc = 1.0f;
-				if (lncc) {
+				if (lncc || p->metric == METRIC_MI) {
 					/* the step: the level's first update is scaled to
 					 * max_step voxels at its largest, later ones by
 					 * the same factor (so they shrink as the
@@ -684,7 +697,7 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 			}
 			double secs = lib_now_s() - t0;
 			if ((rc = add_row(st, tab, l + 1, it + 1, mse, mu, mx, secs,
-					  lncc))) {
+					  p))) {
 				rc = FAIL(rc, "out of memory (table)");
 				goto out;
 			}
@@ -700,7 +713,8 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 			h->progress(st, total ? (double)done / total : 1,
 				    "level %d/%d iter %d/%d %s %.5g mean update "
 				    "%.3g mm", l + 1, nlev, it + 1, iters[l],
-				    lncc ? "lncc" : "mse", lncc ? 1 - mse : mse, mu);
+				    lncc ? "lncc" : p->metric == METRIC_MI ? "log(bins) - mi" : "mse",
+				    lncc ? 1 - mse : mse, mu);
 			/* convergence: relative gain of the best cost over
 			 * the last tol_window iterations (header) */
 			best[it] = p->tol_best && it > 0 && best[it - 1] < mse
@@ -721,7 +735,8 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 					h->log(st, LOG_INFO,
 					       "level %d converged after %d "
 					       "iterations (%s %.5g, compared %.5g)",
-					       l + 1, it + 1, lncc ? "1 - lncc" : "mse",
+					       l + 1, it + 1, lncc ? "1 - lncc" :
+					       p->metric == METRIC_MI ? "log(bins) - mi" : "mse",
 					       mse, best[it]);
 					done += iters[l] - it - 1;
 					break;

@@ -1,0 +1,187 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * demons_mi.c: metric=mi, the gradient of the mutual information between
+ * the fixed image F and the warped moving image W (the metric of ANTs SyN's
+ * default, antspyx type_of_transform "SyN": Mattes MI), as a demons force.
+ *
+ * The joint density of (F, W) over the voxels inside both masks and the
+ * moving image: a histogram of B x B bins on each image's range (the
+ * level's minimum to maximum over those voxels), each voxel counted in its
+ * nearest bin (integer counts: the same on any thread count), then smoothed
+ * by a Gaussian of sigma 1 bin along each axis (Parzen window) into p(f, w);
+ * p_w(w) = sum_f p(f, w).  The mutual information
+ *     MI = sum p log(p / (p_f p_w))                         (nats)
+ * and its first variation with respect to W at a voxel (Hermosillo,
+ * Chefd'hotel, Faugeras, "Variational methods for multimodal image
+ * matching", IJCV 50(3) 2002, eq. 18, the Parzen kernel's derivative moved
+ * onto the density):
+ *     dMI/dW(x) = (1/N) d/dw [log p(f, w) - log p_w(w)] at (F(x), W(x))
+ * by central differences over the bins (per intensity unit), read by
+ * bilinear interpolation at the voxel's continuous bin coordinates.  The
+ * update is u(x) = dMI/dW(x) grad W(x) (world vectors; W's gradient as the
+ * LNCC force takes it), smoothed by sigma_fluid and scaled as the LNCC
+ * update (max_step voxels at its largest on the level's first iteration).
+ * The cost for the convergence test is log(B) - MI (>= 0: MI <= log B),
+ * reported per voxel.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "demons_int.h"
+
+#define MI_EPS 1e-12
+
+static int valid_at(const level_t *L, int64_t e)
+{
+	const float *FM = L->FM.d, *WM = L->WM.d;
+	return !isnan(L->W.d[e]) && !(FM && FM[e] <= 0) &&
+	       !(WM && !(WM[e] > 0.5f));
+}
+
+/* Gaussian smoothing of the B x B table T (double), sigma 1 bin, taps to
+ * 3 sigma, zero beyond the table */
+static void smooth_table(double *T, int B)
+{
+	double k[7], s = 0;
+	for (int i = -3; i <= 3; i++)
+		s += k[i + 3] = exp(-0.5 * i * i);
+	for (int i = 0; i < 7; i++)
+		k[i] /= s;
+	double *tmp = malloc(sizeof(double) * (size_t)B * B);
+	if (!tmp)
+		return;
+	for (int a = 0; a < 2; a++) {
+		for (int i = 0; i < B; i++)
+			for (int j = 0; j < B; j++) {
+				double v = 0;
+				for (int t = -3; t <= 3; t++) {
+					int ii = a ? i : i + t, jj = a ? j + t : j;
+					if (ii < 0 || ii >= B || jj < 0 || jj >= B)
+						continue;
+					v += k[t + 3] * T[ii * B + jj];
+				}
+				tmp[i * B + j] = v;
+			}
+		memcpy(T, tmp, sizeof(double) * (size_t)B * B);
+	}
+	free(tmp);
+}
+
+int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
+			double *score, int64_t *nused, int nt)
+{
+	const fgrid_t *g = &L->g;
+	const int nx = g->nx, ny = g->ny, nz = g->nz;
+	const int64_t nv = fgrid_nvox(g);
+	const int B = p->bins;
+	const float *F = L->F.d, *W = L->W.d;
+	/* the ranges over the valid voxels (exact minima and maxima) */
+	float flo = INFINITY, fhi = -INFINITY, wlo = INFINITY, whi = -INFINITY;
+	int64_t n = 0;
+	for (int64_t e = 0; e < nv; e++) {
+		if (!valid_at(L, e))
+			continue;
+		n++;
+		flo = fminf(flo, F[e]);
+		fhi = fmaxf(fhi, F[e]);
+		wlo = fminf(wlo, W[e]);
+		whi = fmaxf(whi, W[e]);
+	}
+	memset(U->d, 0, sizeof(float) * 3 * (size_t)nv);
+	*nused = n;
+	*score = 0;
+	if (n == 0 || !(fhi > flo) || !(whi > wlo))
+		return 0;
+	const double fs = (B - 1) / ((double)fhi - flo);
+	const double ws = (B - 1) / ((double)whi - wlo);
+	int64_t *H = calloc((size_t)B * B, sizeof(int64_t));
+	double *P = malloc(sizeof(double) * (size_t)B * B);
+	double *pw = calloc((size_t)B, sizeof(double));
+	double *pf = calloc((size_t)B, sizeof(double));
+	double *G = malloc(sizeof(double) * (size_t)B * B);
+	if (!H || !P || !pw || !pf || !G) {
+		free(H), free(P), free(pw), free(pf), free(G);
+		return ARMSTG_ENOMEM;
+	}
+	for (int64_t e = 0; e < nv; e++) {
+		if (!valid_at(L, e))
+			continue;
+		int i = (int)lrint((F[e] - flo) * fs), j = (int)lrint((W[e] - wlo) * ws);
+		H[i * B + j]++;
+	}
+	for (int q = 0; q < B * B; q++)
+		P[q] = (double)H[q] / (double)n;
+	smooth_table(P, B);
+	for (int i = 0; i < B; i++)
+		for (int j = 0; j < B; j++) {
+			pf[i] += P[i * B + j];
+			pw[j] += P[i * B + j];
+		}
+	double mi = 0;
+	for (int i = 0; i < B; i++)
+		for (int j = 0; j < B; j++) {
+			double v = P[i * B + j];
+			if (v > MI_EPS && pf[i] > MI_EPS && pw[j] > MI_EPS)
+				mi += v * log(v / (pf[i] * pw[j]));
+		}
+	/* d/dw [log p(f,w) - log p_w(w)], per intensity unit of W, times 1/N
+	 * (the variation of a mean over the voxels) scaled by N: the update is
+	 * rescaled to max_step anyway, so the 1/N is left out */
+	for (int i = 0; i < B; i++)
+		for (int j = 0; j < B; j++) {
+			int j0 = j > 0 ? j - 1 : j, j1 = j < B - 1 ? j + 1 : j;
+			double lp0 = log(P[i * B + j0] + MI_EPS) - log(pw[j0] + MI_EPS);
+			double lp1 = log(P[i * B + j1] + MI_EPS) - log(pw[j1] + MI_EPS);
+			G[i * B + j] = j1 > j0 ? (lp1 - lp0) / (j1 - j0) * ws : 0;
+		}
+	double Li[3][3];
+	dm_grid_li(g, Li);
+	const int64_t st[3] = { 1, nx, (int64_t)nx * ny };
+	const int dims[3] = { nx, ny, nz };
+#pragma omp parallel for num_threads(nt) schedule(static)
+	for (int64_t r = 0; r < (int64_t)ny * nz; r++) {
+		const int j = (int)(r % ny), k = (int)(r / ny);
+		for (int i = 0; i < nx; i++) {
+			int64_t e = ((int64_t)k * ny + j) * nx + i;
+			if (!valid_at(L, e))
+				continue;
+			double cf = (F[e] - flo) * fs, cw = (W[e] - wlo) * ws;
+			int a0 = (int)cf, b0 = (int)cw;
+			if (a0 > B - 2)
+				a0 = B - 2;
+			if (b0 > B - 2)
+				b0 = B - 2;
+			double ta = cf - a0, tb = cw - b0;
+			double coef = (1 - ta) * ((1 - tb) * G[a0 * B + b0] + tb * G[a0 * B + b0 + 1]) +
+				      ta * ((1 - tb) * G[(a0 + 1) * B + b0] +
+					    tb * G[(a0 + 1) * B + b0 + 1]);
+			const int idx[3] = { i, j, k };
+			double gw[3];
+			for (int a = 0; a < 3; a++) {
+				int lo = idx[a] > 0, hi = idx[a] < dims[a] - 1;
+				int64_t el = lo ? e - st[a] : e, eh = hi ? e + st[a] : e;
+				double h = lo + hi;
+				float wl = W[el], wh = W[eh];
+				if (isnan(wl)) {
+					wl = W[e];
+					h -= lo;
+				}
+				if (isnan(wh)) {
+					wh = W[e];
+					h -= hi;
+				}
+				gw[a] = h > 0 ? (wh - wl) / h : 0;
+			}
+			for (int c = 0; c < 3; c++) {
+				double sw = 0;
+				for (int a = 0; a < 3; a++)
+					sw += gw[a] * Li[a][c];
+				U->d[e + c * nv] = (float)(coef * sw);
+			}
+		}
+	}
+	*score = (log((double)B) - mi) * (double)n;
+	free(H), free(P), free(pw), free(pf), free(G);
+	return 0;
+}
