@@ -4,7 +4,8 @@
  * c through the grid's world->voxel affine, aff_apply(w2v, x, c), or an
  * axis-aligned grid's (x - origin) / h): trilinear weights and nearest
  * voxels, the one copy in the tree (warp/demons through lib/field, metrics,
- * report, levelset, phantom, sampler, labelmap, png_slice).
+ * report, levelset, phantom, sampler, labelmap, png_slice, and the kernels
+ * of plugins/demons_cuda: the stencils are ARMSTG_HD, armstg/hd.h).
  *
  * Grids are n[3] voxels, x fastest: offset (k*ny + j)*nx + i.  Voxel v's
  * centre is at c = v; its extent is [v - 0.5, v + 0.5].
@@ -41,13 +42,17 @@
 #include <math.h>
 #include <stdint.h>
 
+#include "armstg/hd.h"
 #include "armstg/msg.h"
 #include "armstg/volmath.h"
 
 /* the 8-corner loops unrolled (GCC does not at -O2): the same operations
  * in the same order, hence the same floats, in about half the
- * instructions (the corner's bits become constants) */
-#if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 8
+ * instructions (the corner's bits become constants); under nvcc (a .cu
+ * including this header) its own pragma */
+#if defined(__CUDACC__)
+#define IMG_UNROLL8 _Pragma("unroll")
+#elif defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 8
 #define IMG_UNROLL8 _Pragma("GCC unroll 8")
 #else
 #define IMG_UNROLL8
@@ -70,8 +75,8 @@ typedef struct img_lin {
  * One axis of the stencil: corner indices i[2] and weights w[2] for c on
  * an axis of n voxels under `edge`.  0 when c is outside.
  */
-static inline int img_lin_axis(double c, int n, int edge, int i[2],
-			       double w[2])
+ARMSTG_HD int img_lin_axis(double c, int n, int edge, int i[2],
+			   double w[2])
 {
 	switch (edge) {
 	case IMG_EDGE_VOXEL:
@@ -122,8 +127,8 @@ static inline int img_lin_axis(double c, int n, int edge, int i[2],
 }
 
 /* The stencil at continuous index c; 0 when c is outside (s undefined). */
-static inline int img_lin_at(const int n[3], const double c[3], int edge,
-			     img_lin_t *s)
+ARMSTG_HD int img_lin_at(const int n[3], const double c[3], int edge,
+			 img_lin_t *s)
 {
 	double w[3][2];
 	for (int a = 0; a < 3; a++)
@@ -141,7 +146,7 @@ static inline int img_lin_at(const int n[3], const double c[3], int edge,
 }
 
 /* Grid indices of corner q (0..7). */
-static inline void img_lin_corner(const img_lin_t *s, int q, int ijk[3])
+ARMSTG_HD void img_lin_corner(const img_lin_t *s, int q, int ijk[3])
 {
 	ijk[0] = s->i[0][q & 1];
 	ijk[1] = s->i[1][(q >> 1) & 1];
@@ -149,7 +154,7 @@ static inline void img_lin_corner(const img_lin_t *s, int q, int ijk[3])
 }
 
 /* Trilinear value of a float / double grid. */
-static inline double img_lin_f32(const float *d, const img_lin_t *s)
+ARMSTG_HD double img_lin_f32(const float *d, const img_lin_t *s)
 {
 	double v = 0;
 	IMG_UNROLL8
@@ -158,7 +163,7 @@ static inline double img_lin_f32(const float *d, const img_lin_t *s)
 	return v;
 }
 
-static inline double img_lin_f64(const double *d, const img_lin_t *s)
+ARMSTG_HD double img_lin_f64(const double *d, const img_lin_t *s)
 {
 	double v = 0;
 	IMG_UNROLL8
@@ -169,8 +174,8 @@ static inline double img_lin_f64(const double *d, const img_lin_t *s)
 
 /* nc interleaved components (value of voxel o, component m at
  * d[nc*o + m]) into out[nc]. */
-static inline void img_lin_f64n(const double *d, int nc, const img_lin_t *s,
-				double *out)
+ARMSTG_HD void img_lin_f64n(const double *d, int nc, const img_lin_t *s,
+			    double *out)
 {
 	for (int m = 0; m < nc; m++)
 		out[m] = 0;
@@ -194,8 +199,8 @@ typedef struct img_linf {
 	float w[8];
 } img_linf_t;
 
-static inline int img_linf_at(const int n[3], const double c[3], int edge,
-			      img_linf_t *s)
+ARMSTG_HD int img_linf_at(const int n[3], const double c[3], int edge,
+			  img_linf_t *s)
 {
 	int i[3][2];
 	float w[3][2];
@@ -222,7 +227,7 @@ static inline int img_linf_at(const int n[3], const double c[3], int edge,
 	return 1;
 }
 
-static inline float img_linf_f32(const float *d, const img_linf_t *s)
+ARMSTG_HD float img_linf_f32(const float *d, const img_linf_t *s)
 {
 	float v = 0;
 	IMG_UNROLL8
@@ -233,7 +238,7 @@ static inline float img_linf_f32(const float *d, const img_linf_t *s)
 
 /* Per-label linear (labels), on the float stencil: the label of largest
  * summed weight among the corners (ties within 1e-6 to the first seen). */
-static inline float img_linf_label_f32(const float *d, const img_linf_t *s)
+ARMSTG_HD float img_linf_label_f32(const float *d, const img_linf_t *s)
 {
 	float lab[8], wt[8];
 	int n = 0;
@@ -261,8 +266,8 @@ static inline float img_linf_label_f32(const float *d, const img_linf_t *s)
 
 /* Nearest voxel of continuous index c (see above): 1 with *o its offset,
  * 0 outside. */
-static inline int img_near_at(const int n[3], const double c[3], double tol,
-			      int64_t *o)
+ARMSTG_HD int img_near_at(const int n[3], const double c[3], double tol,
+			  int64_t *o)
 {
 	int v[3];
 	for (int a = 0; a < 3; a++) {

@@ -16,6 +16,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "armstg/volmath.h"
+#include "img/sample.h"
+
 #include "demons_cuda.h"
 
 #define TPB 256
@@ -32,118 +35,6 @@ static mat mk_mat(const double A[16])
 	mat m;
 	memcpy(m.a, A, sizeof m.a);
 	return m;
-}
-
-/* ------------------------------------------------------------------ */
-/* the host's sampling, operation by operation (lib/img/sample.h,       */
-/* runtime/include/armstg/volmath.h)                                    */
-/* ------------------------------------------------------------------ */
-
-enum { EDGE_CLAMP = 0, EDGE_VOXEL = 1 };
-
-/* aff_apply / aff_apply_vec */
-__device__ __forceinline__ void aff_apply(const mat &A, const double p[3],
-					  double o[3])
-{
-	const double x = p[0], y = p[1], z = p[2];
-	o[0] = A.a[0] * x + A.a[1] * y + A.a[2] * z + A.a[3];
-	o[1] = A.a[4] * x + A.a[5] * y + A.a[6] * z + A.a[7];
-	o[2] = A.a[8] * x + A.a[9] * y + A.a[10] * z + A.a[11];
-}
-
-__device__ __forceinline__ void aff_vec(const mat &A, const double p[3],
-					double o[3])
-{
-	const double x = p[0], y = p[1], z = p[2];
-	o[0] = A.a[0] * x + A.a[1] * y + A.a[2] * z;
-	o[1] = A.a[4] * x + A.a[5] * y + A.a[6] * z;
-	o[2] = A.a[8] * x + A.a[9] * y + A.a[10] * z;
-}
-
-/* img_lin_axis (EDGE_CLAMP, EDGE_VOXEL) */
-__device__ __forceinline__ bool lin_axis(double c, int n, int edge, int i[2],
-					 double w[2])
-{
-	if (edge == EDGE_VOXEL && !(c >= -0.5 && c <= n - 0.5))
-		return false;
-	if (!(c > 0)) {
-		i[0] = i[1] = 0;
-		w[0] = 1;
-		w[1] = 0;
-		return true;
-	}
-	if (c >= n - 1) {
-		i[0] = i[1] = n - 1;
-		w[0] = 1;
-		w[1] = 0;
-		return true;
-	}
-	const int a = (int)c;
-	const double t = c - a;
-	i[0] = a;
-	i[1] = a + 1;
-	w[0] = 1 - t;
-	w[1] = t;
-	return true;
-}
-
-struct linf {
-	i64 o[8];
-	float w[8];
-};
-
-/* img_linf_at */
-__device__ __forceinline__ bool linf_at(const int n[3], const double c[3],
-					int edge, linf &s)
-{
-	int i[3][2];
-	float w[3][2];
-	for (int a = 0; a < 3; a++) {
-		double wd[2];
-		if (!lin_axis(c[a], n[a], edge, i[a], wd))
-			return false;
-		if (wd[0] + wd[1] == 1) {
-			w[a][1] = (float)wd[1];
-			w[a][0] = 1 - w[a][1];
-		} else {
-			w[a][0] = (float)wd[0];
-			w[a][1] = (float)wd[1];
-		}
-	}
-	const i64 nx = n[0], nxy = (i64)n[0] * n[1];
-#pragma unroll
-	for (int q = 0; q < 8; q++) {
-		const int bi = q & 1, bj = (q >> 1) & 1, bk = (q >> 2) & 1;
-		s.o[q] = (i64)i[2][bk] * nxy + (i64)i[1][bj] * nx + i[0][bi];
-		s.w[q] = w[0][bi] * w[1][bj] * w[2][bk];
-	}
-	return true;
-}
-
-/* img_linf_f32 */
-__device__ __forceinline__ float linf_f32(const float *d, const linf &s)
-{
-	float v = 0;
-#pragma unroll
-	for (int q = 0; q < 8; q++)
-		v += s.w[q] * d[s.o[q]];
-	return v;
-}
-
-/* img_near_at with tol 0 */
-__device__ __forceinline__ bool near_at(const int n[3], const double c[3],
-					i64 *o)
-{
-	const double tol = 0;
-	int v[3];
-	for (int a = 0; a < 3; a++) {
-		if (!(c[a] >= -0.5 - tol && c[a] <= n[a] - 0.5 + tol))
-			return false;
-		const double f = floor(c[a] + 0.5 + tol);
-		v[a] = f < 0 ? 0 : f > n[a] - 1 ? n[a] - 1 : (int)f;
-	}
-	*o = ((i64)v[2] * n[1] + v[1]) * n[0] + v[0];
-	return true;
 }
 
 struct dims {
@@ -187,24 +78,24 @@ __global__ void k_warp(dims g, block b, const uint8_t *where, mat Mx,
 		return;
 	const double p[3] = { (double)i, (double)j, (double)k };
 	double c[3];
-	aff_apply(Mx, p, c);
+	aff_apply(Mx.a, p, c);
 	const double d[3] = { S[e], S[e + g.nv], S[e + 2 * g.nv] };
 	double dv[3];
-	aff_vec(sw2v, d, dv);
+	aff_apply_vec(sw2v.a, d, dv);
 	c[0] += dv[0];
 	c[1] += dv[1];
 	c[2] += dv[2];
 	if (near) {
-		i64 o;
-		dst[e] = near_at(sg.n, c, &o) ? src[o] : 0.0f;
+		int64_t o;
+		dst[e] = img_near_at(sg.n, c, 0, &o) ? src[o] : 0.0f;
 		return;
 	}
-	linf s;
-	if (!linf_at(sg.n, c, EDGE_VOXEL, s)) {
+	img_linf_t s;
+	if (!img_linf_at(sg.n, c, IMG_EDGE_VOXEL, &s)) {
 		dst[e] = __int_as_float(0x7fc00000); /* NAN */
 		return;
 	}
-	dst[e] = linf_f32(src, s);
+	dst[e] = img_linf_f32(src, &s);
 }
 
 /* ------------------------------------------------------------------ */
@@ -481,7 +372,7 @@ __global__ void k_stats(float *U, i64 nv, float scale, mat w2v, double *vc,
 		used[e] = q > 0;
 		if (q > 0)
 			qm = q;
-		aff_vec(w2v, d, c);
+		aff_apply_vec(w2v.a, d, c);
 		const double vv = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
 		if (vv > 0)
 			v2 = vv;
@@ -507,13 +398,13 @@ __global__ void k_compose(const float *x, float xs, int scaled, dims g, mat M,
 		d[q] = scaled ? (double)(x[e + q * nv] * xs) : (double)x[e + q * nv];
 	const double p[3] = { (double)i, (double)j, (double)k };
 	double c[3], dv[3];
-	aff_apply(M, p, c);
-	aff_vec(fw2v, d, dv);
+	aff_apply(M.a, p, c);
+	aff_apply_vec(fw2v.a, d, dv);
 	c[0] += dv[0];
 	c[1] += dv[1];
 	c[2] += dv[2];
-	linf s;
-	linf_at(fg.n, c, EDGE_CLAMP, s);
+	img_linf_t s;
+	img_linf_at(fg.n, c, IMG_EDGE_CLAMP, &s);
 	float o[3];
 	for (int q = 0; q < 3; q++) {
 		const float *fq = f + q * fg.nv;
@@ -523,7 +414,7 @@ __global__ void k_compose(const float *x, float xs, int scaled, dims g, mat M,
 			for (int t = 0; t < 8; t++)
 				v += s.w[t] * (fq[s.o[t]] * xs);
 		} else {
-			v = linf_f32(fq, s);
+			v = img_linf_f32(fq, &s);
 		}
 		o[q] = (float)(d[q] + v);
 	}

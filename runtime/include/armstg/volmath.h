@@ -3,6 +3,8 @@
  * Header-only helpers for voxel<->world geometry and typed voxel access.
  * Pure functions: no host calls, usable in any plugin or test.
  * Affines are row-major 4x4 voxel->world (RAS+ mm), see msg.h.
+ * aff_apply and aff_apply_vec are ARMSTG_HD (hd.h): the CUDA plugins'
+ * kernels call them too.
  */
 #ifndef ARMSTG_VOLMATH_H
 #define ARMSTG_VOLMATH_H
@@ -11,6 +13,7 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "hd.h"
 #include "msg.h"
 
 static inline int64_t vol_nvox(const vol_t *v)
@@ -60,8 +63,8 @@ static inline void vol_set(vol_t *v, int64_t e, double x)
 }
 
 /* out = A * (p, 1) for a row-major 4x4 A (3 rows used). */
-static inline void aff_apply(const double A[16], const double p[3],
-			     double out[3])
+ARMSTG_HD void aff_apply(const double A[16], const double p[3],
+			 double out[3])
 {
 	double x = p[0], y = p[1], z = p[2];
 	out[0] = A[0] * x + A[1] * y + A[2] * z + A[3];
@@ -70,8 +73,8 @@ static inline void aff_apply(const double A[16], const double p[3],
 }
 
 /* Rotate/scale only (no translation): for vectors. */
-static inline void aff_apply_vec(const double A[16], const double p[3],
-				 double out[3])
+ARMSTG_HD void aff_apply_vec(const double A[16], const double p[3],
+			     double out[3])
 {
 	double x = p[0], y = p[1], z = p[2];
 	out[0] = A[0] * x + A[1] * y + A[2] * z;
