@@ -17,6 +17,7 @@
 #include "img/kdtree.h"
 #include "img/sample.h"
 
+#include "field/field_at.h"
 #include "field/field_int.h"
 
 /* ------------------------------------------------------------------ */
@@ -482,7 +483,6 @@ int fimg_resample_block_where(const fimg_t *src, const fimg_t *u, int interp,
 				if (where && !where[e])
 					continue;
 				double p[3] = { i, j, k }, c[3];
-				aff_apply(M, p, c);
 				if (u) {
 					double d[3];
 					if (u_same) {
@@ -499,11 +499,9 @@ int fimg_resample_block_where(const fimg_t *src, const fimg_t *u, int interp,
 							d[q] = img_linf_f32(
 								u->d + q * nvu, &su);
 					}
-					double dv[3];
-					aff_apply_vec(sg->w2v, d, dv);
-					c[0] += dv[0];
-					c[1] += dv[1];
-					c[2] += dv[2];
+					field_index_at(M, sg->w2v, i, j, k, d, c);
+				} else {
+					aff_apply(M, p, c);
 				}
 				if (interp == FIELD_NEAREST) {
 					int64_t o;

@@ -19,6 +19,7 @@
 #include "img/kdtree.h"
 #include "img/sample.h"
 
+#include "field/field_at.h"
 #include "field/field_int.h"
 
 int fimg_compose(const fimg_t *outer, const fimg_t *inner, fimg_t *out,
@@ -30,6 +31,7 @@ int fimg_compose(const fimg_t *outer, const fimg_t *inner, fimg_t *out,
 		return ARMSTG_EINVAL;
 	const fgrid_t *ig = &inner->g, *og = &outer->g;
 	const int64_t nv = fgrid_nvox(ig), nvo = fgrid_nvox(og);
+	const int on[3] = { og->nx, og->ny, og->nz };
 	double M[16]; /* inner voxel -> outer voxel */
 	aff3_mul(og->w2v, ig->v2w, M);
 
@@ -38,54 +40,16 @@ int fimg_compose(const fimg_t *outer, const fimg_t *inner, fimg_t *out,
 		for (int j = 0; j < ig->ny; j++)
 			for (int i = 0; i < ig->nx; i++) {
 				int64_t e = ((int64_t)k * ig->ny + j) * ig->nx + i;
-				double p[3] = { i, j, k }, c[3], dv[3];
 				double d[3] = { inner->d[e], inner->d[e + nv],
 						inner->d[e + 2 * nv] };
-				aff_apply(M, p, c);
-				aff_apply_vec(og->w2v, d, dv);
-				c[0] += dv[0];
-				c[1] += dv[1];
-				c[2] += dv[2];
-				img_linf_t s;
-				lin_at(og, c, IMG_EDGE_CLAMP, &s);
+				float o[3];
+				field_compose_at(0, M, og->w2v, on, outer->d,
+						 nvo, 1.0f, i, j, k, d, o);
 				for (int q = 0; q < 3; q++)
-					out->d[e + q * nv] = (float)(
-						d[q] + img_linf_f32(outer->d + q * nvo, &s));
+					out->d[e + q * nv] = o[q];
 			}
 	return 0;
 }
-
-/*
- * One voxel of fimg_compose's loop with the inner field's vector d (its
- * floats as doubles) given: outer sampled at x + d with edge clamping, its
- * values read as floats times osc when SCALED (the 2^-n of a scaling read
- * on the fly: the same floats as scaled in place), out = (float)(d + sample).
- * SCALED is a literal at every use (the loops carry no test on it: GCC
- * outlines OpenMP regions into functions where an argument is no constant).
- */
-#define COMPOSE_AT(SCALED, M, og, od, nvo, osc, i, j, k, d, out)             \
-	do {                                                                 \
-		double p_[3] = { (i), (j), (k) }, c_[3], dv_[3];             \
-		aff_apply((M), p_, c_);                                      \
-		aff_apply_vec((og)->w2v, (d), dv_);                          \
-		c_[0] += dv_[0];                                             \
-		c_[1] += dv_[1];                                             \
-		c_[2] += dv_[2];                                             \
-		img_linf_t s_;                                               \
-		lin_at((og), c_, IMG_EDGE_CLAMP, &s_);                       \
-		for (int q_ = 0; q_ < 3; q_++) {                             \
-			const float *f_ = (od) + q_ * (nvo);                 \
-			float v_ = 0;                                        \
-			if (SCALED) {                                        \
-				IMG_UNROLL8                                  \
-				for (int t_ = 0; t_ < 8; t_++)               \
-					v_ += s_.w[t_] * (f_[s_.o[t_]] * (osc)); \
-			} else {                                             \
-				v_ = img_linf_f32(f_, &s_);                  \
-			}                                                    \
-			(out)[q_] = (float)((d)[q_] + v_);                   \
-		}                                                            \
-	} while (0)
 
 /*
  * Where the update is zero (the voxels outside the fixed mask's reach, in a
@@ -167,6 +131,8 @@ static int NAME(const double M[16], const double Ms[16], const fimg_t *x,    \
 	const fgrid_t *g = &x->g;                                            \
 	const int64_t nv = fgrid_nvox(g);                                    \
 	const int64_t nvs = (S) ? fgrid_nvox(&s->g) : 0;                     \
+	const int sdims[3] = { (S) ? s->g.nx : 0, (S) ? s->g.ny : 0,         \
+			       (S) ? s->g.nz : 0 };                          \
 	const int nx = g->nx;                                                \
 	const int dims[3] = { g->nx, g->ny, g->nz };                         \
 	int fail = 0;                                                        \
@@ -205,8 +171,9 @@ static int NAME(const double M[16], const double Ms[16], const fimg_t *x,    \
 				for (int q = 0; q < 3; q++)                  \
 					d[q] = (SCALED) ? x->d[e + q * nv] * xs \
 							: x->d[e + q * nv];  \
-				COMPOSE_AT(SCALED, M, g, x->d, nv, xs, i, j, \
-					   k, d, o);                         \
+				field_compose_at(SCALED, M, g->w2v, dims,    \
+						 x->d, nv, xs, i, j, k, d,   \
+						 o);                         \
 				if (S) {                                     \
 					eb[i] = o[0];                        \
 					eb[i + nx] = o[1];                   \
@@ -233,8 +200,9 @@ static int NAME(const double M[16], const double Ms[16], const fimg_t *x,    \
 				}                                            \
 				const double d[3] = { eb[i], eb[i + nx],     \
 						      eb[i + 2 * nx] };      \
-				COMPOSE_AT(0, Ms, &s->g, s->d, nvs, 1.0f, i, \
-					   j, k, d, o);                      \
+				field_compose_at(0, Ms, s->g.w2v, sdims,     \
+						 s->d, nvs, 1.0f, i, j, k, d, \
+						 o);                         \
 				for (int q = 0; q < 3; q++)                  \
 					y->d[e + q * nv] = o[q];             \
 			}                                                    \

@@ -17,6 +17,7 @@
 #include <string.h>
 
 #include "armstg/volmath.h"
+#include "field/field_at.h"
 #include "img/sample.h"
 
 #include "demons_cuda.h"
@@ -61,7 +62,9 @@ struct block {
 };
 
 /* W = M(x + S(x)), trilinear, NaN outside M's voxels; near = 1: the
- * nearest voxel (the moving mask), 0 outside */
+ * nearest voxel (the moving mask), 0 outside; the index of x + S(x) on
+ * M's grid and the stencils are lib/field's and lib/img's (field_at.h,
+ * sample.h) */
 __global__ void k_warp(dims g, block b, const uint8_t *where, mat Mx,
 		       mat sw2v, const float *S, const float *src, dims sg,
 		       float *dst, int near)
@@ -76,15 +79,9 @@ __global__ void k_warp(dims g, block b, const uint8_t *where, mat Mx,
 	const i64 e = ((i64)k * g.n[1] + j) * g.n[0] + i;
 	if (where && !where[e])
 		return;
-	const double p[3] = { (double)i, (double)j, (double)k };
-	double c[3];
-	aff_apply(Mx.a, p, c);
 	const double d[3] = { S[e], S[e + g.nv], S[e + 2 * g.nv] };
-	double dv[3];
-	aff_apply_vec(sw2v.a, d, dv);
-	c[0] += dv[0];
-	c[1] += dv[1];
-	c[2] += dv[2];
+	double c[3];
+	field_index_at(Mx.a, sw2v.a, i, j, k, d, c);
 	if (near) {
 		int64_t o;
 		dst[e] = img_near_at(sg.n, c, 0, &o) ? src[o] : 0.0f;
@@ -381,8 +378,9 @@ __global__ void k_stats(float *U, i64 nv, float scale, mat w2v, double *vc,
 	max_bits(&m[1], v2);
 }
 
-/* COMPOSE_AT: out = d + f(p' + d) sampled with edge clamping on f's grid
- * (p' = M p), d = x(p) (times xs when scaled), f's values times fs when
+/* field_compose_at (lib/field/field_at.h, fimg_compose_exp's squarings
+ * and composition): out = d + f(M p + d) sampled with edge clamping on
+ * f's grid, d = x(p) (times xs when scaled), f's values times xs when
  * scaled; here f = x (a squaring, fg = g, M = Mg) or f = s (M = Ms) */
 __global__ void k_compose(const float *x, float xs, int scaled, dims g, mat M,
 			  mat fw2v, const float *f, dims fg, float *out)
@@ -396,28 +394,9 @@ __global__ void k_compose(const float *x, float xs, int scaled, dims g, mat M,
 	double d[3];
 	for (int q = 0; q < 3; q++)
 		d[q] = scaled ? (double)(x[e + q * nv] * xs) : (double)x[e + q * nv];
-	const double p[3] = { (double)i, (double)j, (double)k };
-	double c[3], dv[3];
-	aff_apply(M.a, p, c);
-	aff_apply_vec(fw2v.a, d, dv);
-	c[0] += dv[0];
-	c[1] += dv[1];
-	c[2] += dv[2];
-	img_linf_t s;
-	img_linf_at(fg.n, c, IMG_EDGE_CLAMP, &s);
 	float o[3];
-	for (int q = 0; q < 3; q++) {
-		const float *fq = f + q * fg.nv;
-		float v = 0;
-		if (scaled) {
-#pragma unroll
-			for (int t = 0; t < 8; t++)
-				v += s.w[t] * (fq[s.o[t]] * xs);
-		} else {
-			v = img_linf_f32(fq, &s);
-		}
-		o[q] = (float)(d[q] + v);
-	}
+	field_compose_at(scaled, M.a, fw2v.a, fg.n, f, fg.nv, xs, i, j, k, d,
+			 o);
 	/* out may be x (n = 0: s o v written into v, read at e only) */
 	for (int q = 0; q < 3; q++)
 		out[e + q * nv] = o[q];
