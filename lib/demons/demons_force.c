@@ -3,9 +3,10 @@
  * demons (demons_run.c): one level's buffers (level_t) and the update of each
  * iteration: the demons force (Thirion / the symmetric ESM force, bounded
  * by sigma_x), the LNCC gradient (Avants et al. 2008, eq. 6) and the
- * update's statistics; the equations are in demons_run.c's header.  Sums over
- * voxels are taken per row, then over the rows in order (the same bits on
- * any thread count).
+ * update's statistics; the equations are in demons_run.c's header, the
+ * formulas at one voxel in demons_at.h (plugins/demons_cuda's kernels
+ * compile the same).  Sums over voxels are taken per row, then over the
+ * rows in order (the same bits on any thread count).
  */
 #include <math.h>
 #include <stddef.h>
@@ -16,6 +17,7 @@
 #include "armstg/volmath.h"
 #include "img/box.h"
 #include "img/sample.h"
+#include "demons_at.h"
 #include "demons_int.h"
 
 /* the rows' sums and counts in row order */
@@ -88,6 +90,22 @@ int dm_level_need(level_t *L, int nt)
 	return 0;
 }
 
+/* the level as demons_at.h's per-voxel functions read it */
+static dm_vox_t dm_vox_of(const level_t *L)
+{
+	dm_vox_t V;
+	V.F = L->F.d;
+	V.W = L->W.d;
+	V.FM = L->FM.d;
+	V.WM = L->WM.d;
+	V.n[0] = L->g.nx;
+	V.n[1] = L->g.ny;
+	V.n[2] = L->g.nz;
+	V.nv = fgrid_nvox(&L->g);
+	dm_grid_li(&L->g, V.Li);
+	return V;
+}
+
 /*
  * Demons force into U (nc 3) for the current W; returns the number of
  * voxels used and the sum of squared differences.
@@ -98,13 +116,8 @@ void dm_compute_force(const demons_priv_t *p, const level_t *L,
 {
 	const fgrid_t *g = &L->g;
 	const int nx = g->nx, ny = g->ny, nz = g->nz;
-	const int64_t nv = fgrid_nvox(g);
-	const int64_t st[3] = { 1, nx, (int64_t)nx * ny };
-	const int dims[3] = { nx, ny, nz };
-	double Li[3][3];
-	dm_grid_li(g, Li);
-	const float *F = L->F.d, *W = L->W.d;
-	const float *FM = L->FM.d, *WM = L->WM.d;
+	const dm_vox_t V = dm_vox_of(L);
+	float *u = U->d;
 	const int sym = p->force == FORCE_SYMMETRIC;
 	const double thr = p->diff_threshold;
 #pragma omp parallel for num_threads(nt) schedule(static)
@@ -112,60 +125,15 @@ void dm_compute_force(const demons_priv_t *p, const level_t *L,
 		const int j = (int)(r % ny), k = (int)(r / ny);
 		double s2 = 0;
 		int64_t nu = 0;
-			for (int i = 0; i < nx; i++) {
-				int64_t e = ((int64_t)k * ny + j) * nx + i;
-				U->d[e] = U->d[e + nv] = U->d[e + 2 * nv] = 0;
-				float w = W[e];
-				if (isnan(w) || (FM && FM[e] <= 0) ||
-				    (WM && !(WM[e] > 0.5f)))
-					continue;
-				double diff = (double)F[e] - w;
-				s2 += diff * diff;
+		for (int i = 0; i < nx; i++) {
+			const int64_t e = r * nx + i;
+			double v;
+			if (dm_force_ssd_at(&V, e, i, j, k, sym, thr, sx2, u,
+					    &v)) {
+				s2 += v;
 				nu++;
-				if (fabs(diff) < thr)
-					continue;
-				const int idx[3] = { i, j, k };
-				double gf[3], gw[3];
-				for (int a = 0; a < 3; a++) {
-					int lo = idx[a] > 0, hi = idx[a] < dims[a] - 1;
-					int64_t el = lo ? e - st[a] : e,
-						eh = hi ? e + st[a] : e;
-					double h = lo + hi;
-					gf[a] = h > 0 ? (F[eh] - F[el]) / h : 0;
-					if (sym) {
-						/* one-sided where a neighbour is
-						 * outside the moving image */
-						float wl = W[el], wh = W[eh];
-						if (isnan(wl)) {
-							wl = w;
-							h -= lo;
-						}
-						if (isnan(wh)) {
-							wh = w;
-							h -= hi;
-						}
-						gw[a] = h > 0 ? (wh - wl) / h : 0;
-					}
-				}
-				double J[3];
-				for (int c = 0; c < 3; c++) {
-					double sf = 0, sw = 0;
-					for (int a = 0; a < 3; a++) {
-						sf += gf[a] * Li[a][c];
-						if (sym)
-							sw += gw[a] * Li[a][c];
-					}
-					J[c] = sym ? 0.5 * (sf + sw) : sf;
-				}
-				double den = J[0] * J[0] + J[1] * J[1] + J[2] * J[2] +
-					     diff * diff / sx2;
-				if (den < 1e-12)
-					continue;
-				double f = diff / den;
-				U->d[e] = (float)(f * J[0]);
-				U->d[e + nv] = (float)(f * J[1]);
-				U->d[e + 2 * nv] = (float)(f * J[2]);
 			}
+		}
 		L->rsum[r] = s2;
 		L->rcnt[r] = nu;
 	}
@@ -186,83 +154,28 @@ int dm_compute_force_lncc(const demons_priv_t *p, const level_t *L,
 	const fgrid_t *g = &L->g;
 	const int nx = g->nx, ny = g->ny, nz = g->nz;
 	const int64_t nv = fgrid_nvox(g);
-	const int64_t st[3] = { 1, nx, (int64_t)nx * ny };
 	const int dims[3] = { nx, ny, nz };
-	const float *F = L->F.d, *W = L->W.d;
-	const float *FM = L->FM.d, *WM = L->WM.d;
+	const dm_vox_t V = dm_vox_of(L);
+	float *u = U->d;
 #pragma omp parallel for num_threads(nt) schedule(static)
-	for (int64_t e = 0; e < nv; e++) {
-		float w = W[e], f = F[e];
-		int ok = !isnan(w) && !(FM && FM[e] <= 0) && !(WM && !(WM[e] > 0.5f));
-		if (!ok)
-			w = f = 0;
-		S[e] = (float)ok;
-		S[e + nv] = f;
-		S[e + 2 * nv] = w;
-		S[e + 3 * nv] = f * f;
-		S[e + 4 * nv] = w * w;
-		S[e + 5 * nv] = f * w;
-	}
+	for (int64_t e = 0; e < nv; e++)
+		dm_lncc_terms_at(&V, e, S);
 	if (img_box_sum(S, 6, dims, p->radius, nt))
 		return ARMSTG_ENOMEM;
-	double Li[3][3];
-	dm_grid_li(g, Li);
 	const double nmin = 0.25 * pow(2 * p->radius + 1, 3);
 #pragma omp parallel for num_threads(nt) schedule(static)
 	for (int64_t r = 0; r < (int64_t)ny * nz; r++) {
 		const int j = (int)(r % ny), k = (int)(r / ny);
 		double sc = 0;
 		int64_t nu = 0;
-			for (int i = 0; i < nx; i++) {
-				int64_t e = ((int64_t)k * ny + j) * nx + i;
-				U->d[e] = U->d[e + nv] = U->d[e + 2 * nv] = 0;
-				if (!(S[e] > 0) || isnan(W[e]) ||
-				    (FM && FM[e] <= 0) || (WM && !(WM[e] > 0.5f)))
-					continue;
-				/* too few valid voxels in the window (a mask's
-				 * edge): no statistics */
-				const double n = S[e];
-				if (n < nmin)
-					continue;
-				const double mf = S[e + nv] / n, mw = S[e + 2 * nv] / n;
-				const double sff = S[e + 3 * nv] - n * mf * mf;
-				const double sww = S[e + 4 * nv] - n * mw * mw;
-				const double sfw = S[e + 5 * nv] - n * mf * mw;
-				/* flat windows (float sums: relative precision
-				 * ~1e-5 after 125 terms) carry no correlation */
-				if (!(sff > 1e-5 * S[e + 3 * nv] + 1e-30) ||
-				    !(sww > 1e-5 * S[e + 4 * nv] + 1e-30))
-					continue;
-				const double cc = sfw * sfw / (sff * sww);
-				sc += 1 - cc;
+		for (int i = 0; i < nx; i++) {
+			const int64_t e = r * nx + i;
+			double v;
+			if (dm_force_lncc_at(&V, S, nmin, e, i, j, k, u, &v)) {
+				sc += v;
 				nu++;
-				const double coef = 2 * sfw / (sff * sww) *
-						    ((F[e] - mf) - sfw / sww * (W[e] - mw));
-				const int idx[3] = { i, j, k };
-				double gw[3];
-				for (int a = 0; a < 3; a++) {
-					int lo = idx[a] > 0, hi = idx[a] < dims[a] - 1;
-					int64_t el = lo ? e - st[a] : e,
-						eh = hi ? e + st[a] : e;
-					double h = lo + hi;
-					float wl = W[el], wh = W[eh];
-					if (isnan(wl)) {
-						wl = W[e];
-						h -= lo;
-					}
-					if (isnan(wh)) {
-						wh = W[e];
-						h -= hi;
-					}
-					gw[a] = h > 0 ? (wh - wl) / h : 0;
-				}
-				for (int c = 0; c < 3; c++) {
-					double sw = 0;
-					for (int a = 0; a < 3; a++)
-						sw += gw[a] * Li[a][c];
-					U->d[e + c * nv] = (float)(coef * sw);
-				}
 			}
+		}
 		L->rsum[r] = sc;
 		L->rcnt[r] = nu;
 	}
@@ -290,21 +203,14 @@ void dm_update_stats(fimg_t *U, const level_t *L, float scale,
 		double s = 0;
 		int64_t n = 0;
 		for (int64_t e = r * g->nx; e < (r + 1) * g->nx; e++) {
-			if (scale != 1.0f) {
-				U->d[e] *= scale;
-				U->d[e + nv] *= scale;
-				U->d[e + 2 * nv] *= scale;
-			}
-			double d[3] = { U->d[e], U->d[e + nv], U->d[e + 2 * nv] }, c[3];
-			double q = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+			double q, v2;
+			dm_update_at(U->d, nv, e, scale, g->w2v, &q, &v2);
 			if (q > 0) {
 				s += q;
 				n++;
 			}
 			if (q > m)
 				m = q;
-			aff_apply_vec(g->w2v, d, c);
-			double v2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
 			if (v2 > mv)
 				mv = v2;
 		}

@@ -17,6 +17,7 @@
 
 #include "armstg/plugin.h"
 #include "field/field.h"
+#include "demons_at.h" /* the forces at one voxel, dm_squarings */
 
 #define MAX_LEVELS 8
 
@@ -119,17 +120,6 @@ int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 			double *score, int64_t *nused, int nt);
 void dm_update_stats(fimg_t *U, const level_t *L, float scale,
 			 double *mean, double *max, double *max_vox, int nt);
-
-/* squarings of the exponential: the update's largest vector, mvox voxels,
- * scaled to at most half a voxel (with max_step 1 the LNCC update comes out
- * as 1 + 1e-8 voxel and must not cost a second squaring) */
-static inline int dm_squarings(double mvox)
-{
-	int n = 0;
-	while (mvox / ldexp(1.0, n) > 0.5 * (1 + 1e-4) && n < 30)
-		n++;
-	return n;
-}
 
 /* d index / d world of grid g: the 3x3 part of its w2v */
 static inline void dm_grid_li(const fgrid_t *g, double Li[3][3])

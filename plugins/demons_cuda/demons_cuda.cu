@@ -3,10 +3,20 @@
  * demons_cuda.cu: a demons level's iterations on an NVIDIA GPU (see
  * demons_cuda.h for what matches the host and how).  The host functions
  * each kernel mirrors are named above it; their equations are in
- * lib/demons/demons_run.c's header.  Compiled with -fmad=false and
- * --default-stream per-thread (plugin.mk): the [tune] candidates'
- * registrations, each on its own host thread, run on their own streams;
- * device memory is stream-ordered (cudaMallocAsync), so a level's
+ * lib/demons/demons_run.c's header.  The arithmetic at one voxel is the
+ * host's own text, ARMSTG_HD (armstg/hd.h): the affines (armstg/
+ * volmath.h), the trilinear and nearest stencils (lib/img/sample.h), the
+ * displaced index and the composition (lib/field/field_at.h), the forces,
+ * the update's statistics and the squarings (lib/demons/demons_at.h).
+ * What stays here is how the work is spread over threads, where it must
+ * differ from the host's loops: the box sums and the Gaussian (the host
+ * sweeps whole rows, nx sums advancing together, with shortcuts over zero
+ * rows; here one thread per line or per output, each sum in the host's
+ * order), the sums per row (k_rows, in voxel order) and the maxima
+ * (warp shuffles and atomics on the bits, exact).  Compiled with
+ * -fmad=false and --default-stream per-thread (plugin.mk): the [tune]
+ * candidates' registrations, each on its own host thread, run on their own
+ * streams; device memory is stream-ordered (cudaMallocAsync), so a level's
  * allocations never wait for the other candidates' work.
  */
 #include <cuda_runtime.h>
@@ -17,6 +27,7 @@
 #include <string.h>
 
 #include "armstg/volmath.h"
+#include "demons/demons_at.h"
 #include "field/field_at.h"
 #include "img/sample.h"
 
@@ -43,13 +54,13 @@ struct dims {
 	i64 nv;
 };
 
-__device__ __forceinline__ void ijk_of(const dims &g, i64 e, int &i, int &j,
+__device__ __forceinline__ void ijk_of(const int n[3], i64 e, int &i, int &j,
 				       int &k)
 {
-	i = (int)(e % g.n[0]);
-	const i64 r = e / g.n[0];
-	j = (int)(r % g.n[1]);
-	k = (int)(r / g.n[1]);
+	i = (int)(e % n[0]);
+	const i64 r = e / n[0];
+	j = (int)(r % n[1]);
+	k = (int)(r / n[1]);
 }
 
 /* ------------------------------------------------------------------ */
@@ -99,103 +110,30 @@ __global__ void k_warp(dims g, block b, const uint8_t *where, mat Mx,
 /* forces: dm_compute_force, dm_compute_force_lncc                      */
 /* ------------------------------------------------------------------ */
 
-struct lev {
-	dims g;
-	double Li[3][3]; /* d index / d world (dm_grid_li) */
-	const float *F, *W, *FM, *WM;
-};
-
-__device__ __forceinline__ bool masked_out(const lev &L, i64 e)
-{
-	return (L.FM && L.FM[e] <= 0) || (L.WM && !(L.WM[e] > 0.5f));
-}
-
-/* the gradient of W along axis a at voxel e (one-sided where a neighbour
- * is outside the moving image) */
-__device__ __forceinline__ double grad_w(const lev &L, i64 e, const int idx[3],
-					 int a, const i64 st[3])
-{
-	const int lo = idx[a] > 0, hi = idx[a] < L.g.n[a] - 1;
-	const i64 el = lo ? e - st[a] : e, eh = hi ? e + st[a] : e;
-	double h = lo + hi;
-	float wl = L.W[el], wh = L.W[eh];
-	if (isnan(wl)) {
-		wl = L.W[e];
-		h -= lo;
-	}
-	if (isnan(wh)) {
-		wh = L.W[e];
-		h -= hi;
-	}
-	return h > 0 ? (wh - wl) / h : 0;
-}
-
-__global__ void k_force_ssd(lev L, float *U, double *vc, uint8_t *used,
+/* the forces' arithmetic at a voxel is lib/demons/demons_at.h's (the
+ * level: dm_vox_t); a kernel writes each voxel's cost term to vc where
+ * used, and k_rows adds them per row as the host's loops do */
+__global__ void k_force_ssd(dm_vox_t L, float *U, double *vc, uint8_t *used,
 			    int sym, double thr, double sx2)
 {
 	const i64 e = (i64)blockIdx.x * blockDim.x + threadIdx.x;
-	const i64 nv = L.g.nv;
-	if (e >= nv)
+	if (e >= L.nv)
 		return;
-	U[e] = U[e + nv] = U[e + 2 * nv] = 0;
-	used[e] = 0;
-	const float w = L.W[e];
-	if (isnan(w) || masked_out(L, e))
-		return;
-	const double diff = (double)L.F[e] - w;
-	vc[e] = diff * diff;
-	used[e] = 1;
-	if (fabs(diff) < thr)
-		return;
-	int idx[3];
-	ijk_of(L.g, e, idx[0], idx[1], idx[2]);
-	const i64 st[3] = { 1, L.g.n[0], (i64)L.g.n[0] * L.g.n[1] };
-	double gf[3], gw[3];
-	for (int a = 0; a < 3; a++) {
-		const int lo = idx[a] > 0, hi = idx[a] < L.g.n[a] - 1;
-		const i64 el = lo ? e - st[a] : e, eh = hi ? e + st[a] : e;
-		const double h = lo + hi;
-		gf[a] = h > 0 ? (L.F[eh] - L.F[el]) / h : 0;
-		if (sym)
-			gw[a] = grad_w(L, e, idx, a, st);
-	}
-	double J[3];
-	for (int c = 0; c < 3; c++) {
-		double sf = 0, sw = 0;
-		for (int a = 0; a < 3; a++) {
-			sf += gf[a] * L.Li[a][c];
-			if (sym)
-				sw += gw[a] * L.Li[a][c];
-		}
-		J[c] = sym ? 0.5 * (sf + sw) : sf;
-	}
-	const double den = J[0] * J[0] + J[1] * J[1] + J[2] * J[2] +
-			   diff * diff / sx2;
-	if (den < 1e-12)
-		return;
-	const double f = diff / den;
-	U[e] = (float)(f * J[0]);
-	U[e + nv] = (float)(f * J[1]);
-	U[e + 2 * nv] = (float)(f * J[2]);
+	int i, j, k;
+	ijk_of(L.n, e, i, j, k);
+	double v;
+	const int u = dm_force_ssd_at(&L, e, i, j, k, sym, thr, sx2, U, &v);
+	used[e] = (uint8_t)u;
+	if (u)
+		vc[e] = v;
 }
 
 /* the six window quantities (V, V F, V W, V F^2, V W^2, V F W) */
-__global__ void k_lncc_prep(lev L, float *S)
+__global__ void k_lncc_prep(dm_vox_t L, float *S)
 {
 	const i64 e = (i64)blockIdx.x * blockDim.x + threadIdx.x;
-	const i64 nv = L.g.nv;
-	if (e >= nv)
-		return;
-	float w = L.W[e], f = L.F[e];
-	const int ok = !isnan(w) && !masked_out(L, e);
-	if (!ok)
-		w = f = 0;
-	S[e] = (float)ok;
-	S[e + nv] = f;
-	S[e + 2 * nv] = w;
-	S[e + 3 * nv] = f * f;
-	S[e + 4 * nv] = w * w;
-	S[e + 5 * nv] = f * w;
+	if (e < L.nv)
+		dm_lncc_terms_at(&L, e, S);
 }
 
 /* lib/img/box.c pass_x: one thread per line of nx values (running sum in
@@ -245,44 +183,19 @@ __global__ void k_box_rows(const float *in, float *out, int nc, i64 nv,
 	}
 }
 
-__global__ void k_force_lncc(lev L, const float *S, float *U, double *vc,
-			     uint8_t *used, double nmin)
+__global__ void k_force_lncc(dm_vox_t L, const float *S, float *U,
+			     double *vc, uint8_t *used, double nmin)
 {
 	const i64 e = (i64)blockIdx.x * blockDim.x + threadIdx.x;
-	const i64 nv = L.g.nv;
-	if (e >= nv)
+	if (e >= L.nv)
 		return;
-	U[e] = U[e + nv] = U[e + 2 * nv] = 0;
-	used[e] = 0;
-	if (!(S[e] > 0) || isnan(L.W[e]) || masked_out(L, e))
-		return;
-	const double n = S[e];
-	if (n < nmin)
-		return;
-	const double mf = S[e + nv] / n, mw = S[e + 2 * nv] / n;
-	const double sff = S[e + 3 * nv] - n * mf * mf;
-	const double sww = S[e + 4 * nv] - n * mw * mw;
-	const double sfw = S[e + 5 * nv] - n * mf * mw;
-	if (!(sff > 1e-5 * S[e + 3 * nv] + 1e-30) ||
-	    !(sww > 1e-5 * S[e + 4 * nv] + 1e-30))
-		return;
-	const double cc = sfw * sfw / (sff * sww);
-	vc[e] = 1 - cc;
-	used[e] = 1;
-	const double coef = 2 * sfw / (sff * sww) *
-			    ((L.F[e] - mf) - sfw / sww * (L.W[e] - mw));
-	int idx[3];
-	ijk_of(L.g, e, idx[0], idx[1], idx[2]);
-	const i64 st[3] = { 1, L.g.n[0], (i64)L.g.n[0] * L.g.n[1] };
-	double gw[3];
-	for (int a = 0; a < 3; a++)
-		gw[a] = grad_w(L, e, idx, a, st);
-	for (int c = 0; c < 3; c++) {
-		double sw = 0;
-		for (int a = 0; a < 3; a++)
-			sw += gw[a] * L.Li[a][c];
-		U[e + c * nv] = (float)(coef * sw);
-	}
+	int i, j, k;
+	ijk_of(L.n, e, i, j, k);
+	double v;
+	const int u = dm_force_lncc_at(&L, S, nmin, e, i, j, k, U, &v);
+	used[e] = (uint8_t)u;
+	if (u)
+		vc[e] = v;
 }
 
 /* the rows' sums (dm_rows_total's terms): one thread per row of the level
@@ -323,7 +236,7 @@ __global__ void k_gauss(const float *in, float *out, dims g, int nc, int axis,
 		return;
 	const i64 c = t / g.nv, e = t % g.nv;
 	int idx[3];
-	ijk_of(g, e, idx[0], idx[1], idx[2]);
+	ijk_of(g.n, e, idx[0], idx[1], idx[2]);
 	const i64 st[3] = { 1, g.n[0], (i64)g.n[0] * g.n[1] };
 	const int m = g.n[axis];
 	const float *p = in + c * g.nv + e - (i64)idx[axis] * st[axis];
@@ -357,20 +270,12 @@ __global__ void k_stats(float *U, i64 nv, float scale, mat w2v, double *vc,
 	const i64 e = (i64)blockIdx.x * blockDim.x + threadIdx.x;
 	double qm = 0, v2 = 0;
 	if (e < nv) {
-		if (scale != 1.0f) {
-			U[e] *= scale;
-			U[e + nv] *= scale;
-			U[e + 2 * nv] *= scale;
-		}
-		const double d[3] = { U[e], U[e + nv], U[e + 2 * nv] };
-		double c[3];
-		const double q = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+		double q, vv;
+		dm_update_at(U, nv, e, scale, w2v.a, &q, &vv);
 		vc[e] = q;
 		used[e] = q > 0;
 		if (q > 0)
 			qm = q;
-		aff_apply_vec(w2v.a, d, c);
-		const double vv = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
 		if (vv > 0)
 			v2 = vv;
 	}
@@ -390,7 +295,7 @@ __global__ void k_compose(const float *x, float xs, int scaled, dims g, mat M,
 	if (e >= nv)
 		return;
 	int i, j, k;
-	ijk_of(g, e, i, j, k);
+	ijk_of(g.n, e, i, j, k);
 	double d[3];
 	for (int q = 0; q < 3; q++)
 		d[q] = scaled ? (double)(x[e + q * nv] * xs) : (double)x[e + q * nv];
@@ -416,7 +321,7 @@ __global__ void k_add(float *S, const float *A, i64 n)
 struct dmc {
 	dmc_desc_t d;
 	dims g, mg, kg;
-	lev L;
+	dm_vox_t L;
 	float *F, *M, *FM, *MM, *W, *WM, *S, *A, *B, *E, *T, *sums, *sums2;
 	uint8_t *needw, *needm, *used;
 	double *vc, *rsum;
@@ -573,10 +478,12 @@ static int begin(dmc_t *c, int device, char *err, size_t errsize)
 	CK(up(c->W, d->W, nv), "uploading the level");
 	CK(up(c->S, d->S, 3 * nv), "uploading the level");
 	CK(cudaStreamSynchronize(cudaStreamPerThread), "uploading the level");
-	c->L.g = c->g;
-	for (int a = 0; a < 3; a++)
+	for (int a = 0; a < 3; a++) {
+		c->L.n[a] = c->g.n[a];
 		for (int q = 0; q < 3; q++)
 			c->L.Li[a][q] = d->gw2v[a * 4 + q];
+	}
+	c->L.nv = c->g.nv;
 	c->L.F = c->F;
 	c->L.W = c->W;
 	c->L.FM = c->FM;
@@ -684,15 +591,6 @@ static int smooth(dmc_t *c, float **p, int nc, const dmc_gauss_t *G, int q,
 	return 0;
 }
 
-/* demons_int.h dm_squarings */
-static int squarings(double mvox)
-{
-	int n = 0;
-	while (mvox / ldexp(1.0, n) > 0.5 * (1 + 1e-4) && n < 30)
-		n++;
-	return n;
-}
-
 extern "C" int dmc_iterate(dmc_t *c, dmc_step_t *s, char *err, size_t errsize)
 {
 	const dmc_desc_t *d = &c->d;
@@ -766,7 +664,7 @@ extern "C" int dmc_iterate(dmc_t *c, dmc_step_t *s, char *err, size_t errsize)
 	const double mvox = sqrt(m[1]);
 	if (d->diffeo) {
 		/* s <- s o exp(u): fimg_compose_exp */
-		const int n = squarings(mvox);
+		const int n = dm_squarings(mvox);
 		const mat Mg = mk_mat(d->Mg), w2v = mk_mat(d->gw2v);
 		float *res;
 		if (n == 0) {

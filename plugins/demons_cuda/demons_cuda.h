@@ -7,7 +7,9 @@
  *
  * Every kernel computes what the host's functions compute, operation by
  * operation, in the same precision and order (-fmad=false: no fused
- * multiply-adds, as the host's x86-64 baseline code has none): the warp
+ * multiply-adds, as the host's x86-64 baseline code has none); the
+ * arithmetic at one voxel is the host's own functions (ARMSTG_HD, compiled
+ * from lib/'s headers; demons_cuda.cu lists them): the warp
  * (lib/field fimg_resample_block_where, the float trilinear stencil of
  * lib/img/sample.h), the demons and LNCC forces (lib/demons/
  * demons_force.c; the LNCC window sums as lib/img/box.c's running sums,
