@@ -4,7 +4,7 @@
  * tled_model_mls.c) that the CUDA backend's contact search repeats
  * (plugins/tled_cuda/tled_cuda_kernels.cu, d_knnK): the start cell, the sorted
  * insertion (ties: the first found stays first) and the stopping rule.
- * `static inline` and TLED_HD (tled_hd.h): one text for both.  Lengths in
+ * ARMSTG_HD (armstg/hd.h): one text for both.  Lengths in
  * the grid's unit (m), distances squared.
  */
 #ifndef TLED_KNN_H
@@ -14,12 +14,12 @@
 #include <math.h>
 #include <stdint.h>
 
-#include "tled_hd.h"
+#include "armstg/hd.h"
 
 /* the cell of x, clamped into the grid (lo, cell, nc cells per axis) */
-TLED_HD static inline void tled_knn_cell(const double x[3],
-					 const double lo[3], double cell,
-					 const int nc[3], int c0[3])
+ARMSTG_HD void tled_knn_cell(const double x[3],
+			     const double lo[3], double cell,
+			     const int nc[3], int c0[3])
 {
 	for (int c = 0; c < 3; c++) {
 		double f = floor((x[c] - lo[c]) / cell);
@@ -33,8 +33,8 @@ TLED_HD static inline void tled_knn_cell(const double x[3],
 
 /* insert (id, d) into the k best so far (ids, d2 ascending, *cnt of them):
  * kept only when closer than the k-th; equal distances keep their order */
-TLED_HD static inline void tled_knn_insert(int k, int *cnt, int64_t *ids,
-					   double *d2, int64_t id, double d)
+ARMSTG_HD void tled_knn_insert(int k, int *cnt, int64_t *ids,
+			       double *d2, int64_t id, double d)
 {
 	if (*cnt == k && d >= d2[k - 1])
 		return;
@@ -53,9 +53,9 @@ TLED_HD static inline void tled_knn_insert(int k, int *cnt, int64_t *ids,
  * the outside of the block is at least its distance; sides of the block
  * already at the grid's edge hide no further points (x may lie outside the
  * grid), and a block that covers the grid ends the search. */
-TLED_HD static inline int tled_knn_done(const double x[3], const double lo[3],
-					double cell, const int nc[3],
-					const int c0[3], int r, double d2k)
+ARMSTG_HD int tled_knn_done(const double x[3], const double lo[3],
+			    double cell, const int nc[3],
+			    const int c0[3], int r, double d2k)
 {
 	double lb = DBL_MAX;
 	for (int c = 0; c < 3; c++) {

@@ -2,7 +2,7 @@
 /*
  * The material law at one integration point, shared by the C reference
  * (tled_step.c) and the CUDA backend (plugins/tled_cuda/tled_cuda_kernels.cu):
- * `static inline` and TLED_HD (tled_hd.h), so both compile this one text.
+ * ARMSTG_HD (armstg/hd.h), so both compile this one text.
  * SI units: stresses in Pa, energy density in J/m^3, volumes in m^3.
  */
 #ifndef TLED_LAW_H
@@ -10,7 +10,7 @@
 
 #include <math.h>
 
-#include "tled_hd.h"
+#include "armstg/hd.h"
 #include "tled_model.h"
 
 /*
@@ -20,9 +20,9 @@
  * C = F^T F, J = det F, U(J) of enum tled_vol (tled_model.h).  F and S
  * row-major 3x3.  Returns J; S = 0 and W = 0 when J <= 0 (or NaN).
  */
-TLED_HD static inline double tled_law_neohooke(const double F[9], double mu,
-					       double kappa, int vol,
-					       double S[9], double *W)
+ARMSTG_HD double tled_law_neohooke(const double F[9], double mu,
+				   double kappa, int vol,
+				   double S[9], double *W)
 {
 	double C[9];
 	for (int i = 0; i < 3; i++)
@@ -75,9 +75,9 @@ TLED_HD static inline double tled_law_neohooke(const double F[9], double mu,
  * and *W = the strain energy density per reference volume, g^3 W(F_e)
  * (J/m^3).  Returns det F_e (the watchdogs' J).
  */
-TLED_HD static inline double tled_law_ip(const double F[9], double mu,
-					 double kappa, int vol, double g,
-					 double V, double P[9], double *W)
+ARMSTG_HD double tled_law_ip(const double F[9], double mu,
+			     double kappa, int vol, double g,
+			     double V, double P[9], double *W)
 {
 	double S[9], J;
 	if (g != 1) {
