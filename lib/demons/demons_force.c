@@ -91,7 +91,7 @@ int dm_level_need(level_t *L, int nt)
 }
 
 /* the level as demons_at.h's per-voxel functions read it */
-static dm_vox_t dm_vox_of(const level_t *L)
+dm_vox_t dm_vox_of(const level_t *L)
 {
 	dm_vox_t V;
 	V.F = L->F.d;

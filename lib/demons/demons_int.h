@@ -108,6 +108,7 @@ int dm_crop_img(fimg_t *f, const int lo[3], const fgrid_t *gs, int nt);
 
 /* demons_force.c */
 void dm_rows_total(const level_t *L, double *sum, int64_t *cnt);
+dm_vox_t dm_vox_of(const level_t *L);
 void dm_level_free(level_t *L);
 int dm_level_need(level_t *L, int nt);
 void dm_compute_force(const demons_priv_t *p, const level_t *L,

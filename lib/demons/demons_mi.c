@@ -18,8 +18,8 @@
  *     dMI/dW(x) = (1/N) d/dw [log p(f, w) - log p_w(w)] at (F(x), W(x))
  * by central differences over the bins (per intensity unit), read by
  * bilinear interpolation at the voxel's continuous bin coordinates.  The
- * update is u(x) = dMI/dW(x) grad W(x) (world vectors; W's gradient as the
- * LNCC force takes it), smoothed by sigma_fluid and scaled as the LNCC
+ * update is u(x) = dMI/dW(x) grad W(x) (world vectors; W's gradient is
+ * demons_at.h's dm_grad_w, as the other forces take it), smoothed by sigma_fluid and scaled as the LNCC
  * update (max_step voxels at its largest on the level's first iteration).
  * The cost for the convergence test is log(B) - MI (>= 0: MI <= log B),
  * reported per voxel.
@@ -32,11 +32,10 @@
 
 #define MI_EPS 1e-12
 
-static int valid_at(const level_t *L, int64_t e)
+/* inside both masks and the moving image */
+static int valid_at(const dm_vox_t *V, int64_t e)
 {
-	const float *FM = L->FM.d, *WM = L->WM.d;
-	return !isnan(L->W.d[e]) && !(FM && FM[e] <= 0) &&
-	       !(WM && !(WM[e] > 0.5f));
+	return !isnan(V->W[e]) && !dm_masked_out(V, e);
 }
 
 /* Gaussian smoothing of the B x B table T (double), sigma 1 bin, taps to
@@ -71,16 +70,16 @@ static void smooth_table(double *T, int B)
 int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 			double *score, int64_t *nused, int nt)
 {
-	const fgrid_t *g = &L->g;
-	const int nx = g->nx, ny = g->ny, nz = g->nz;
-	const int64_t nv = fgrid_nvox(g);
+	const dm_vox_t V = dm_vox_of(L);
+	const int nx = V.n[0], ny = V.n[1], nz = V.n[2];
+	const int64_t nv = V.nv;
 	const int B = p->bins;
 	const float *F = L->F.d, *W = L->W.d;
 	/* the ranges over the valid voxels (exact minima and maxima) */
 	float flo = INFINITY, fhi = -INFINITY, wlo = INFINITY, whi = -INFINITY;
 	int64_t n = 0;
 	for (int64_t e = 0; e < nv; e++) {
-		if (!valid_at(L, e))
+		if (!valid_at(&V, e))
 			continue;
 		n++;
 		flo = fminf(flo, F[e]);
@@ -105,7 +104,7 @@ int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 		return ARMSTG_ENOMEM;
 	}
 	for (int64_t e = 0; e < nv; e++) {
-		if (!valid_at(L, e))
+		if (!valid_at(&V, e))
 			continue;
 		int i = (int)lrint((F[e] - flo) * fs), j = (int)lrint((W[e] - wlo) * ws);
 		H[i * B + j]++;
@@ -135,16 +134,13 @@ int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 			double lp1 = log(P[i * B + j1] + MI_EPS) - log(pw[j1] + MI_EPS);
 			G[i * B + j] = j1 > j0 ? (lp1 - lp0) / (j1 - j0) * ws : 0;
 		}
-	double Li[3][3];
-	dm_grid_li(g, Li);
 	const int64_t st[3] = { 1, nx, (int64_t)nx * ny };
-	const int dims[3] = { nx, ny, nz };
 #pragma omp parallel for num_threads(nt) schedule(static)
 	for (int64_t r = 0; r < (int64_t)ny * nz; r++) {
 		const int j = (int)(r % ny), k = (int)(r / ny);
 		for (int i = 0; i < nx; i++) {
 			int64_t e = ((int64_t)k * ny + j) * nx + i;
-			if (!valid_at(L, e))
+			if (!valid_at(&V, e))
 				continue;
 			double cf = (F[e] - flo) * fs, cw = (W[e] - wlo) * ws;
 			int a0 = (int)cf, b0 = (int)cw;
@@ -158,25 +154,12 @@ int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 					    tb * G[(a0 + 1) * B + b0 + 1]);
 			const int idx[3] = { i, j, k };
 			double gw[3];
-			for (int a = 0; a < 3; a++) {
-				int lo = idx[a] > 0, hi = idx[a] < dims[a] - 1;
-				int64_t el = lo ? e - st[a] : e, eh = hi ? e + st[a] : e;
-				double h = lo + hi;
-				float wl = W[el], wh = W[eh];
-				if (isnan(wl)) {
-					wl = W[e];
-					h -= lo;
-				}
-				if (isnan(wh)) {
-					wh = W[e];
-					h -= hi;
-				}
-				gw[a] = h > 0 ? (wh - wl) / h : 0;
-			}
+			for (int a = 0; a < 3; a++)
+				gw[a] = dm_grad_w(&V, e, idx, a, st);
 			for (int c = 0; c < 3; c++) {
 				double sw = 0;
 				for (int a = 0; a < 3; a++)
-					sw += gw[a] * Li[a][c];
+					sw += gw[a] * V.Li[a][c];
 				U->d[e + c * nv] = (float)(coef * sw);
 			}
 		}
