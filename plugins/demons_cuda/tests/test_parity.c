@@ -178,6 +178,20 @@ static void test_lncc_masks(void **state)
 	parity("lncc, both masks", p, in);
 }
 
+/* metric=mi: no backend runs it, so demons_cuda's levels run on the host
+ * (demons_run.c's on_dev): device 0 gives the host's bits */
+static void test_mi_host(void **state)
+{
+	require_gpu();
+	const char *p[] = { "metric=mi", "normalize=minmax",
+			    "update=diffeomorphic", "sigma_unit=voxel",
+			    "sigma_fluid=3", "sigma_field=1.5", "levels=3",
+			    "iterations=40,30,10", NULL };
+	const vol_t *in[7] = { g_fx.f, g_minv, g_fx.fm,
+			       g_fx.mm, NULL, NULL, NULL };
+	parity("mi (on the host), both masks", p, in);
+}
+
 /* the outline map (to_atlas): SSD, symmetric, diffeomorphic, no mask */
 static void test_ssd_plain(void **state)
 {
@@ -301,6 +315,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_lncc_masks),
 		cmocka_unit_test(test_ssd_plain),
+		cmocka_unit_test(test_mi_host),
 		cmocka_unit_test(test_thirion_additive),
 		cmocka_unit_test(test_label_levels),
 		cmocka_unit_test(test_two_threads),
