@@ -816,13 +816,18 @@ static void test_threads(void **state)
 	const char *lncc[] = { "levels=3", "iterations=40,30,10", "metric=lncc",
 			       "normalize=minmax", "sigma_unit=voxel",
 			       "sigma_fluid=3", "sigma_field=1.5", NULL };
-	for (int m = 0; m < 2; m++) {
+	const char *mi[] = { "levels=3", "iterations=40,30,10", "metric=mi",
+			     "normalize=minmax", "sigma_unit=voxel",
+			     "sigma_fluid=3", "sigma_field=1.5", NULL };
+	const char *const *ps[3] = { ssd, lncc, mi };
+	const char *names[3] = { "ssd", "lncc", "mi" };
+	for (int m = 0; m < 3; m++) {
 		reg_out_t o[4] = { 0 };
 		for (int t = 0; t < 4; t++) {
 			const msg_t *in[7] = { &fx->fixed->base, &fx->moving->base,
 					       &fx->fmask->base, &mm->base, NULL };
 			msg_t *out[3] = { 0 };
-			assert_int_equal(tu_run_nt(TU_PLUGIN(), m ? lncc : ssd, in,
+			assert_int_equal(tu_run_nt(TU_PLUGIN(), ps[m], in,
 						   out, t + 1, e, sizeof e), 0);
 			o[t].field = (vol_t *)out[OUT_FIELD];
 			o[t].warped = (vol_t *)out[OUT_WARPED];
@@ -846,8 +851,8 @@ static void test_threads(void **state)
 			}
 		}
 		print_message("%s: %lld iterations, %s %.9g, the same bits on 1-4 "
-			      "threads\n", m ? "lncc" : "ssd", (long long)t0->nrows,
-			      m ? "lncc" : "mse", tab_col(t0, m ? "lncc" : "mse")->num[t0->nrows - 2]);
+			      "threads\n", names[m], (long long)t0->nrows,
+			      m ? names[m] : "mse", tab_col(t0, m ? names[m] : "mse")->num[t0->nrows - 2]);
 		for (int t = 0; t < 4; t++)
 			reg_free(&o[t]);
 	}
