@@ -6,9 +6,10 @@
  * compile this one text, so the GPU's forces are the host's bits.  The
  * equations are in demons_run.c's header: the demons force (Thirion; the
  * symmetric ESM force with the moving image's gradient, bounded by
- * sigma_x) and the LNCC gradient (Avants et al. 2008, eq. 6).  Gradients are central differences in index units (one-sided at
- * a face, or where a neighbour of W is outside the moving image), turned
- * into world units (1/mm) by Li = d index / d world; U is in mm.
+ * sigma_x) and the LNCC gradient (Avants et al. 2008, eq. 6).  Gradients
+ * are central differences in index units (one-sided at a face, or where a
+ * neighbour of W is outside the moving image), turned into world units
+ * (1/mm) by Li = d index / d world; U is in mm.
  *
  * What stays with each side: the loops and the sums.  The host adds each
  * row's used voxels' terms in voxel order, then the rows in order
@@ -62,6 +63,24 @@ ARMSTG_HD double dm_grad_w(const dm_vox_t *L, int64_t e, const int idx[3],
 		h -= hi;
 	}
 	return h > 0 ? (wh - wl) / h : 0;
+}
+
+/* W's gradient at voxel e = (i, j, k) in world units (1/mm: dm_grad_w's
+ * per-voxel differences through Li = d index / d world), into g[3] */
+ARMSTG_HD void dm_grad_w_world(const dm_vox_t *L, int64_t e, int i, int j,
+			       int k, double g[3])
+{
+	const int idx[3] = { i, j, k };
+	const int64_t st[3] = { 1, L->n[0], (int64_t)L->n[0] * L->n[1] };
+	double gw[3];
+	for (int a = 0; a < 3; a++)
+		gw[a] = dm_grad_w(L, e, idx, a, st);
+	for (int c = 0; c < 3; c++) {
+		double sw = 0;
+		for (int a = 0; a < 3; a++)
+			sw += gw[a] * L->Li[a][c];
+		g[c] = sw;
+	}
 }
 
 /*
@@ -167,17 +186,10 @@ ARMSTG_HD_INLINE int dm_force_lncc_at(const dm_vox_t *L, const float *S,
 	*cost = 1 - cc;
 	const double coef = 2 * sfw / (sff * sww) *
 			    ((L->F[e] - mf) - sfw / sww * (L->W[e] - mw));
-	const int idx[3] = { i, j, k };
-	const int64_t st[3] = { 1, L->n[0], (int64_t)L->n[0] * L->n[1] };
 	double gw[3];
-	for (int a = 0; a < 3; a++)
-		gw[a] = dm_grad_w(L, e, idx, a, st);
-	for (int c = 0; c < 3; c++) {
-		double sw = 0;
-		for (int a = 0; a < 3; a++)
-			sw += gw[a] * L->Li[a][c];
-		U[e + c * nv] = (float)(coef * sw);
-	}
+	dm_grad_w_world(L, e, i, j, k, gw);
+	for (int c = 0; c < 3; c++)
+		U[e + c * nv] = (float)(coef * gw[c]);
 	return 1;
 }
 

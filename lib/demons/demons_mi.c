@@ -22,7 +22,19 @@
  * demons_at.h's dm_grad_w, as the other forces take it), smoothed by sigma_fluid and scaled as the LNCC
  * update (max_step voxels at its largest on the level's first iteration).
  * The cost for the convergence test is log(B) - MI (>= 0: MI <= log B),
- * reported per voxel.
+ * reported per voxel; the table's column mi is MI in nats.
+ *
+ * The step: the LNCC rule (demons_run.c), the level's first update scaled
+ * to max_step voxels at its largest and the later ones by the same factor,
+ * never beyond max_step.  The MI force's largest vector comes from the
+ * sparsest bins and does not shrink as the images align, so the cap acts
+ * at most iterations.  On TCGA-DU-7294 (tens of thousands of brain voxels
+ * at the coarsest level for 32 x 32 bins) MI rises monotonically to a
+ * plateau at every level (bench/peers/results.md, "TCGA-DU-7294: the
+ * metric decides it"); where a level has few voxels for the bins (the
+ * test phantom's coarsest level: 1 560 voxels for 1 024 bins) the
+ * histogram is mostly noise and the coarse levels oscillate, MI rising
+ * only at the finest: give fewer bins there.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -32,15 +44,18 @@
 
 #define MI_EPS 1e-12
 
-/* inside both masks and the moving image */
+/* inside both masks and the moving image, F finite (the stage refuses
+ * NaN inputs; a non-finite F would index the histogram out of range) */
 static int valid_at(const dm_vox_t *V, int64_t e)
 {
-	return !isnan(V->W[e]) && !dm_masked_out(V, e);
+	return !isnan(V->W[e]) && isfinite(V->F[e]) && !dm_masked_out(V, e);
 }
 
 /* Gaussian smoothing of the B x B table T (double), sigma 1 bin, taps to
- * 3 sigma, zero beyond the table */
-static void smooth_table(double *T, int B)
+ * 3 sigma, zero beyond the table; then T is scaled back to a total of 1
+ * (the mass the taps carried beyond the edge bins).  Returns 0 or
+ * ARMSTG_ENOMEM. */
+static int smooth_table(double *T, int B)
 {
 	double k[7], s = 0;
 	for (int i = -3; i <= 3; i++)
@@ -49,7 +64,7 @@ static void smooth_table(double *T, int B)
 		k[i] /= s;
 	double *tmp = malloc(sizeof(double) * (size_t)B * B);
 	if (!tmp)
-		return;
+		return ARMSTG_ENOMEM;
 	for (int a = 0; a < 2; a++) {
 		for (int i = 0; i < B; i++)
 			for (int j = 0; j < B; j++) {
@@ -65,6 +80,13 @@ static void smooth_table(double *T, int B)
 		memcpy(T, tmp, sizeof(double) * (size_t)B * B);
 	}
 	free(tmp);
+	double tot = 0;
+	for (int q = 0; q < B * B; q++)
+		tot += T[q];
+	if (tot > 0)
+		for (int q = 0; q < B * B; q++)
+			T[q] /= tot;
+	return 0;
 }
 
 int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
@@ -89,7 +111,8 @@ int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 	}
 	memset(U->d, 0, sizeof(float) * 3 * (size_t)nv);
 	*nused = n;
-	*score = 0;
+	/* a flat image over the used voxels: MI 0, no force */
+	*score = log((double)B) * (double)n;
 	if (n == 0 || !(fhi > flo) || !(whi > wlo))
 		return 0;
 	const double fs = (B - 1) / ((double)fhi - flo);
@@ -111,7 +134,10 @@ int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 	}
 	for (int q = 0; q < B * B; q++)
 		P[q] = (double)H[q] / (double)n;
-	smooth_table(P, B);
+	if (smooth_table(P, B)) {
+		free(H), free(P), free(pw), free(pf), free(G);
+		return ARMSTG_ENOMEM;
+	}
 	for (int i = 0; i < B; i++)
 		for (int j = 0; j < B; j++) {
 			pf[i] += P[i * B + j];
@@ -134,7 +160,6 @@ int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 			double lp1 = log(P[i * B + j1] + MI_EPS) - log(pw[j1] + MI_EPS);
 			G[i * B + j] = j1 > j0 ? (lp1 - lp0) / (j1 - j0) * ws : 0;
 		}
-	const int64_t st[3] = { 1, nx, (int64_t)nx * ny };
 #pragma omp parallel for num_threads(nt) schedule(static)
 	for (int64_t r = 0; r < (int64_t)ny * nz; r++) {
 		const int j = (int)(r % ny), k = (int)(r / ny);
@@ -152,16 +177,10 @@ int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 			double coef = (1 - ta) * ((1 - tb) * G[a0 * B + b0] + tb * G[a0 * B + b0 + 1]) +
 				      ta * ((1 - tb) * G[(a0 + 1) * B + b0] +
 					    tb * G[(a0 + 1) * B + b0 + 1]);
-			const int idx[3] = { i, j, k };
 			double gw[3];
-			for (int a = 0; a < 3; a++)
-				gw[a] = dm_grad_w(&V, e, idx, a, st);
-			for (int c = 0; c < 3; c++) {
-				double sw = 0;
-				for (int a = 0; a < 3; a++)
-					sw += gw[a] * V.Li[a][c];
-				U->d[e + c * nv] = (float)(coef * sw);
-			}
+			dm_grad_w_world(&V, e, i, j, k, gw);
+			for (int c = 0; c < 3; c++)
+				U->d[e + c * nv] = (float)(coef * gw[c]);
 		}
 	}
 	*score = (log((double)B) - mi) * (double)n;

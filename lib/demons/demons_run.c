@@ -48,7 +48,8 @@
  * and smoothing of the sharp images.  SimpleITK does the same under the
  * same smoothing; it is not a defect of the update.
  * A level stops after its iterations or when its cost c (the MSE;
- * metric=lncc: the mean of 1 - CC) has improved by less than tol (relative)
+ * metric=lncc: the mean of 1 - CC; metric=mi: log(bins) - MI) has improved
+ * by less than tol (relative)
  * over the last tol_window iterations:
  *   stop after iteration i >= k (k = tol_window) when
  *     b(i-k) - b(i) < tol b(i-k),

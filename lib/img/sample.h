@@ -48,9 +48,9 @@
 
 /* the 8-corner loops unrolled (GCC does not at -O2): the same operations
  * in the same order, hence the same floats, in about half the
- * instructions (the corner's bits become constants); under nvcc (a .cu
- * including this header) its own pragma */
-#if defined(__CUDACC__)
+ * instructions (the corner's bits become constants); nvcc's device pass
+ * its own pragma (its host pass is g++: GCC's) */
+#if defined(__CUDA_ARCH__)
 #define IMG_UNROLL8 _Pragma("unroll")
 #elif defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 8
 #define IMG_UNROLL8 _Pragma("GCC unroll 8")

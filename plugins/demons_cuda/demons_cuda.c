@@ -225,8 +225,8 @@ static const armstg_plugin_t desc = {
 	.description = "deformable registration (plugin demons: Thirion / "
 		       "symmetric demons or LNCC, diffeomorphic update, "
 		       "multi-resolution, masks) with each level's iterations "
-		       "on an NVIDIA GPU, the same bits as demons; needs a "
-		       "CUDA device",
+		       "on an NVIDIA GPU, the same bits as demons (metric = "
+		       "mi: on the host); needs a CUDA device",
 	.version = "1.0.0",
 	.license = "MIT",
 	.citation = "Vercauteren, Pennec, Perchant, Ayache, \"Diffeomorphic "

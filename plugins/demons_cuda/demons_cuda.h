@@ -12,7 +12,7 @@
  * from lib/'s headers; demons_cuda.cu lists them): the warp
  * (lib/field fimg_resample_block_where, the float trilinear stencil of
  * lib/img/sample.h), the demons and LNCC forces (lib/demons/
- * demons_force.c; the LNCC window sums as lib/img/box.c's running sums,
+ * demons_at.h; the LNCC window sums as lib/img/box.c's running sums,
  * one thread per line), the discrete Gaussian (lib/img/gauss.c's float
  * taps, tap by tap), the update's statistics, and s o exp(u) (lib/field/
  * field_compose.c: the squarings and the composition).  Sums over voxels
