@@ -40,10 +40,13 @@ def main():
                     help="mattes: histogram bins; CC: window radius (voxels)")
     ap.add_argument("--iterations", default="40,20,0", help="SyN's, coarse to fine")
     ap.add_argument("--data", default=os.environ.get("ARMSTG_DATA", "../shared/data"))
+    ap.add_argument("--armstg", default="build/armstg",
+                    help="for the case's brain mask where it has none (real.prepare: sts)")
     a = ap.parse_args()
     os.environ.setdefault("ITK_GLOBAL_DEFAULT_NUMBER_OF_THREADS", "2")
     import ants
-    a.out, a.data = os.path.abspath(a.out), os.path.abspath(a.data)
+    a.out, a.data, a.armstg = (os.path.abspath(a.out), os.path.abspath(a.data),
+                               os.path.abspath(a.armstg))
     a.here, a.log = here, False
     c = real.case_def(a.data, a.case)
     real.ensure_ventricles(a.data, os.path.join(a.out, "ventricles"), [c["vent"]])

@@ -175,13 +175,15 @@ def main():
         if args.pre:
             # a first registration (the stage's text with these keys) whose
             # field starts the stage: a schedule per level without new keys
-            pre = re.sub(r"^\[stage register\]", "[stage register0]", reg, flags=re.M)
+            head = "[stage register]\n"
+            assert reg.startswith(head), "the graph's register stage header"
+            pre = "[stage register0]\n" + reg[len(head):]
             for kv in args.pre.split(";"):
-                k, v = kv.split("=", 1)
-                pre = re.sub(r"^%s\s*=.*$" % k, "", pre, flags=re.M)
-                pre = pre.replace("[stage register0]\n", "[stage register0]\n%s = %s\n" % (k, v), 1)
-            reg = pre + "\n" + reg.replace("[stage register]\n",
-                                            "[stage register]\ninitial_field = register0.field\n", 1)
+                k, v = (t.strip() for t in kv.split("=", 1))
+                pre = re.sub(r"^\s*%s\s*=.*$" % re.escape(k), "", pre, flags=re.M)
+                pre = pre.replace("[stage register0]\n",
+                                  "[stage register0]\n%s = %s\n" % (k, v), 1)
+            reg = pre + "\n" + head + "initial_field = register0.field\n" + reg[len(head):]
         # the graph's [vars] too: the stage names its plugin as ${DEMONS}
         g = ("[graph]\nname = reg_sweep\n" + section(graph_text, "vars", "vars") + src +
              reg + "\n" +
@@ -205,7 +207,9 @@ def main():
         tag = args.tag or "default"
     l1 = os.getloadavg()[0]
     msd, S, dv, ml, td, jm = score(args, c, warp, tum)
-    row = [args.case, tag, ";".join(args.set) or "-", "%.3f" % msd, "%.0f" % S, "%.3f" % dv,
+    sets = list(args.set) + (["pre:" + args.pre] if args.pre else []) + \
+        (["images:" + args.images] if args.images else [])
+    row = [args.case, tag, ";".join(sets) or "-", "%.3f" % msd, "%.0f" % S, "%.3f" % dv,
            "%.2f" % ml, "%.3f" % td, "%.3f" % jm, fine_iters(o), "%.1f" % cpu, "%.1f" % t,
            "%.1f" % l1]
     tsv = os.path.join(args.out, "sweep.tsv")
