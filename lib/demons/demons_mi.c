@@ -19,8 +19,8 @@
  * by central differences over the bins (per intensity unit), read by
  * bilinear interpolation at the voxel's continuous bin coordinates.  The
  * update is u(x) = dMI/dW(x) grad W(x) (world vectors; W's gradient is
- * demons_at.h's dm_grad_w, as the other forces take it), smoothed by sigma_fluid and scaled as the LNCC
- * update (max_step voxels at its largest on the level's first iteration).
+ * demons_at.h's dm_grad_w_world, as the LNCC force takes it), smoothed by
+ * sigma_fluid and scaled as the LNCC update (below).
  * The cost for the convergence test is log(B) - MI (>= 0: MI <= log B),
  * reported per voxel; the table's column mi is MI in nats.
  *
@@ -174,9 +174,9 @@ int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 			if (b0 > B - 2)
 				b0 = B - 2;
 			double ta = cf - a0, tb = cw - b0;
-			double coef = (1 - ta) * ((1 - tb) * G[a0 * B + b0] + tb * G[a0 * B + b0 + 1]) +
-				      ta * ((1 - tb) * G[(a0 + 1) * B + b0] +
-					    tb * G[(a0 + 1) * B + b0 + 1]);
+			const double *g0 = G + a0 * B + b0, *g1 = g0 + B;
+			double coef = (1 - ta) * ((1 - tb) * g0[0] + tb * g0[1]) +
+				      ta * ((1 - tb) * g1[0] + tb * g1[1]);
 			double gw[3];
 			dm_grad_w_world(&V, e, i, j, k, gw);
 			for (int c = 0; c < 3; c++)
