@@ -551,7 +551,8 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 			rc = FAIL(ARMSTG_ENOMEM, "out of memory (level %d)", l + 1);
 			goto out;
 		}
-		double lscale = 0; /* metric=lncc: update scale of the level */
+		double lscale = 0; /* metric=lncc, mi: update scale of the level */
+		double mi_prev = NAN; /* metric=mi: the last iteration's cost */
 		/* a backend (demons_cuda) runs the level's iterations on its
 		 * device, the same floats as below; the label term inside the
 		 * levels stays on the host (label_where = after, what the
@@ -650,6 +651,15 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 					 * max_step */
 					double mmm, mvox;
 					fimg_field_maxnorm(&A, &mmm, &mvox);
+					/* metric=mi: the force's largest vector does
+					 * not shrink as the images align (it comes
+					 * from the sparsest bins), so the scale is
+					 * halved after each iteration whose cost rose
+					 * (the last update overshot; demons_mi.c) */
+					if (p->metric == METRIC_MI && lscale > 0 &&
+					    mse > mi_prev)
+						lscale *= 0.5;
+					mi_prev = mse;
 					if (mvox > 0) {
 						if (!(lscale > 0))
 							lscale = p->max_step / mvox;
