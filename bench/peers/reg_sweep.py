@@ -165,7 +165,12 @@ def main():
         if args.images:
             # another pair of images: the patient's (fixed) and the atlas's
             # (moving, carried by the saved growth field as grown_t1 is)
+            if args.images.count(",") != 1:
+                raise SystemExit("reg_sweep.py: --images: give FIXED,MOVING")
             fx, mv = args.images.split(",")
+            for f in (fx, mv):
+                if not os.path.exists(f):
+                    raise SystemExit("reg_sweep.py: --images: %s does not exist" % f)
             src += ("[stage x_fixed]\nplugin = nifti_source\npath = %s\n"
                     "[stage x_moving0]\nplugin = nifti_source\npath = %s\n"
                     "[stage x_moving]\nplugin = warp\nvolume = x_moving0.volume\n"
@@ -179,6 +184,8 @@ def main():
             assert reg.startswith(head), "the graph's register stage header"
             pre = "[stage register0]\n" + reg[len(head):]
             for kv in args.pre.split(";"):
+                if "=" not in kv:
+                    raise SystemExit("reg_sweep.py: --pre: '%s' is not KEY=VALUE" % kv)
                 k, v = (t.strip() for t in kv.split("=", 1))
                 pre = re.sub(r"^\s*%s\s*=.*$" % re.escape(k), "", pre, flags=re.M)
                 pre = pre.replace("[stage register0]\n",
