@@ -11,7 +11,8 @@
 #
 # carried_libs: unpack debs/*.deb once into /tmp/dl (by rename, so batches
 #   started together never load a half-written library: SIGBUS) and put it
-#   on LD_LIBRARY_PATH (no debs/: the machine's own libraries).
+#   on LD_LIBRARY_PATH before what the caller had there (no debs/: the
+#   machine's own libraries, or a folder the caller named).
 # check_libs: stop, naming them, when libraries of $BUILD's binaries are
 #   missing (2026-11-23: 80 runs had failed in a second each, silently).
 carried_libs() {
@@ -23,7 +24,7 @@ carried_libs() {
 		fi
 		break
 	done
-	export LD_LIBRARY_PATH=/tmp/dl/usr/lib/x86_64-linux-gnu:/tmp/dl/lib/x86_64-linux-gnu
+	export LD_LIBRARY_PATH=/tmp/dl/usr/lib/x86_64-linux-gnu:/tmp/dl/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
 }
 
 check_libs() {
