@@ -24,7 +24,7 @@
  * The cost for the convergence test is log(B) - MI (>= 0: MI <= log B),
  * reported per voxel; the table's column mi is MI in nats.
  *
- * The step: the LNCC rule (demons_run.c), the level's first update scaled
+ * The step: the LNCC rule (metric_rules), the level's first update scaled
  * to max_step voxels at its largest and the later ones by the same factor,
  * never beyond max_step, and for MI that factor halved after each
  * iteration whose cost rose: the MI force's largest vector comes from the

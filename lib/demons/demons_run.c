@@ -79,13 +79,15 @@
  *     u(x) = 2 sFW / (sFF sWW) (Ft(x) - sFW / sWW Wt(x)) grad W(x),
  *   smoothed by sigma_fluid and scaled so that its largest vector is
  *   max_step voxels of the level (Greedy's step epsilon; the demons bound
- *   does not apply to a correlation gradient).  The update then goes
+ *   does not apply to a correlation gradient; the step rule of each metric
+ *   is with metric_rules below).  The update then goes
  *   through the same diffeomorphic composition and field smoothing.  The
  *   convergence test watches 1 - mean CC in place of the MSE.
  *
  * metric=mi: the gradient of the mutual information of F and W (one global
  * joint histogram, Parzen-smoothed; the equations in demons_mi.c), scaled
- * as the LNCC update; the convergence test watches log(bins) - MI.  No
+ * as the LNCC update, its scale halved after each iteration whose cost
+ * rose (metric_rules); the convergence test watches log(bins) - MI.  No
  * backend runs it: a demons_cuda stage runs such levels on the host.
  *
  * fixed_label and moving_label (optional, together) add the label term of
@@ -157,11 +159,142 @@ int dm_stage_init(armstg_stage_t *st)
 
 
 
+/*
+ * The metrics (metric = ssd | lncc | mi), each in one place: the cost c
+ * that the convergence test compares (header) and its name in the logs,
+ * the table's column and its figure, the force of an iteration, and the
+ * step, the factor the smoothed update u is multiplied by at an iteration
+ * whose cost is c:
+ *   ssd:  1 (the demons force is bounded by sigma_x / 2 itself);
+ *   lncc: min(s_l, max_step / max|u|), max|u| the largest vector in voxels
+ *         of the level, s_l = max_step / max|u| of the level's first
+ *         update: that update is max_step voxels at its largest, later
+ *         ones are scaled by the same factor (so they shrink as the
+ *         correlation converges; ANTs estimates its learning rate once per
+ *         level too), never beyond max_step (Greedy's step epsilon; the
+ *         demons bound does not apply to a correlation gradient);
+ *   mi:   the lncc step, with s_l halved after each iteration whose cost
+ *         rose (the last update overshot): the MI force's largest vector
+ *         comes from the sparsest bins and does not shrink as the images
+ *         align (demons_mi.c).
+ */
+typedef struct step {
+	double scale; /* lncc, mi: s_l, 0 until the level's first update
+		       * (a backend's dm_iter_t lscale) */
+	double prev;  /* mi: the last iteration's cost c (NaN: none yet) */
+} step_t;
+
+/* the step at the start of a level */
+static step_t step_level(void)
+{
+	return (step_t){ 0, NAN };
+}
+
+static float step_one(const demons_priv_t *p, step_t *s, const fimg_t *U,
+		      double c)
+{
+	(void)p, (void)s, (void)U, (void)c;
+	return 1.0f;
+}
+
+static float step_lncc(const demons_priv_t *p, step_t *s, const fimg_t *U,
+		       double c)
+{
+	(void)c;
+	double mmm, mvox; /* max |u|: mm, voxels of the level */
+	fimg_field_maxnorm(U, &mmm, &mvox);
+	if (!(mvox > 0))
+		return 1.0f;
+	if (!(s->scale > 0))
+		s->scale = p->max_step / mvox;
+	return (float)fmin(s->scale, p->max_step / mvox);
+}
+
+static float step_mi(const demons_priv_t *p, step_t *s, const fimg_t *U,
+		     double c)
+{
+	if (s->scale > 0 && c > s->prev)
+		s->scale *= 0.5;
+	s->prev = c;
+	return step_lncc(p, s, U, c);
+}
+
+/* the force of one iteration into U (mm), the sum of the cost's terms over
+ * the used voxels and their number; sx2: the demons bound sigma_x^2 (mm^2,
+ * ssd); 0 or ARMSTG_ENOMEM */
+static int force_ssd(const demons_priv_t *p, const level_t *L, fimg_t *U,
+		     double sx2, double *sum, int64_t *nused, int nt)
+{
+	dm_compute_force(p, L, U, sx2, sum, nused, nt);
+	return 0;
+}
+
+static int force_lncc(const demons_priv_t *p, const level_t *L, fimg_t *U,
+		      double sx2, double *sum, int64_t *nused, int nt)
+{
+	(void)sx2;
+	return dm_compute_force_lncc(p, L, U, sum, nused, nt);
+}
+
+static int force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
+		    double sx2, double *sum, int64_t *nused, int nt)
+{
+	(void)sx2;
+	return dm_compute_force_mi(p, L, U, sum, nused, nt);
+}
+
+/* the table's figure from the cost c: the MSE; the mean CC, 1 - c; MI in
+ * nats, log(bins) - c */
+static double figure_ssd(const demons_priv_t *p, double c)
+{
+	(void)p;
+	return c;
+}
+
+static double figure_lncc(const demons_priv_t *p, double c)
+{
+	(void)p;
+	return 1 - c;
+}
+
+static double figure_mi(const demons_priv_t *p, double c)
+{
+	return log((double)p->bins) - c;
+}
+
+typedef struct metric_rule {
+	const char *cost;   /* the name of the cost c (logs) */
+	const char *column; /* the table's column (and the progress line's) */
+	double (*figure)(const demons_priv_t *p, double c);
+	int (*force)(const demons_priv_t *p, const level_t *L, fimg_t *U,
+		     double sx2, double *sum, int64_t *nused, int nt);
+	const char *force_mem; /* what the force's ARMSTG_ENOMEM was for */
+	int on_backend;        /* a backend (demons.h) may run its levels */
+	float (*step)(const demons_priv_t *p, step_t *s, const fimg_t *U,
+		      double c);
+} metric_rule_t;
+
+static const metric_rule_t metric_rules[] = {
+	[METRIC_SSD] = { "mse", "mse", figure_ssd, force_ssd, "force", 1,
+			 step_one },
+	[METRIC_LNCC] = { "1 - lncc", "lncc", figure_lncc, force_lncc,
+			  "lncc sums", 1, step_lncc },
+	/* no backend runs mi: a demons_cuda stage runs its levels here */
+	[METRIC_MI] = { "log(bins) - mi", "mi", figure_mi, force_mi,
+			"mi histogram", 0, step_mi },
+};
+
+static const metric_rule_t *metric_rule(const demons_priv_t *p)
+{
+	return &metric_rules[p->metric];
+}
+
 static int add_row(armstg_stage_t *st, tab_t *t, int level, int it,
-		   double mse, double mean_u, double max_u, double secs,
+		   double cost, double mean_u, double max_u, double secs,
 		   const demons_priv_t *p)
 {
 	const armstg_host_t *h = st->host;
+	const metric_rule_t *mr = metric_rule(p);
 	if (!t)
 		return 0;
 	int64_t r = h->tab_add_row(t);
@@ -169,12 +302,7 @@ static int add_row(armstg_stage_t *st, tab_t *t, int level, int it,
 		return ARMSTG_ENOMEM;
 	h->tab_set_num(t, r, "level", level);
 	h->tab_set_num(t, r, "iteration", it);
-	if (p->metric == METRIC_LNCC)
-		h->tab_set_num(t, r, "lncc", 1 - mse);
-	else if (p->metric == METRIC_MI) /* nats; the cost is log(bins) - MI */
-		h->tab_set_num(t, r, "mi", log((double)p->bins) - mse);
-	else
-		h->tab_set_num(t, r, "mse", mse);
+	h->tab_set_num(t, r, mr->column, mr->figure(p, cost));
 	h->tab_set_num(t, r, "mean_update_mm", mean_u);
 	h->tab_set_num(t, r, "max_update_mm", max_u);
 	h->tab_set_num(t, r, "seconds", secs);
@@ -199,6 +327,7 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 	const vol_t *vinit = (const vol_t *)st->in[IN_INIT];
 	const vol_t *vfl = (const vol_t *)st->in[IN_FLABEL];
 	const vol_t *vml = (const vol_t *)st->in[IN_MLABEL];
+	const metric_rule_t *mrule = metric_rule(p);
 	int nt = h->threads ? h->threads(st) : 1;
 	if (nt < 1)
 		nt = 1;
@@ -478,7 +607,7 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 		}
 		/* a backend runs the level's iterations (below) on its own
 		 * buffers: the host's window sums are not needed then */
-		const int on_dev = be && iters[l] > 0 && p->metric != METRIC_MI &&
+		const int on_dev = be && iters[l] > 0 && mrule->on_backend &&
 				   !label_at(p, use_label, l, nlev);
 		if (p->metric == METRIC_LNCC && !on_dev &&
 		    !(L.sums = malloc(sizeof(float) * 6 * (size_t)fgrid_nvox(&g)))) {
@@ -551,8 +680,7 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 			rc = FAIL(ARMSTG_ENOMEM, "out of memory (level %d)", l + 1);
 			goto out;
 		}
-		double lscale = 0; /* metric=lncc, mi: update scale of the level */
-		double mi_prev = NAN; /* metric=mi: the last iteration's cost */
+		step_t step = step_level(); /* the update's step (metric_rule) */
 		/* a backend (demons_cuda) runs the level's iterations on its
 		 * device, the same floats as below; the label term inside the
 		 * levels stays on the host (label_where = after, what the
@@ -582,19 +710,18 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 			nt = h->threads ? h->threads(st) : 1;
 			if (nt < 1)
 				nt = 1;
-			double mse, mu, mx;
+			double cost, mu, mx; /* c (header), mean and max update (mm) */
 			double ldice = NAN, lcost = NAN;
-			const int lncc = p->metric == METRIC_LNCC;
 			if (dev) {
 				/* the whole iteration on the backend's device */
-				dm_iter_t itv = { sx2, sg_fluid, sg_field, lscale,
+				dm_iter_t itv = { sx2, sg_fluid, sg_field, step.scale,
 						  0, 0, 0, 0 };
 				if ((rc = be->iterate(dev, p, &itv, err, sizeof err))) {
 					rc = FAIL(rc, "%s: %s (level %d iteration %d)",
 						  be->name, err, l + 1, it + 1);
 					goto out;
 				}
-				lscale = itv.lscale;
+				step.scale = itv.lscale;
 				if (itv.nused == 0) {
 					rc = FAIL(ARMSTG_EINVAL,
 						  "no voxel where fixed, moving and "
@@ -602,7 +729,7 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 						  "the masks and affines", l + 1);
 					goto out;
 				}
-				mse = itv.cost / (double)itv.nused;
+				cost = itv.cost / (double)itv.nused;
 				mu = itv.mean_u;
 				mx = itv.max_u;
 			} else {
@@ -612,24 +739,12 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 					fimg_resample_block_where(&MM0, &S, FIELD_NEAREST, 0,
 								  &L.WM, L.wlo, L.whi,
 								  L.needm, nt);
-				double ssd;
+				double csum; /* the sum of the cost's terms */
 				int64_t nused;
-				if (p->metric == METRIC_MI) {
-					if ((rc = dm_compute_force_mi(p, &L, &A, &ssd, &nused,
-								   nt))) {
-						rc = FAIL(rc, "out of memory (mi histogram, "
-							  "level %d)", l + 1);
-						goto out;
-					}
-				} else if (lncc) {
-					if ((rc = dm_compute_force_lncc(p, &L, &A, &ssd, &nused,
-								     nt))) {
-						rc = FAIL(rc, "out of memory (lncc sums, "
-							  "level %d)", l + 1);
-						goto out;
-					}
-				} else {
-					dm_compute_force(p, &L, &A, sx2, &ssd, &nused, nt);
+				if ((rc = mrule->force(p, &L, &A, sx2, &csum, &nused, nt))) {
+					rc = FAIL(rc, "out of memory (%s, level %d)",
+						  mrule->force_mem, l + 1);
+					goto out;
 				}
 				if (nused == 0) {
 					rc = FAIL(ARMSTG_EINVAL,
@@ -638,34 +753,12 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 						  "and affines", l + 1);
 					goto out;
 				}
-				mse = ssd / (double)nused;
+				cost = csum / (double)nused;
 				if (sg_fluid > 0)
 					fimg_smooth(&A, sg_fluid, nt);
-				float sc = 1.0f;
-				if (lncc || p->metric == METRIC_MI) {
-					/* the step: the level's first update is scaled to
-					 * max_step voxels at its largest, later ones by
-					 * the same factor (so they shrink as the
-					 * correlation converges; ANTs estimates its
-					 * learning rate once per level too), never beyond
-					 * max_step */
-					double mmm, mvox;
-					fimg_field_maxnorm(&A, &mmm, &mvox);
-					/* metric=mi: the force's largest vector does
-					 * not shrink as the images align (it comes
-					 * from the sparsest bins), so the scale is
-					 * halved after each iteration whose cost rose
-					 * (the last update overshot; demons_mi.c) */
-					if (p->metric == METRIC_MI && lscale > 0 &&
-					    mse > mi_prev)
-						lscale *= 0.5;
-					mi_prev = mse;
-					if (mvox > 0) {
-						if (!(lscale > 0))
-							lscale = p->max_step / mvox;
-						sc = (float)fmin(lscale, p->max_step / mvox);
-					}
-				}
+				/* the step (metric_rule): 1 for ssd, the level's
+				 * scale for lncc and mi */
+				float sc = mrule->step(p, &step, &A, cost);
 				/* the label term's step, on top of the image term's
 				 * (already scaled: the label step is in mm, bounded by
 				 * sigma_x / 2, and takes no share of the LNCC step) */
@@ -707,7 +800,7 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 					fimg_smooth(&S, sg_field, nt);
 			}
 			double secs = lib_now_s() - t0;
-			if ((rc = add_row(st, tab, l + 1, it + 1, mse, mu, mx, secs,
+			if ((rc = add_row(st, tab, l + 1, it + 1, cost, mu, mx, secs,
 					  p))) {
 				rc = FAIL(rc, "out of memory (table)");
 				goto out;
@@ -718,18 +811,17 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 			}
 			if (memo_on && l < mk)
 				mrows[nmrows++] = (dm_memo_row_t){
-					l + 1, it + 1, mse, mu, mx, ldice, lcost
+					l + 1, it + 1, cost, mu, mx, ldice, lcost
 				};
 			done++;
 			h->progress(st, total ? (double)done / total : 1,
 				    "level %d/%d iter %d/%d %s %.5g mean update "
 				    "%.3g mm", l + 1, nlev, it + 1, iters[l],
-				    lncc ? "lncc" : p->metric == METRIC_MI ? "log(bins) - mi" : "mse",
-				    lncc ? 1 - mse : mse, mu);
+				    mrule->column, mrule->figure(p, cost), mu);
 			/* convergence: relative gain of the best cost over
 			 * the last tol_window iterations (header) */
-			best[it] = p->tol_best && it > 0 && best[it - 1] < mse
-					   ? best[it - 1] : mse;
+			best[it] = p->tol_best && it > 0 && best[it - 1] < cost
+					   ? best[it - 1] : cost;
 			/* the label term's cost likewise: a level goes on
 			 * while either cost still improves (the regions are
 			 * still being carried together when the images,
@@ -746,9 +838,8 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 					h->log(st, LOG_INFO,
 					       "level %d converged after %d "
 					       "iterations (%s %.5g, compared %.5g)",
-					       l + 1, it + 1, lncc ? "1 - lncc" :
-					       p->metric == METRIC_MI ? "log(bins) - mi" : "mse",
-					       mse, best[it]);
+					       l + 1, it + 1, mrule->cost, cost,
+					       best[it]);
 					done += iters[l] - it - 1;
 					break;
 				}
