@@ -81,6 +81,9 @@ typedef struct level {
 	 * resampled; NULL without a fixed mask */
 	uint8_t *needw, *needm;
 	float *sums; /* metric=lncc: the 6 window sums, one level's buffer */
+	/* metric=mi: the histogram's ranges, F's inside the fixed mask and
+	 * the moving image M's (dm_mi_level) */
+	float mi_f[2], mi_w[2];
 	/* per row (j, k) of the level grid: partial sums and counts, added
 	 * in row order afterwards, so that the costs and statistics are the
 	 * same bits on any thread count */
@@ -116,7 +119,8 @@ void dm_compute_force(const demons_priv_t *p, const level_t *L,
 			  int nt);
 int dm_compute_force_lncc(const demons_priv_t *p, const level_t *L,
 			      fimg_t *U, double *score, int64_t *nused, int nt);
-/* demons_mi.c */
+/* demons_mi.c; dm_mi_level once per level, after its images */
+void dm_mi_level(level_t *L, int nt);
 int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 			double *score, int64_t *nused, int nt);
 void dm_update_stats(fimg_t *U, const level_t *L, float scale,

@@ -5,11 +5,11 @@
  * default, antspyx type_of_transform "SyN": Mattes MI), as a demons force.
  *
  * The joint density of (F, W) over the voxels inside both masks and the
- * moving image: a histogram of B x B bins on each image's range (the
- * level's minimum to maximum over those voxels), each voxel counted in its
- * nearest bin (integer counts: the same on any thread count), then smoothed
- * by a Gaussian of sigma 1 bin along each axis (Parzen window) into p(f, w);
- * p_w(w) = sum_f p(f, w).  The mutual information
+ * moving image: a histogram of B x B bins on each image's range (below),
+ * each voxel counted in its nearest bin (integer counts: the same on any
+ * thread count), then smoothed by a Gaussian of sigma 1 bin along each
+ * axis (Parzen window) into p(f, w); p_w(w) = sum_f p(f, w).  The mutual
+ * information
  *     MI = sum p log(p / (p_f p_w))                         (nats)
  * and its first variation with respect to W at a voxel (Hermosillo,
  * Chefd'hotel, Faugeras, "Variational methods for multimodal image
@@ -23,6 +23,25 @@
  * sigma_fluid and scaled as the LNCC update (below).
  * The cost for the convergence test is log(B) - MI (>= 0: MI <= log B),
  * reported per voxel; the table's column mi is MI in nats.
+ *
+ * The ranges are set once per level (dm_mi_level), as ITK's
+ * MattesMutualInformationImageToImageMetricv4::Initialize sets them once
+ * per registration: F's minimum to maximum over the level's fixed image
+ * inside the fixed mask (the used voxels are inside it), W's over the
+ * level's whole moving image M (W interpolates M, so it stays within M's
+ * range; ITK takes M's inside the moving mask, where W near the mask's
+ * edge leaves the range and is clamped into the edge bin).  So every
+ * iteration of a level bins alike, and the cost that the step rule and the
+ * convergence test compare between iterations moves with the alignment
+ * alone.  Until 2026-11-27 each iteration took both ranges over its own
+ * used voxels, which move with the warp (the test phantom's masked
+ * coarsest level: F's lower end 0.205, 0.220, 0.213 over its first
+ * iterations, the bins 0.021 wide), in a third walk over the voxels; on
+ * the demo phantom (seeds 1-5, one 6 mm push, register.metric=mi) the
+ * mean displacement error in the brain fell from 0.892, 0.812, 0.728,
+ * 0.703, 0.773 mm to 0.876, 0.780, 0.711, 0.663, 0.729 mm (ITK's masked
+ * moving range: 0.889, 0.812, 0.718, 0.707, 0.732), test_mi_contrast's
+ * error from 0.997 to 0.911 mm.
  *
  * The step: the LNCC rule (metric_rules), the level's first update scaled
  * to max_step voxels at its largest and the later ones by the same factor,
@@ -46,6 +65,14 @@
 static int valid_at(const dm_vox_t *V, int64_t e)
 {
 	return !isnan(V->W[e]) && isfinite(V->F[e]) && !dm_masked_out(V, e);
+}
+
+/* W's continuous bin coordinate, clamped to [0, B - 1]: a trilinear W
+ * may pass M's maximum or minimum by a rounding */
+static double wbin(float w, float wlo, double ws, int B)
+{
+	double c = (w - wlo) * ws;
+	return c < 0 ? 0 : c > B - 1 ? B - 1 : c;
 }
 
 /* Gaussian smoothing of the B x B table T (double), sigma 1 bin, taps to
@@ -86,6 +113,24 @@ static int smooth_table(double *T, int B)
 	return 0;
 }
 
+void dm_mi_level(level_t *L, int nt)
+{
+	/* F inside the fixed mask (FM > 0: dm_masked_out) */
+	const int64_t nv = fgrid_nvox(&L->F.g);
+	const float *F = L->F.d, *FM = L->FM.d;
+	float lo = INFINITY, hi = -INFINITY;
+	for (int64_t e = 0; e < nv; e++) {
+		if ((FM && FM[e] <= 0) || !isfinite(F[e]))
+			continue;
+		lo = fminf(lo, F[e]);
+		hi = fmaxf(hi, F[e]);
+	}
+	L->mi_f[0] = lo;
+	L->mi_f[1] = hi;
+	/* the whole moving image (finite: the stage refuses NaN inputs) */
+	dm_minmax(&L->M, &L->mi_w[0], &L->mi_w[1], nt);
+}
+
 int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 			double *score, int64_t *nused, int nt)
 {
@@ -94,26 +139,14 @@ int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 	const int64_t nv = V.nv;
 	const int B = p->bins;
 	const float *F = L->F.d, *W = L->W.d;
-	/* the ranges over the valid voxels (exact minima and maxima) */
-	float flo = INFINITY, fhi = -INFINITY, wlo = INFINITY, whi = -INFINITY;
-	int64_t n = 0;
-	for (int64_t e = 0; e < nv; e++) {
-		if (!valid_at(&V, e))
-			continue;
-		n++;
-		flo = fminf(flo, F[e]);
-		fhi = fmaxf(fhi, F[e]);
-		wlo = fminf(wlo, W[e]);
-		whi = fmaxf(whi, W[e]);
-	}
+	/* the level's ranges (dm_mi_level): F and W at a used voxel lie in
+	 * them (W's bin coordinate is clamped against rounding: wbin) */
+	const float flo = L->mi_f[0], fhi = L->mi_f[1];
+	const float wlo = L->mi_w[0], whi = L->mi_w[1];
+	const int flat = !(fhi > flo) || !(whi > wlo);
+	const double fs = flat ? 0 : (B - 1) / ((double)fhi - flo);
+	const double ws = flat ? 0 : (B - 1) / ((double)whi - wlo);
 	memset(U->d, 0, sizeof(float) * 3 * (size_t)nv);
-	*nused = n;
-	/* a flat image over the used voxels: MI 0, no force */
-	*score = log((double)B) * (double)n;
-	if (n == 0 || !(fhi > flo) || !(whi > wlo))
-		return 0;
-	const double fs = (B - 1) / ((double)fhi - flo);
-	const double ws = (B - 1) / ((double)whi - wlo);
 	int64_t *H = calloc((size_t)B * B, sizeof(int64_t));
 	double *P = malloc(sizeof(double) * (size_t)B * B);
 	double *pw = calloc((size_t)B, sizeof(double));
@@ -123,11 +156,23 @@ int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 		free(H), free(P), free(pw), free(pf), free(G);
 		return ARMSTG_ENOMEM;
 	}
+	/* the histogram, and the used voxels counted */
+	int64_t n = 0;
 	for (int64_t e = 0; e < nv; e++) {
 		if (!valid_at(&V, e))
 			continue;
-		int i = (int)lrint((F[e] - flo) * fs), j = (int)lrint((W[e] - wlo) * ws);
+		n++;
+		int i = (int)lrint((F[e] - flo) * fs);
+		int j = (int)lrint(wbin(W[e], wlo, ws, B));
 		H[i * B + j]++;
+	}
+	*nused = n;
+	/* a level whose fixed (inside its mask) or moving image is flat: MI
+	 * 0, no force */
+	*score = log((double)B) * (double)n;
+	if (n == 0 || flat) {
+		free(H), free(P), free(pw), free(pf), free(G);
+		return 0;
 	}
 	for (int q = 0; q < B * B; q++)
 		P[q] = (double)H[q] / (double)n;
@@ -164,7 +209,7 @@ int dm_compute_force_mi(const demons_priv_t *p, const level_t *L, fimg_t *U,
 			int64_t e = ((int64_t)k * ny + j) * nx + i;
 			if (!valid_at(&V, e))
 				continue;
-			double cf = (F[e] - flo) * fs, cw = (W[e] - wlo) * ws;
+			double cf = (F[e] - flo) * fs, cw = wbin(W[e], wlo, ws, B);
 			int a0 = (int)cf, b0 = (int)cw;
 			if (a0 > B - 2)
 				a0 = B - 2;

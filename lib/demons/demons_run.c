@@ -270,18 +270,20 @@ typedef struct metric_rule {
 		     double sx2, double *sum, int64_t *nused, int nt);
 	const char *force_mem; /* what the force's ARMSTG_ENOMEM was for */
 	int on_backend;        /* a backend (demons.h) may run its levels */
+	/* once per level on the host, after its images (or NULL) */
+	void (*level)(level_t *L, int nt);
 	float (*step)(const demons_priv_t *p, step_t *s, const fimg_t *U,
 		      double c);
 } metric_rule_t;
 
 static const metric_rule_t metric_rules[] = {
 	[METRIC_SSD] = { "mse", "mse", figure_ssd, force_ssd, "force", 1,
-			 step_one },
+			 NULL, step_one },
 	[METRIC_LNCC] = { "1 - lncc", "lncc", figure_lncc, force_lncc,
-			  "lncc sums", 1, step_lncc },
+			  "lncc sums", 1, NULL, step_lncc },
 	/* no backend runs mi: a demons_cuda stage runs its levels here */
 	[METRIC_MI] = { "log(bins) - mi", "mi", figure_mi, force_mi,
-			"mi histogram", 0, step_mi },
+			"mi histogram", 0, dm_mi_level, step_mi },
 };
 
 static const metric_rule_t *metric_rule(const demons_priv_t *p)
@@ -630,6 +632,8 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 			rc = FAIL(rc, "out of memory (level %d)", l + 1);
 			goto out;
 		}
+		if (mrule->level && !on_dev)
+			mrule->level(&L, nt);
 		{
 			const int64_t nvl = fgrid_nvox(&g);
 #pragma omp parallel for num_threads(nt) schedule(static)
