@@ -7,6 +7,11 @@ load; a later file's row replaces an earlier one's) and one PNG: ventricle MSD p
 displacement error near the tumour per phantom, one bar per method.
 
     python3 bench/peers/plot_real.py OUT/real.tsv [more.tsv...] --png FIG.png
+    python3 bench/peers/plot_real.py ... --wide [--methods a,b,...]
+
+--wide prints one row per case and one column per method instead: the
+ventricle MSD (mm) on the real cases, the error near the tumour (mm) on the
+phantoms, with the case's lowest figure in bold (the README's table).
 """
 import argparse
 import csv
@@ -33,10 +38,27 @@ def num(r, k):
     return v
 
 
+def wide(rows, cases, methods):
+    """one row per case, one column per method"""
+    print("| case | " + " | ".join(methods) + " |")
+    print("|---|" + "---|" * len(methods))
+    for c in cases:
+        key = "err_band_mm" if c.startswith("phantom") else "vent_msd_mm"
+        v = [num(rows[(c, m)], key) if (c, m) in rows else math.nan for m in methods]
+        if all(math.isnan(x) for x in v):
+            continue
+        best = min(x for x in v if not math.isnan(x))
+        cell = ["" if math.isnan(x) else ("**%.3f**" if x == best else "%.3f") % x for x in v]
+        print("| %s | %s |" % (c, " | ".join(cell)))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("tsv", nargs="+")
     ap.add_argument("--png")
+    ap.add_argument("--wide", action="store_true",
+                    help="one row per case, one column per method (MSD or error near the tumour)")
+    ap.add_argument("--methods", help="--wide: these methods, in this order (default: all)")
     a = ap.parse_args()
     rows = load(a.tsv)
     cases = []
@@ -45,6 +67,18 @@ def main():
             cases.append(c)
     methods = [m for m in ORDER if any(k[1] == m for k in rows)]
     methods += sorted({k[1] for k in rows} - set(methods))
+    if a.methods:
+        methods = a.methods.split(",")
+    if a.wide:
+        wide(rows, cases, methods)
+    else:
+        long_table(rows, cases, methods)
+    if a.png:
+        figure(rows, cases, methods, a.png)
+
+
+def long_table(rows, cases, methods):
+    """one row per case and method"""
     # one row per case and method (cases in the order of the rows)
     print("| case | method | ventricle MSD mm | S mm | ventricle Dice | tumour Dice "
           "| min det J | error near tumour mm | wall s | CPU s | load |")
@@ -63,8 +97,10 @@ def main():
                 f(r, "vent_dice", "%.3f"), f(r, "tumour_dice", "%.3f"),
                 f(r, "jac_min", "%.3f"), f(r, "err_band_mm", "%.3f"),
                 f(r, "wall_s", "%.0f"), f(r, "cpu_s", "%.0f"), r.get("load1") or ""))
-    if not a.png:
-        return
+
+
+def figure(rows, cases, methods, png):
+    """ventricle MSD per real case, error near the tumour per phantom"""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -89,7 +125,7 @@ def main():
         ax[k].grid(axis="y", alpha=0.3)
     ax[0].legend(fontsize=7, ncol=2)
     fig.tight_layout()
-    fig.savefig(a.png, dpi=80)
+    fig.savefig(png, dpi=80)
 
 
 if __name__ == "__main__":
