@@ -145,6 +145,7 @@ static int cu_level_begin(void *ctx, void **dev, const demons_priv_t *p,
 	d.S = S->d;
 	d.needw = L->needw;
 	d.needm = L->WM.d ? L->needm : NULL;
+	d.vox = dm_vox_of(L);
 	d.lncc = p->metric == METRIC_LNCC;
 	d.radius = p->radius;
 	d.sym = p->force == FORCE_SYMMETRIC;

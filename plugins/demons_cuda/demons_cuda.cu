@@ -478,12 +478,8 @@ static int begin(dmc_t *c, int device, char *err, size_t errsize)
 	CK(up(c->W, d->W, nv), "uploading the level");
 	CK(up(c->S, d->S, 3 * nv), "uploading the level");
 	CK(cudaStreamSynchronize(cudaStreamPerThread), "uploading the level");
-	for (int a = 0; a < 3; a++) {
-		c->L.n[a] = c->g.n[a];
-		for (int q = 0; q < 3; q++)
-			c->L.Li[a][q] = d->gw2v[a * 4 + q];
-	}
-	c->L.nv = c->g.nv;
+	/* the host's level (n, nv, Li: dm_vox_of) on the device's buffers */
+	c->L = d->vox;
 	c->L.F = c->F;
 	c->L.W = c->W;
 	c->L.FM = c->FM;

@@ -27,6 +27,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "demons/demons_at.h" /* dm_vox_t */
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -45,6 +47,9 @@ typedef struct dmc_desc {
 	int wlo[3], whi[3];/* the block where W and WM are resampled */
 	const float *F, *M, *FM, *MM, *W, *WM, *S; /* FM, MM, WM: NULL = none */
 	const uint8_t *needw, *needm; /* NULL: the whole block */
+	dm_vox_t vox;      /* the level as the host's per-voxel functions read
+			    * it (lib/demons dm_vox_of: n, nv, Li); its image
+			    * pointers are the host's: the device sets its own */
 	int lncc;          /* metric = lncc (else ssd) */
 	int radius;        /* lncc window half-width, voxels */
 	int sym;           /* ssd: the symmetric (ESM) force */
