@@ -54,6 +54,7 @@ typedef struct demons_priv {
 	int label_levels;
 	int label_where;     /* WHERE_* */
 	double label_blend;  /* mm */
+	double label_margin; /* mm; -1: no limit */
 	double label_jmin;
 	int label_iterations;
 	int memo;            /* keep / resume the coarse levels (demons_memo.c) */

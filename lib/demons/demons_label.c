@@ -367,10 +367,13 @@ int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
 }
 
 /* the correction's weight on the block: w = min(1, d(x, outside R) / blend)
- * in R (FM <= 0, or the fixed region without FM), 0 elsewhere; the
- * distance on the whole fixed grid (exact, not cut by the block) */
+ * in R (FM <= 0, or the fixed region without FM; with margin >= 0 also
+ * d(x, fixed region) <= margin mm), 0 elsewhere; the distances on the whole
+ * fixed grid (exact, between voxel centres, not cut by the block, nor
+ * clamped at reach as FD0 is) */
 static int correction_weight(const dlabel_t *d, const fgrid_t *G,
-			     const fimg_t *FM, double blend, fimg_t *wt, int nt)
+			     const fimg_t *FM, double blend, double margin,
+			     fimg_t *wt, int nt)
 {
 	const int64_t NV = fgrid_nvox(G);
 	const int n[3] = { G->nx, G->ny, G->nz };
@@ -379,8 +382,16 @@ static int correction_weight(const dlabel_t *d, const fgrid_t *G,
 	int rc = ARMSTG_ENOMEM;
 	if (!site || !d2)
 		goto done;
+	if (margin >= 0) {
+		/* d(x, fixed region)^2: the sites are its voxels */
+		for (int64_t e = 0; e < NV; e++)
+			site[e] = d->FD0.d[e] < 0;
+		if ((rc = img_edt_sq(site, n, G->sp, nt, d2)))
+			goto done;
+	}
 	for (int64_t e = 0; e < NV; e++)
-		site[e] = FM && FM->d ? FM->d[e] > 0 : !(d->FD0.d[e] < 0);
+		site[e] = (FM && FM->d ? FM->d[e] > 0 : !(d->FD0.d[e] < 0)) ||
+			  (margin >= 0 && sqrt((double)d2[e]) > margin);
 	if ((rc = img_edt_sq(site, n, G->sp, nt, d2)))
 		goto done;
 	const fgrid_t *g = &d->bg;
@@ -423,7 +434,7 @@ static double jac_min_where(const fimg_t *u, const float *wt, int nt)
 }
 
 int dlabel_correct(dlabel_t *d, fimg_t *S, const fimg_t *FM, double blend_mm,
-		   double sg_fluid, double sg_field, double sx2, int max_iter,
+		   double margin_mm, double sg_fluid, double sg_field, double sx2, int max_iter,
 		   double tol, int window, double jmin, double *dice0,
 		   double *dice, double *cost, int *steps, int *folds, int nt)
 {
@@ -438,7 +449,7 @@ int dlabel_correct(dlabel_t *d, fimg_t *S, const fimg_t *FM, double blend_mm,
 	double *hist = malloc(sizeof(double) * (size_t)(max_iter + 1));
 	if (!hist || (rc = fimg_alloc(&wt, &d->bg, 1)) ||
 	    (rc = fimg_alloc(&B, &d->bg, 3)) || (rc = fimg_alloc(&P, &d->bg, 3)) ||
-	    (rc = correction_weight(d, G, FM, blend_mm, &wt, nt))) {
+	    (rc = correction_weight(d, G, FM, blend_mm, margin_mm, &wt, nt))) {
 		rc = ARMSTG_ENOMEM;
 		goto out;
 	}

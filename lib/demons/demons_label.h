@@ -62,8 +62,11 @@ int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
 /*
  * label_where = after: the term as a correction of the finished field S
  * (on the fixed grid, nc 3), confined to the region R the fixed mask FM
- * leaves out of the images (FM <= 0; FM NULL: the fixed region itself) and
- * blended to zero towards the imaged voxels: each step's update (the term's
+ * leaves out of the images (FM <= 0; FM NULL: the fixed region itself),
+ * and with margin_mm >= 0 (< 0: no limit) also within margin_mm of the
+ * fixed region (d(x, fixed region) <= margin_mm, exact Euclidean distance
+ * between voxel centres, 0 inside; margin 0: the fixed region only), and
+ * blended to zero towards the voxels outside R: each step's update (the term's
  * demons step where R holds, smoothed by sg_fluid mm) is multiplied by
  * w(x) = min(1, d(x, outside R) / blend_mm) (d: exact Euclidean distance,
  * mm; blend_mm 0: w = 1 in R) and composed, s <- s o exp(w u), then the
@@ -78,7 +81,7 @@ int dlabel_add_force(dlabel_t *d, const fimg_t *S, const fimg_t *FM,
  * Returns 0 or ARMSTG_ENOMEM.
  */
 int dlabel_correct(dlabel_t *d, fimg_t *S, const fimg_t *FM, double blend_mm,
-		   double sg_fluid, double sg_field, double sx2, int max_iter,
+		   double margin_mm, double sg_fluid, double sg_field, double sx2, int max_iter,
 		   double tol, int window, double jmin, double *dice0,
 		   double *dice, double *cost, int *steps, int *folds, int nt);
 

@@ -154,6 +154,11 @@ int dm_stage_init(armstg_stage_t *st)
 			    "parameter 'iterations' has %d values but levels = "
 			    "%d (give one per level, coarse to fine, or one for "
 			    "all)", p->nlist, p->levels);
+	if (p->label_margin < 0 && p->label_margin != -1)
+		return FAIL(ARMSTG_EINVAL,
+			    "parameter 'label_margin': %g is out of range (a "
+			    "distance >= 0 mm, or -1 for no limit)",
+			    p->label_margin);
 	return 0;
 }
 
@@ -897,7 +902,7 @@ int dm_stage_process(armstg_stage_t *st, const dm_backend_t *be)
 		double d0, d1, c1;
 		int nsteps, folds;
 		rc = dlabel_correct(&DL, &S, FM0.d ? &FM0 : NULL, p->label_blend,
-				    p->sigma_fluid * vs, p->sigma_field * vs,
+				    p->label_margin, p->sigma_fluid * vs, p->sigma_field * vs,
 				    4 * p->max_step * p->max_step * ms2,
 				    p->label_iterations, p->tol, p->tol_window,
 				    p->label_jmin, &d0, &d1, &c1, &nsteps, &folds, nt);
