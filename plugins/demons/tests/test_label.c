@@ -152,6 +152,16 @@ static double centre_error(const vol_t *field)
 	return err;
 }
 
+/* 1 when the 3-vector fields a and b (nv voxels a component) are the same
+ * bits at voxel v */
+static int same_vec(const float *a, const float *b, int64_t v, int64_t nv)
+{
+	int same = 1;
+	for (int c = 0; c < 3; c++)
+		same &= a[v + c * nv] == b[v + c * nv];
+	return same;
+}
+
 static void test_label_carries_tumour(void **state)
 {
 	fx_t *x = *state;
@@ -225,9 +235,7 @@ static void test_label_after(void **state)
 	const float *a = f0->data, *b = f1->data;
 	int64_t nmask = 0, ndiff = 0, nmoved = 0;
 	for (int64_t v = 0; v < nv; v++) {
-		int same = 1;
-		for (int c = 0; c < 3; c++)
-			same &= a[v + c * nv] == b[v + c * nv];
+		int same = same_vec(a, b, v, nv);
 		if (vol_get(x->fm, v) > 0) {
 			nmask++;
 			ndiff += !same;
@@ -320,9 +328,7 @@ static void test_label_margin(void **state)
 		const float *a = f0->data, *b = f1->data;
 		int64_t nfar = 0, ndiff = 0, nmoved = 0;
 		for (int64_t v = 0; v < nv; v++) {
-			int same = 1;
-			for (int c = 0; c < 3; c++)
-				same &= a[v + c * nv] == b[v + c * nv];
+			int same = same_vec(a, b, v, nv);
 			if (sqrt((double)d2[v]) > margin[m]) {
 				nfar++;
 				ndiff += !same;
