@@ -16,6 +16,8 @@ phantoms, with the case's lowest figure in bold (the README's table).
 import argparse
 import csv
 import math
+import os
+import sys
 
 ORDER = ["armstg", "armstg_auto", "sphere", "direct", "direct_lncc",
          "affine_lncc", "ants_syn", "elastix", "greedy", "sitk_demons"]
@@ -24,6 +26,8 @@ ORDER = ["armstg", "armstg_auto", "sphere", "direct", "direct_lncc",
 def load(paths):
     rows = {}
     for p in paths:
+        if not os.path.isfile(p):
+            sys.exit("plot_real.py: %s: no such file (real.py's rows)" % p)
         with open(p) as f:
             for r in csv.DictReader(f, delimiter="\t"):
                 rows[(r["case"], r["method"])] = r

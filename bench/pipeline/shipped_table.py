@@ -45,6 +45,8 @@ def load(d, kind):
     rows = {}
     for name in (kind + ".tsv", kind + "-nolabel.tsv"):
         path = os.path.join(d, name)
+        if not os.path.isfile(path):
+            sys.exit("shipped_table.py: %s: no such file (the rows of device_bg.sh's pools)" % path)
         with open(path, newline="") as f:
             for r in csv.DictReader(f, delimiter="\t"):
                 if r["err_band_mean_mm"] in ("failed", "", None):
@@ -66,13 +68,14 @@ def paired(a, b):
 def main():
     d = sys.argv[1] if len(sys.argv) > 1 else os.path.join(
         os.path.dirname(os.path.abspath(__file__)), "results", "shipped-2026-11-27")
+    loaded = {kind: load(d, kind) for kind, _ in KINDS}  # every file read before a line is printed
     print("| phantoms | n | ARMSTG as shipped | ARMSTG, no label correction | semi-spherical | direct demons "
           "| no correction − sphere (SE), lower on | shipped − no correction (SE), lower on "
           "| vs direct: shipped / no correction / sphere | tumour Dice: shipped / no correction / sphere |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     pooled = {m: [] for m in METHODS}
     for kind, label in KINDS:
-        seeds, rows = load(d, kind)
+        seeds, rows = loaded[kind]
         col = {m: [float(rows[(s, m)]["err_band_mean_mm"]) for s in seeds] for m in METHODS}
         dice = {m: mean([float(rows[(s, m)]["dice_tumour"]) for s in seeds]) for m in METHODS}
         for m in METHODS:
