@@ -291,9 +291,9 @@ static void test_shipped_graphs(void **state)
 	const char *graphs[] = { "graphs/armstg.ini", "graphs/armstg_auto.ini",
 				 "graphs/demo.ini", "graphs/distributed.ini",
 				 "graphs/spherical.ini" };
-	/* the graphs whose [tune] tolerance is [vars] TUNE_TOLERANCE (the
-	 * other two state 3e-4 in place) */
-	const int var_tol[] = { 1, 1, 1, 0, 0 };
+	/* the graphs whose [tune] tolerance is [vars] TUNE_TOLERANCE
+	 * (distributed.ini states 3e-4 in place) */
+	const int var_tol[] = { 1, 1, 1, 0, 1 };
 	struct { const char *tled, *nodes, *spacing, *set; const char *plugin,
 		*want, *tol; } cases[] = {
 		{ NULL, NULL, NULL, NULL, "tled_cpu", "6.0", "0.0003" },
@@ -341,8 +341,8 @@ static void test_shipped_graphs(void **state)
 					 val(g, "nodes", "spacing"));
 			/* the registrations follow the backend where the
 			 * graph has them as [vars] DEMONS (not distributed.ini,
-			 * whose workers may have no GPU; spherical.ini has
-			 * none): demons_cuda with tled_cuda */
+			 * whose workers may have no GPU): demons_cuda with
+			 * tled_cuda */
 			if (var_tol[k]) {
 				const char *want = strcmp(cases[i].plugin, "tled_cuda")
 							   ? "demons" : "demons_cuda";
@@ -366,6 +366,158 @@ static void test_shipped_graphs(void **state)
 	unsetenv("TLED");
 	unsetenv("NODES");
 	unsetenv("NODE_SPACING");
+}
+
+/* graphs/spherical.ini is graphs/armstg.ini with the tumour a ball (thesis
+ * section 4.3.3): every stage of armstg.ini, in the same order, with the
+ * same keys and values, every [tune] key and every [vars] entry as written,
+ * except the graph's name, the report's title and the atlas tumour's four
+ * readers (the growth's layers and nodes, the grown atlas's moving mask,
+ * the mass effect), which read the ball; one stage more, sphere
+ * (labelmap op=sphere on armstg.ini's placed atlas tumour), and nothing else
+ * reads the placed tumour there.  Checked with the default environment and
+ * with the GPU backend's fine model, whose [vars] pick other plugins and
+ * [tune] values.  When armstg.ini changes, spherical.ini must follow. */
+static const struct { const char *stage, *key, *armstg, *sphere; }
+	sph_allowed[] = {
+	{ "report", "title", "ARMSTG", "Baseline: semi-spherical tumour model" },
+	{ "contours", "mask", "atlas_tumour.volume", "sphere.volume" },
+	{ "nodes", "tumour", "atlas_tumour.volume", "sphere.volume" },
+	{ "grown_mask", "mask", "atlas_tumour.volume", "sphere.volume" },
+	{ "mass", "tumour", "atlas_tumour.volume", "sphere.volume" },
+};
+
+static int sph_allowed_at(const char *stage, const char *key)
+{
+	for (size_t i = 0; i < ARMSTG_COUNT(sph_allowed); i++)
+		if (!strcmp(sph_allowed[i].stage, stage) &&
+		    !strcmp(sph_allowed[i].key, key))
+			return (int)i;
+	return -1;
+}
+
+/* every key of a (n keys) in b with the same value, and b no other key;
+ * what names the list in the failure message */
+static void same_kv(const g_kv_t *a, int na, const g_kv_t *b, int nb,
+		    const char *what)
+{
+	for (int i = 0; i < na; i++) {
+		const g_kv_t *o = g_kv_find(b, nb, a[i].key);
+		if (!o)
+			fail_msg("graphs/spherical.ini: %s: key '%s' (armstg.ini "
+				 "line %d) missing", what, a[i].key, a[i].line);
+		if (strcmp(a[i].val, o->val))
+			fail_msg("graphs/spherical.ini:%d: %s: key '%s' is '%s', "
+				 "armstg.ini:%d has '%s'", o->line, what,
+				 a[i].key, o->val, a[i].line, a[i].val);
+	}
+	for (int i = 0; i < nb; i++)
+		if (!g_kv_find(a, na, b[i].key))
+			fail_msg("graphs/spherical.ini:%d: %s: key '%s' is not "
+				 "in graphs/armstg.ini", b[i].line, what,
+				 b[i].key);
+}
+
+static graph_t *parse_shipped(const char *path, char *err, size_t errsize)
+{
+	graph_t *g = g_alloc(path, err, errsize);
+	assert_non_null(g);
+	assert_int_equal(g_parse_file(g, path), 0);
+	if (g->nerr)
+		fail_msg("%s: %s", path, err);
+	return g;
+}
+
+static void test_spherical_in_step(void **state)
+{
+	(void)state;
+	static const char *const envs[][2] = { { NULL, NULL },
+					       { "tled_cuda", "fine" } };
+	char err[8192], err2[8192];
+	unsetenv("NODE_SPACING");
+	unsetenv("TUNE_PARALLEL");
+	unsetenv("PUSH_VALUES");
+	for (size_t e = 0; e < ARMSTG_COUNT(envs); e++) {
+		if (envs[e][0])
+			setenv("TLED", envs[e][0], 1);
+		else
+			unsetenv("TLED");
+		if (envs[e][1])
+			setenv("NODES", envs[e][1], 1);
+		else
+			unsetenv("NODES");
+		graph_t *a = parse_shipped("graphs/armstg.ini", err, sizeof err);
+		graph_t *s = parse_shipped("graphs/spherical.ini", err2,
+					   sizeof err2);
+		assert_string_equal(a->name, "armstg");
+		assert_string_equal(s->name, "spherical");
+		/* the stages: armstg.ini's in order, sphere after
+		 * atlas_tumour */
+		assert_int_equal(s->nstages, a->nstages + 1);
+		int j = 0;
+		for (int i = 0; i < a->nstages; i++, j++) {
+			const g_stage_t *sa = &a->stages[i];
+			if (!strcmp(s->stages[j].name, "sphere"))
+				j++;
+			const g_stage_t *ss = &s->stages[j];
+			if (strcmp(sa->name, ss->name))
+				fail_msg("graphs/spherical.ini:%d: stage '%s' "
+					 "where graphs/armstg.ini:%d has '%s'",
+					 ss->line, ss->name, sa->line, sa->name);
+			/* the allowed differences, each as stated */
+			g_kv_t ka[64], ks[64];
+			assert_true(sa->nkv <= 64 && ss->nkv <= 64);
+			int na = 0, ns = 0;
+			for (int k = 0; k < sa->nkv; k++) {
+				int w = sph_allowed_at(sa->name, sa->kv[k].key);
+				if (w < 0)
+					ka[na++] = sa->kv[k];
+				else
+					assert_string_equal(sa->kv[k].val,
+							    sph_allowed[w].armstg);
+			}
+			for (int k = 0; k < ss->nkv; k++) {
+				int w = sph_allowed_at(ss->name, ss->kv[k].key);
+				if (w < 0)
+					ks[ns++] = ss->kv[k];
+				else
+					assert_string_equal(ss->kv[k].val,
+							    sph_allowed[w].sphere);
+			}
+			assert_int_equal(sa->nkv - na, ss->nkv - ns);
+			char what[2 * G_NAME];
+			snprintf(what, sizeof what, "stage '%s'", sa->name);
+			same_kv(ka, na, ks, ns, what);
+			/* nothing but sphere reads the placed tumour */
+			for (int k = 0; k < ss->nkv; k++)
+				if (!strcmp(ss->kv[k].val, "atlas_tumour.volume"))
+					fail_msg("graphs/spherical.ini:%d: stage "
+						 "'%s' reads atlas_tumour.volume, "
+						 "not the ball (sphere.volume)",
+						 ss->kv[k].line, ss->name);
+			if (!strcmp(sa->name, "atlas_tumour"))
+				assert_string_equal(s->stages[j + 1].name,
+						    "sphere");
+		}
+		assert_int_equal(j, s->nstages);
+		const char *sp[] = { "plugin", "labelmap", "op", "sphere",
+				     "volume", "atlas_tumour.volume" };
+		const g_stage_t *sph = &s->stages[g_stage_index(s, "sphere")];
+		assert_int_equal(sph->nkv, 3);
+		for (int k = 0; k < 3; k++)
+			assert_string_equal(g_stage_kv(sph, sp[2 * k])->val,
+					    sp[2 * k + 1]);
+		assert_string_equal(val(a, "atlas_tumour", "op"), "move");
+		/* [tune] expanded, [vars] as written */
+		assert_true(a->tune.present && s->tune.present);
+		same_kv(a->tune.kv, a->tune.nkv, s->tune.kv, s->tune.nkv,
+			"[tune]");
+		same_kv(a->fvars, a->nfvars, s->fvars, s->nfvars, "[vars]");
+		graph_free(a);
+		graph_free(s);
+	}
+	unsetenv("TLED");
+	unsetenv("NODES");
 }
 
 static void test_vars_errors(void **state)
@@ -616,6 +768,7 @@ int main(void)
 		cmocka_unit_test(test_vars),
 		cmocka_unit_test(test_composed_names),
 		cmocka_unit_test(test_shipped_graphs),
+		cmocka_unit_test(test_spherical_in_step),
 		cmocka_unit_test(test_vars_errors),
 		cmocka_unit_test(test_syntax_errors),
 		cmocka_unit_test(test_sets),

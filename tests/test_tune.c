@@ -1826,22 +1826,19 @@ static void test_shipped_push_rule(void **state)
 		assert_float_equal(q->value, 0.1, 0);
 		/* one candidate at a time unless TUNE_PARALLEL says more */
 		assert_int_equal(t->parallel, 1);
-		/* stop: require everywhere; past_peak after two depths in a
-		 * row below the best by more than 5 tolerances in armstg.ini
-		 * and armstg_auto.ini (bench/pipeline/tune_decline.py) */
+		/* stop: require, and past_peak after two depths in a row
+		 * below the best by more than 5 tolerances
+		 * (bench/pipeline/tune_decline.py) */
 		assert_true(t->stop_require);
-		assert_int_equal(t->stop_peak, k < 2);
-		assert_int_equal(t->patience, k < 2 ? 2 : 1);
-		assert_float_equal(t->margin, k < 2 ? 5 : 1, 0);
-		/* same_from: the growth's push_used_mm (armstg.ini and
-		 * armstg_auto.ini; spherical.ini has no such key) */
-		if (k < 2) {
-			assert_int_equal(t->sf_stage, t->stage);
-			assert_string_equal(g->stages[t->sf_stage].plug.desc->
-					    outputs[t->sf_port].name, "stats");
-			assert_string_equal(t->sf_col, "push_used_mm");
-			assert_float_equal(t->numval[4], 6, 0);
-		}
+		assert_true(t->stop_peak);
+		assert_int_equal(t->patience, 2);
+		assert_float_equal(t->margin, 5, 0);
+		/* same_from: the growth's push_used_mm */
+		assert_int_equal(t->sf_stage, t->stage);
+		assert_string_equal(g->stages[t->sf_stage].plug.desc->
+				    outputs[t->sf_port].name, "stats");
+		assert_string_equal(t->sf_col, "push_used_mm");
+		assert_float_equal(t->numval[4], 6, 0);
 		graph_free(g);
 		setenv("TUNE_PARALLEL", "3", 1);
 		g = graph_load(graphs[k], NULL, 0, err, sizeof err);
