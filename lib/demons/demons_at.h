@@ -223,4 +223,20 @@ ARMSTG_HD int dm_squarings(double mvox)
 	return n;
 }
 
+/* the LNCC (and MI) update's step factor (demons_run.c's header: the
+ * update scaled so that its largest vector is at most max_step voxels of
+ * the level): mvox is the unscaled update's largest vector (voxels); the
+ * level's first iteration fixes *scale = max_step / mvox (*scale <= 0:
+ * not yet fixed) and later ones take the smaller of the two, so the step
+ * never grows back within a level; 1 where the update is zero.  The
+ * host's step rule and demons_cuda's host side both call this */
+ARMSTG_HD double dm_lncc_step(double *scale, double max_step, double mvox)
+{
+	if (!(mvox > 0))
+		return 1.0;
+	if (!(*scale > 0))
+		*scale = max_step / mvox;
+	return fmin(*scale, max_step / mvox);
+}
+
 #endif

@@ -208,11 +208,7 @@ static float step_lncc(const demons_priv_t *p, step_t *s, const fimg_t *U,
 	(void)c;
 	double mmm, mvox; /* max |u|: mm, voxels of the level */
 	fimg_field_maxnorm(U, &mmm, &mvox);
-	if (!(mvox > 0))
-		return 1.0f;
-	if (!(s->scale > 0))
-		s->scale = p->max_step / mvox;
-	return (float)fmin(s->scale, p->max_step / mvox);
+	return (float)dm_lncc_step(&s->scale, p->max_step, mvox);
 }
 
 static float step_mi(const demons_priv_t *p, step_t *s, const fimg_t *U,

@@ -640,12 +640,7 @@ extern "C" int dmc_iterate(dmc_t *c, dmc_step_t *s, char *err, size_t errsize)
 					   c->used, c->dmax);
 		if (read_max(c, m, err, errsize))
 			return -1;
-		const double mvox = sqrt(m[1]);
-		if (mvox > 0) {
-			if (!(s->lscale > 0))
-				s->lscale = d->max_step / mvox;
-			sc = (float)fmin(s->lscale, d->max_step / mvox);
-		}
+		sc = (float)dm_lncc_step(&s->lscale, d->max_step, sqrt(m[1]));
 	}
 	CK(cudaMemsetAsync(c->dmax, 0, 2 * sizeof(unsigned long long),
 			   cudaStreamPerThread), "the update's statistics");
