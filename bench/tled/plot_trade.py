@@ -3,6 +3,14 @@
 
   plot_trade.py TSV PNG [--time wall|growth]   the figure (needs matplotlib)
   plot_trade.py TSV --table                    Markdown tables (stdlib only)
+  plot_trade.py TSV... --summary               the phantoms over their seeds
+
+--summary: one row per phantom kind (the case name without trade.sh's -sN
+seed suffix) and uniform node spacing: the runs that ended (status ok), the
+mean band error (mm) and whole-run time (s) over the seeds, and the paired
+difference of the band error to the next coarser spacing with its standard
+error (SD / sqrt(n) of the per-seed differences; "n.s." when the difference
+is smaller than its standard error).  Several TSVs are read as one.
 
 The figure: accuracy against time, the time on a log axis: phantom band
 error (mean, mm; lower is better), BraTS ventricle metric S (mm; lower is
@@ -192,9 +200,60 @@ def table(rows):
                  change("dice_tumour", "%+.3f")))
 
 
+def kind_seed(case):
+    """('lobulated', 3) from 'lobulated-s3'; seed 1 without a suffix"""
+    k, sep, n = case.rpartition("-s")
+    if sep and n.isdigit():
+        return k, int(n)
+    return case, 1
+
+
+def summary(rows):
+    ph = [r for r in rows if not r["_real"] and not r["_graded"]
+          and r["status"] == "ok" and not math.isnan(num(r["err_band_mean_mm"]))]
+    by = {}
+    for r in ph:
+        k, seed = kind_seed(r["case"])
+        by.setdefault((k, r["_sp"]), {})[seed] = r
+    kinds = sorted({k for k, _ in by},
+                   key=lambda c: CASE_ORDER.index(c) if c in CASE_ORDER else 9)
+    print("| phantom kind | nodes | seeds | band error mm (mean) | whole run s (mean) "
+          "| against the next coarser spacing: band error change mm (SE) |")
+    print("|---|---|---|---|---|---|")
+    for k in kinds:
+        sps = sorted((sp for kk, sp in by if kk == k), reverse=True)
+        for i, sp in enumerate(sps):
+            d = by[(k, sp)]
+            e = [num(r["err_band_mean_mm"]) for r in d.values()]
+            t = [num(r["wall_s"]) for r in d.values()]
+            ch = "-"
+            if i > 0:
+                c = by[(k, sps[i - 1])]
+                diff = [num(d[s]["err_band_mean_mm"]) - num(c[s]["err_band_mean_mm"])
+                        for s in sorted(d) if s in c]
+                if len(diff) >= 2:
+                    m = sum(diff) / len(diff)
+                    sd = math.sqrt(sum((x - m) ** 2 for x in diff) / (len(diff) - 1))
+                    se = sd / math.sqrt(len(diff))
+                    ch = "%+.3f (%.3f)%s, %d seeds, vs %g mm" % (
+                        m, se, "" if abs(m) > se else " n.s.", len(diff), sps[i - 1])
+                elif diff:
+                    ch = "%+.3f (one seed), vs %g mm" % (diff[0], sps[i - 1])
+            print("| %s | %g mm | %s | %.3f | %.1f | %s |"
+                  % (k, sp, ",".join(str(s) for s in sorted(d)),
+                     sum(e) / len(e), sum(t) / len(t), ch))
+
+
 def main(argv):
     if len(argv) < 3:
         sys.exit(__doc__)
+    if "--summary" in argv:
+        rows = []
+        for a in argv[1:]:
+            if a != "--summary":
+                rows += read(a)
+        summary(rows)
+        return
     rows = read(argv[1])
     if argv[2] == "--table":
         table(rows)

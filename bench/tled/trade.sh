@@ -15,7 +15,8 @@
 #   -c CASES   default lobulated irregular pat0001 pat0002 pat0003 (default):
 #              default | lobulated (phantom.lobulation=0.9) | irregular
 #              (lobulation 0.9 + two_components) as in bench/tled/fine.sh,
-#              phantom seed 1, exported once as NIfTI files
+#              phantom seed 1 (KIND-sN: seed N, e.g. lobulated-s3; the
+#              case column keeps the name), exported once as NIfTI files
 #              (bench/pipeline/phantom_export.ini) and run through
 #              graphs/armstg.ini like a user's files; patNNNN: BraTS 2013
 #              patNNNN under $DATA with the SRI24 atlas (bench/pipeline/lib.sh
@@ -258,6 +259,8 @@ done
 for c in $CASES $XCASES; do
 	case $c in
 	default | lobulated | irregular) ;;
+	default-s[1-9]* | lobulated-s[1-9]* | irregular-s[1-9]*)
+		case ${c##*-s} in *[!0-9]*) die "case '$c': the seed after -s is not a whole number" ;; esac ;;
 	pat[0-9][0-9][0-9][0-9])
 		p=$DATA/brats2013/brats_2013_${c}_1
 		for f in T1c_subtrMeanDivStd Flair_subtrMeanDivStd OTMultiClass brainmask; do
@@ -265,7 +268,7 @@ for c in $CASES $XCASES; do
 		done
 		[ -f "$TRADE_VENTRICLES/${c}_ventricles.nii.gz" ] ||
 			echo "trade.sh: $c: no $TRADE_VENTRICLES/${c}_ventricles.nii.gz: S will be nan (bench/pipeline/ventricles.py makes it)" >&2 ;;
-	*) die "unknown case '$c' (default, lobulated, irregular or patNNNN)" ;;
+	*) die "unknown case '$c' (default, lobulated, irregular, KIND-sSEED or patNNNN)" ;;
 	esac
 done
 for m in $MODELS $XMODELS; do
@@ -279,14 +282,16 @@ rm -f "$TRADE_OUT.done"
 
 # the phantoms as NIfTI files, once (before any run: runs in parallel share them)
 for c in $CASES $XCASES; do
-	case $c in
+	seed=1
+	case $c in *-s[1-9]*) seed=${c##*-s} ;; esac
+	case ${c%-s[1-9]*} in
 	default) ps="" ;;
 	lobulated) ps="phantom.lobulation=0.9" ;;
 	irregular) ps="phantom.lobulation=0.9 phantom.two_components=true" ;;
 	*) continue ;;
 	esac
 	[ -f "$TRADE_WORK/ph-$c/true_field.nii.gz" ] && continue
-	PHANTOM_SET=$ps export_phantom "$TRADE_WORK/ph-$c" 1
+	PHANTOM_SET=$ps export_phantom "$TRADE_WORK/ph-$c" "$seed"
 done
 
 echo "trade.sh: $(echo "$CASES" | wc -w) cases x $(echo "$MODELS" | wc -w) models + $(echo "$EXTRA" | wc -w) extra runs, $J at a time, $OMP_NUM_THREADS threads each, $TLED; rows to $TRADE_OUT"
