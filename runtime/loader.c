@@ -135,6 +135,16 @@ int plugin_check_desc(const armstg_plugin_t *d, char *err, size_t errsize)
 				BAD("parameter '%s': min %g > max %g", p->name,
 				    p->min, p->max);
 		}
+		if ((p->type == PT_INT || p->type == PT_DOUBLE) && p->choices)
+			for (const char *c = p->choices; *c;) {
+				char *end;
+				(void)strtod(c, &end);
+				if (end == c || (*end && *end != '|'))
+					BAD("parameter '%s': choices '%s' of a "
+					    "number are not numbers separated "
+					    "by '|'", p->name, p->choices);
+				c = *end ? end + 1 : end;
+			}
 		if (p->type == PT_ENUM && (!p->choices || !*p->choices))
 			BAD("parameter '%s': enum without choices", p->name);
 		if ((p->flags & (PARAM_OUT_FILE | PARAM_OUT_DIR)) &&

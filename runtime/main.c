@@ -311,8 +311,10 @@ static int cmd_describe(const char *name)
 		const armstg_param_t *q = &d->params[i];
 		char range[160] = "", def[128];
 		if (q->type == PT_INT || q->type == PT_DOUBLE)
-			snprintf(range, sizeof range, " range [%g, %g]%s%s",
-				 q->min, q->max, *q->unit ? " " : "", q->unit);
+			snprintf(range, sizeof range, " range [%g, %g]%s%s%s%s",
+				 q->min, q->max, *q->unit ? " " : "", q->unit,
+				 q->choices ? ", or " : "",
+				 q->choices ? q->choices : "");
 		else if (q->type == PT_ENUM)
 			snprintf(range, sizeof range, " one of %s", q->choices);
 		snprintf(def, sizeof def, "%s",

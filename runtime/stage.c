@@ -448,11 +448,47 @@ static const char *unit_sfx(const armstg_param_t *p, char *buf, size_t n)
 	return buf;
 }
 
+/* 1 when x is one of the values that the numeric param p lists in choices
+ * ("-1|0.5") to be accepted outside [min, max] */
+static int num_special(const armstg_param_t *p, double x)
+{
+	for (const char *c = p->choices; c && *c;) {
+		char *end;
+		double v = strtod(c, &end);
+		if (end != c && v == x)
+			return 1;
+		c += strcspn(c, "|");
+		if (*c == '|')
+			c++;
+	}
+	return 0;
+}
+
+/* " (or -1)", " (or -1 or 0.5)": the numeric param's values outside its
+ * range, for the range error; "" without */
+static const char *special_sfx(const armstg_param_t *p, char *buf, size_t n)
+{
+	buf[0] = 0;
+	if (!p->choices || !*p->choices)
+		return buf;
+	size_t lo = 0;
+	for (const char *c = p->choices; *c;) {
+		size_t k = strcspn(c, "|");
+		lo = str_addf(buf, n, lo, "%s%.*s", lo ? " or " : " (or ",
+			      (int)k, c);
+		c += k;
+		if (*c == '|')
+			c++;
+	}
+	str_addf(buf, n, lo, ")");
+	return buf;
+}
+
 /* Parse value for param p into dst (NULL: only check).  0 or EINVAL. */
 static int parse_value(const armstg_param_t *p, const char *value, void *dst,
 		       char *err, size_t errsize)
 {
-	char u[64];
+	char u[64], sp[96];
 	char *end;
 	switch (p->type) {
 	case PT_INT: {
@@ -473,11 +509,13 @@ static int parse_value(const armstg_param_t *p, const char *value, void *dst,
 				 unit_sfx(p, u, sizeof u));
 			return ARMSTG_EINVAL;
 		}
-		if ((double)x < p->min || (double)x > p->max) {
+		if (((double)x < p->min || (double)x > p->max) &&
+		    !num_special(p, (double)x)) {
 			snprintf(err, errsize,
 				 "parameter '%s': %lld is out of range "
-				 "[%g, %g]%s", p->name, x, p->min, p->max,
-				 unit_sfx(p, u, sizeof u));
+				 "[%g, %g]%s%s", p->name, x, p->min, p->max,
+				 unit_sfx(p, u, sizeof u),
+				 special_sfx(p, sp, sizeof sp));
 			return ARMSTG_EINVAL;
 		}
 		if (dst)
@@ -516,11 +554,12 @@ static int parse_value(const armstg_param_t *p, const char *value, void *dst,
 				 p->name, value);
 			return ARMSTG_EINVAL;
 		}
-		if (x < p->min || x > p->max) {
+		if ((x < p->min || x > p->max) && !num_special(p, x)) {
 			snprintf(err, errsize,
 				 "parameter '%s': %g is out of range "
-				 "[%g, %g]%s", p->name, x, p->min, p->max,
-				 unit_sfx(p, u, sizeof u));
+				 "[%g, %g]%s%s", p->name, x, p->min, p->max,
+				 unit_sfx(p, u, sizeof u),
+				 special_sfx(p, sp, sizeof sp));
 			return ARMSTG_EINVAL;
 		}
 		if (dst)

@@ -156,6 +156,20 @@ static int setup_params(rt_stage_t *s, const armstg_plugin_t *d,
 	return 0;
 }
 
+/* 1 when x is one of the numbers listed in CHOICES ("-1|0.5") */
+static int num_listed(const char *choices, double x)
+{
+	for (const char *c = choices; c && *c;) {
+		char *end;
+		if (strtod(c, &end) == x && end != c)
+			return 1;
+		c += strcspn(c, "|");
+		if (*c == '|')
+			c++;
+	}
+	return 0;
+}
+
 static int check_params(const armstg_plugin_t *d)
 {
 	char e[1024];
@@ -173,15 +187,34 @@ static int check_params(const armstg_plugin_t *d)
 		char lo[64], hi[64];
 		int nv = 0;
 		if (p->type == PT_INT || p->type == PT_DOUBLE) {
+			/* out of range, and not one of the values the
+			 * parameter accepts outside its range (choices:
+			 * "-1"), each of which must be accepted */
 			if (isfinite(p->min) && p->min > -1e300) {
-				snprintf(lo, sizeof lo, "%.17g",
-					 p->min - 1 - fabs(p->min));
+				double v = p->min - 1 - fabs(p->min);
+				while (num_listed(p->choices, v))
+					v -= 1;
+				snprintf(lo, sizeof lo, "%.17g", v);
 				vals[nv++] = lo;
 			}
 			if (isfinite(p->max) && p->max < 1e300) {
-				snprintf(hi, sizeof hi, "%.17g",
-					 p->max + 1 + fabs(p->max));
+				double v = p->max + 1 + fabs(p->max);
+				while (num_listed(p->choices, v))
+					v += 1;
+				snprintf(hi, sizeof hi, "%.17g", v);
 				vals[nv++] = hi;
+			}
+			for (const char *c = p->choices; c && *c && !bad;) {
+				char v[64];
+				size_t n = strcspn(c, "|");
+				snprintf(v, sizeof v, "%.*s", (int)n, c);
+				if (stage_set_param(s, p->name, v, e, sizeof e)) {
+					snprintf(child_msg, sizeof child_msg,
+						 "parameter '%s' refused its listed "
+						 "value '%s': %s", p->name, v, e);
+					bad = 1;
+				}
+				c += n + (c[n] == '|');
 			}
 			vals[nv++] = "not-a-number";
 			if (p->type == PT_INT)

@@ -154,11 +154,6 @@ int dm_stage_init(armstg_stage_t *st)
 			    "parameter 'iterations' has %d values but levels = "
 			    "%d (give one per level, coarse to fine, or one for "
 			    "all)", p->nlist, p->levels);
-	if (p->label_margin < 0 && p->label_margin != -1)
-		return FAIL(ARMSTG_EINVAL,
-			    "parameter 'label_margin': %g is out of range (a "
-			    "distance >= 0 mm, or -1 for no limit)",
-			    p->label_margin);
 	return 0;
 }
 

@@ -369,6 +369,9 @@ static void test_label_margin(void **state)
 		assert_true(rc < 0);
 		assert_null(f);
 		assert_non_null(strstr(e, "label_margin"));
+		/* the runtime's parameter table refuses it (a graph: at
+		 * load, before any stage runs), -1 named beside the range */
+		assert_non_null(strstr(e, "out of range [0, 200] mm (or -1)"));
 	}
 #undef AFTER
 	msg_unref(&f0->base);

@@ -121,7 +121,10 @@ typedef struct armstg_param {
 	const char *unit;    /* "mm", "Pa", "s", "" for none */
 	const char *help;    /* one line */
 	const char *choices; /* PT_ENUM: "uniform|poisson|adaptive";
-	                        PARAM_OUT_FILE: endings, "nii|nii.gz" */
+	                        PARAM_OUT_FILE: endings, "nii|nii.gz";
+	                        PT_INT / PT_DOUBLE: values accepted outside
+	                        [min, max], "-1" (a sentinel such as "no
+	                        limit"); NULL: none */
 	size_t offset;       /* where the value goes in priv */
 	uint32_t flags;      /* PARAM_REQUIRED, PARAM_OUT_FILE, PARAM_OUT_DIR */
 } armstg_param_t;
