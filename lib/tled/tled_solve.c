@@ -218,6 +218,7 @@ typedef struct host_eng {
 	tled_solver_t *s;
 	const tled_ops_t *hops;
 	const double *target, *ipg_to;
+	double r_drive; /* the drive's last ramp value (he_drive) */
 } host_eng_t;
 
 static int64_t nchunks(int64_t n)
@@ -237,12 +238,25 @@ static int he_begin(void *ctx, tled_solver_t *s, const double *target,
 	return s->part ? 0 : -1;
 }
 
+/* The driver's work is reaction . the drive's own increment, (r - r_last)
+ * (target - ustart), not nu - u: the contact (tled_contact) also moves
+ * driven nodes, and one whose target lies beyond the brain boundary is
+ * projected back after every step and put out again by the next drive.
+ * The strain energy is evaluated after the drive, the node out, so that
+ * round trip stores nothing; counted as nu - u, each return was work
+ * taken out (the reaction points back along it), and the energy watchdog's
+ * reference fell below zero while the energy rose smoothly: a false
+ * energy blow-up (the ball at 1.5 mm on phantom-pat0001, driven node 4.9 mm
+ * beyond the boundary; bench/tled/results.md, "The ball's growth on a
+ * real-anatomy phantom").  Without contact both are the same increment. */
 static int he_drive(void *ctx, double r, double *wext)
 {
 	host_eng_t *e = ctx;
 	tled_solver_t *s = e->s;
 	const tled_model_t *m = s->m;
 	int64_t nch = nchunks(m->n);
+	double dr = r - e->r_drive;
+	e->r_drive = r;
 #pragma omp parallel for schedule(static) num_threads(m->nthreads)
 	for (int64_t ch = 0; ch < nch; ch++) {
 		double w = 0;
@@ -254,7 +268,9 @@ static int he_drive(void *ctx, double r, double *wext)
 						    r * (e->target[3 * a + i] -
 							 s->ustart[3 * a + i]);
 					/* driver work: reaction . du */
-					w += s->f[3 * a + i] * (nu - s->u[3 * a + i]);
+					w += s->f[3 * a + i] * dr *
+					     (e->target[3 * a + i] -
+					      s->ustart[3 * a + i]);
 					s->u[3 * a + i] = nu;
 				}
 		s->part[ch] = w;
