@@ -77,10 +77,12 @@ __global__ void k_cd(dmod m, const unsigned char *kind, const double *f,
 __global__ void k_rayleigh(dmod m, const unsigned char *dkind, const double *v,
 			   const double *f, const double *fprev, double dt,
 			   red *part);
-/* the driven nodes' ramp; s0 the driver's work */
+/* the driven nodes' ramp to rr; s0 the driver's work, reaction . the
+ * drive's own increment dr (target - ustart) (lib/tled/tled_solve.c
+ * he_drive: not nu - u, which the contact's projections also move) */
 __global__ void k_drive(dmod m, const unsigned char *kind, const double *ustart,
 			const double *target, const double *f, double *u,
-			double rr, red *part);
+			double rr, double dr, red *part);
 /* the growth stretch's ramp */
 __global__ void k_grow(int nip, const double *g0, const double *g1, double rr,
 		       double *ipg);

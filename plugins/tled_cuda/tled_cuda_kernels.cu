@@ -256,7 +256,7 @@ __global__ void k_rayleigh(dmod m, const unsigned char *dkind, const double *v,
 
 __global__ void k_drive(dmod m, const unsigned char *kind, const double *ustart,
 			const double *target, const double *f, double *u,
-			double rr, red *part)
+			double rr, double dr, red *part)
 {
 	red r;
 	red_init(r);
@@ -267,7 +267,8 @@ __global__ void k_drive(dmod m, const unsigned char *kind, const double *ustart,
 		for (int i = 0; i < 3; i++) {
 			double nu = ustart[3 * a + i] +
 				    rr * (target[3 * a + i] - ustart[3 * a + i]);
-			r.s0 += f[3 * a + i] * (nu - u[3 * a + i]);
+			r.s0 += f[3 * a + i] * dr *
+				(target[3 * a + i] - ustart[3 * a + i]);
 			u[3 * a + i] = nu;
 		}
 	}

@@ -59,6 +59,7 @@ struct tled_cuda {
 	int64_t *q_cnt;
 	int w_on;
 	double w_emax, w_L;
+	double r_drive; /* the drive's last ramp value (cu_drive) */
 	int nbl_n, nbl_ip;
 	int have_target, growing;
 	tled_solver_t *s;
@@ -555,6 +556,7 @@ static int cu_begin(void *ctx, tled_solver_t *s, const double *target,
 	c->defer = 0;
 	c->pend = 0;
 	c->w_on = 0;
+	c->r_drive = 0;
 	CK(c, cudaMemcpy(c->u, s->u, n3, cudaMemcpyHostToDevice), "begin");
 	CK(c, cudaMemcpy(c->ustart, s->u, n3, cudaMemcpyHostToDevice), "begin");
 	CK(c, cudaMemset(c->v, 0, n3), "begin");
@@ -589,8 +591,10 @@ static int cu_drive(void *ctx, double r, double *wext)
 	if (!c->have_target)
 		return 0;
 	int nb = nblk(c->nbl_n);
+	const double dr = r - c->r_drive;
+	c->r_drive = r;
 	k_drive<<<nb, TPB>>>(c->dm, c->kind, c->ustart, c->target, c->f, c->u, r,
-			     c->part);
+			     dr, c->part);
 	CK(c, cudaGetLastError(), "drive");
 	if (fetch(c, nb, "drive"))
 		return -1;

@@ -805,7 +805,6 @@ static void test_coincident(void **state)
 	synth_free(&c);
 }
 
-#ifndef TLED_CUDA_TEST_H /* tled_cuda: see main() */
 /* A driven node beyond the brain boundary (nodal driving, contact on): the
  * contact projects it back after every step and the next drive puts it out
  * again.  The strain energy is evaluated after the drive, so that round
@@ -884,7 +883,6 @@ static void test_drive_contact(void **state)
 	tled_model_free(&m);
 	synth_free(&c);
 }
-#endif
 
 int main(void)
 {
@@ -899,13 +897,9 @@ int main(void)
 		cmocka_unit_test(test_dt_critical),
 		cmocka_unit_test(test_coincident),
 		cmocka_unit_test(test_model_reuse),
-#ifndef TLED_CUDA_TEST_H
-		/* not yet through tled_cuda: its resident drive (k_drive)
-		 * still counts reaction . (nu - u), to be ported with the
-		 * host engine's he_drive (bench/tled/results.md, "The ball's
-		 * growth on a real-anatomy phantom") */
+		/* through tled_cuda too: k_drive counts the drive's own
+		 * increment as he_drive does */
 		cmocka_unit_test(test_drive_contact),
-#endif
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
