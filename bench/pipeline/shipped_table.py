@@ -111,6 +111,17 @@ def paired(a, b):
     return "%+.3f (%.3f), %d of %d" % (mean(diff), se(diff), sum(v < 0 for v in diff), len(diff))
 
 
+def columns(loaded_kind, ms, pooled):
+    """one phantom kind's seeds, band errors per method (by seed) and mean
+    tumour Dice per method; the band errors are also added to POOLED"""
+    seeds, rows = loaded_kind
+    col = {m: [float(rows[(s, m)]["err_band_mean_mm"]) for s in seeds] for m in ms}
+    dice = {m: mean([float(rows[(s, m)]["dice_tumour"]) for s in seeds]) for m in ms}
+    for m in ms:
+        pooled[m] += col[m]
+    return seeds, col, dice
+
+
 def main():
     d = sys.argv[1] if len(sys.argv) > 1 else os.path.join(
         os.path.dirname(os.path.abspath(__file__)), "results", "shipped-2026-11-27")
@@ -122,11 +133,7 @@ def main():
     print("|---|---|---|---|---|---|---|---|---|---|")
     pooled = {m: [] for m in METHODS}
     for kind, label in KINDS:
-        seeds, rows = loaded[kind]
-        col = {m: [float(rows[(s, m)]["err_band_mean_mm"]) for s in seeds] for m in METHODS}
-        dice = {m: mean([float(rows[(s, m)]["dice_tumour"]) for s in seeds]) for m in METHODS}
-        for m in METHODS:
-            pooled[m] += col[m]
+        seeds, col, dice = columns(loaded[kind], METHODS, pooled)
         mn = {m: mean(col[m]) for m in METHODS}
         rel = lambda m: 100 * (mn[m] / mn["direct"] - 1)  # noqa: E731
         print("| %s | %d | %.3f | **%.3f** | %.3f | %.3f | %s | %s | %.1f / %.1f / %.1f %% | %.3f / %.3f / %.3f |" % (
@@ -154,11 +161,7 @@ def like_table(loaded):
     print("|---|---|---|---|---|---|---|---|---|---|")
     pooled = {m: [] for m in ms}
     for kind, label in KINDS:
-        seeds, rows = loaded[kind]
-        col = {m: [float(rows[(s, m)]["err_band_mean_mm"]) for s in seeds] for m in ms}
-        dice = {m: mean([float(rows[(s, m)]["dice_tumour"]) for s in seeds]) for m in ms}
-        for m in ms:
-            pooled[m] += col[m]
+        seeds, col, dice = columns(loaded[kind], ms, pooled)
         print("| %s | %d | %.3f | %.3f | %.3f | %.3f | %.3f | %s | %s | %.3f / %.3f; %.3f / %.3f |" % (
             label, len(seeds), mean(col["armstg"]), mean(col["sphere2"]),
             mean(col["armstg_nolabel"]), mean(col["sphere2nl"]), mean(col["sphere"]),
