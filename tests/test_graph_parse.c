@@ -396,6 +396,24 @@ static int sph_allowed_at(const char *stage, const char *key)
 	return -1;
 }
 
+/* the keys of stage st that must match the other graph's into out (their
+ * count returned); the allowed ones are checked against sph_allowed's value
+ * for this graph (sphere 0: armstg.ini's, 1: spherical.ini's) */
+static int sph_split(const g_stage_t *st, int sphere, g_kv_t *out)
+{
+	int n = 0;
+	for (int k = 0; k < st->nkv; k++) {
+		int w = sph_allowed_at(st->name, st->kv[k].key);
+		if (w < 0)
+			out[n++] = st->kv[k];
+		else
+			assert_string_equal(st->kv[k].val,
+					    sphere ? sph_allowed[w].sphere
+						   : sph_allowed[w].armstg);
+	}
+	return n;
+}
+
 /* every key of a (n keys) in b with the same value, and b no other key;
  * what names the list in the failure message */
 static void same_kv(const g_kv_t *a, int na, const g_kv_t *b, int nb,
@@ -467,23 +485,7 @@ static void test_spherical_in_step(void **state)
 			/* the allowed differences, each as stated */
 			g_kv_t ka[64], ks[64];
 			assert_true(sa->nkv <= 64 && ss->nkv <= 64);
-			int na = 0, ns = 0;
-			for (int k = 0; k < sa->nkv; k++) {
-				int w = sph_allowed_at(sa->name, sa->kv[k].key);
-				if (w < 0)
-					ka[na++] = sa->kv[k];
-				else
-					assert_string_equal(sa->kv[k].val,
-							    sph_allowed[w].armstg);
-			}
-			for (int k = 0; k < ss->nkv; k++) {
-				int w = sph_allowed_at(ss->name, ss->kv[k].key);
-				if (w < 0)
-					ks[ns++] = ss->kv[k];
-				else
-					assert_string_equal(ss->kv[k].val,
-							    sph_allowed[w].sphere);
-			}
+			int na = sph_split(sa, 0, ka), ns = sph_split(ss, 1, ks);
 			assert_int_equal(sa->nkv - na, ss->nkv - ns);
 			char what[2 * G_NAME];
 			snprintf(what, sizeof what, "stage '%s'", sa->name);
