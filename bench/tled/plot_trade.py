@@ -42,9 +42,24 @@ def num(x):
     return v
 
 
+NEED = ("case", "model", "spacing_mm", "status", "wall_s", "err_band_mean_mm")
+
+
 def read(path):
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f, delimiter="\t"))
+    """trade.sh's rows; a missing, empty or foreign file stops with its name"""
+    try:
+        with open(path, newline="") as f:
+            rd = csv.DictReader(f, delimiter="\t")
+            rows = list(rd)
+            cols = rd.fieldnames or []
+    except OSError as e:
+        sys.exit("plot_trade.py: %s: %s" % (path, e.strerror))
+    miss = [c for c in NEED if c not in cols]
+    if miss:
+        sys.exit("plot_trade.py: %s: not trade.sh's rows (no column %s)"
+                 % (path, ", ".join(miss)))
+    if not rows:
+        sys.exit("plot_trade.py: %s: no rows" % path)
     for r in rows:
         r["_sp"] = num(r.get("spacing_mm"))
         r["_graded"] = r.get("model") == "graded"
